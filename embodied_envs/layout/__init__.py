@@ -1,0 +1,19 @@
+"""Layout files: schema, poses, asset specs and placement."""
+
+from embodied_envs.layout.assets import AssetGeometry, AssetSpec, asset_geometry, parse_urdf
+from embodied_envs.layout.errors import LayoutError, PlacementError
+from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.layout.schema import LayoutInfo, check_asset_files, load_layout
+
+__all__ = [
+    "AssetGeometry",
+    "AssetSpec",
+    "LayoutError",
+    "LayoutInfo",
+    "LayoutPose",
+    "PlacementError",
+    "asset_geometry",
+    "check_asset_files",
+    "load_layout",
+    "parse_urdf",
+]

@@ -1,0 +1,268 @@
+"""EmbodiedGen asset folders: URDF parsing and the Z-up geometry that placement needs.
+
+An asset folder holds ``<stem>.urdf`` (one link with a visual and a collision mesh), the visual
+mesh and ``mesh/<stem>_collision.obj`` whose connected components are convex parts. Meshes are
+stored Y-up and reach Z-up through the URDF ``<origin rpy="1.5708 0 0">``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.pose import rpy_to_matrix, rpy_to_quat_wxyz
+
+STATIC_FRICTION_RANGE = (0.1, 0.7)  # mu1 is clipped to this range
+DYNAMIC_FRICTION_RANGE = (0.1, 0.6)  # mu2 is clipped to this range
+DEFAULT_STATIC_FRICTION = 0.5  # when the URDF has no mu1
+DEFAULT_DYNAMIC_FRICTION = 0.4  # when the URDF has no mu2
+RESTITUTION = 0.05
+DEFAULT_DENSITY = 1000.0  # kg/m^3, when the URDF gives no mass
+
+
+def node_stem(node: str) -> str:
+    """File stem of a layout node: spaces become underscores."""
+    return node.replace(" ", "_")
+
+
+@dataclass(frozen=True)
+class MeshRef:
+    """A mesh of the link with its ``<origin>`` and ``scale``."""
+
+    path: Path
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+
+    def to_link_frame(self, vertices: np.ndarray) -> np.ndarray:
+        """Map mesh vertices into the link (actor) frame: scale, rotate, translate."""
+        v = np.asarray(vertices, dtype=np.float64) * np.asarray(self.scale)
+        return v @ rpy_to_matrix(self.rpy).T + np.asarray(self.xyz)
+
+    def sapien_pose(self):
+        import sapien
+
+        return sapien.Pose(p=list(self.xyz), q=list(rpy_to_quat_wxyz(self.rpy)))
+
+
+@dataclass(frozen=True)
+class AssetSpec:
+    """Everything needed to build one EmbodiedGen asset."""
+
+    name: str
+    urdf_path: Path
+    visual: MeshRef
+    collision: MeshRef
+    static_friction: float
+    dynamic_friction: float
+    mass: float | None
+
+    @property
+    def restitution(self) -> float:
+        return RESTITUTION
+
+
+def urdf_path_for(asset_dir: Path, node: str) -> Path:
+    return Path(asset_dir) / f"{node_stem(node)}.urdf"
+
+
+def _origin(elem: ET.Element | None, urdf: Path, where: str):
+    if elem is None:
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    try:
+        xyz = tuple(float(v) for v in elem.get("xyz", "0 0 0").split())
+        rpy = tuple(float(v) for v in elem.get("rpy", "0 0 0").split())
+    except ValueError as e:
+        raise LayoutError(f"{urdf}: {where}/origin has a non-numeric xyz or rpy ({e})") from e
+    if len(xyz) != 3 or len(rpy) != 3 or not all(map(math.isfinite, xyz + rpy)):
+        raise LayoutError(f"{urdf}: {where}/origin needs 3 finite numbers in xyz and in rpy")
+    return xyz, rpy
+
+
+def _mesh(link: ET.Element, tag: str, urdf: Path) -> MeshRef:
+    elem = link.find(tag)
+    if elem is None:
+        raise LayoutError(
+            f"{urdf}: link has no <{tag}>. Fix: add a <{tag}><geometry><mesh filename=...>"
+            f" element (EmbodiedGen assets have both <visual> and <collision>)."
+        )
+    mesh = elem.find("geometry/mesh")
+    if mesh is None or not mesh.get("filename"):
+        raise LayoutError(f"{urdf}: <{tag}> has no <geometry><mesh filename=...>. Fix: add it.")
+    filename = mesh.get("filename").replace("package://", "")
+    path = (urdf.parent / filename).resolve()
+    if not path.is_file():
+        raise LayoutError(
+            f"{urdf}: <{tag}> mesh file {filename} does not exist (looked at {path})."
+            " Fix: correct the filename or restore the file."
+        )
+    try:
+        scale = tuple(float(v) for v in mesh.get("scale", "1 1 1").split())
+    except ValueError as e:
+        raise LayoutError(f"{urdf}: <{tag}> mesh scale is not numeric ({e})") from e
+    if len(scale) == 1:
+        scale = scale * 3
+    if len(scale) != 3 or not all(math.isfinite(s) and s > 0 for s in scale):
+        raise LayoutError(f"{urdf}: <{tag}> mesh scale must be 3 positive numbers")
+    xyz, rpy = _origin(elem.find("origin"), urdf, tag)
+    return MeshRef(path, xyz, rpy, scale)
+
+
+def _float_text(elem: ET.Element | None, urdf: Path, field: str) -> float | None:
+    if elem is None:
+        return None
+    text = elem.get("value") if elem.get("value") is not None else elem.text
+    try:
+        value = float(text)
+    except (TypeError, ValueError) as e:
+        raise LayoutError(f"{urdf}: {field} is not a number ({text!r})") from e
+    if not math.isfinite(value):
+        raise LayoutError(f"{urdf}: {field} is not finite ({text!r})")
+    return value
+
+
+def parse_urdf(urdf: Path | str) -> AssetSpec:
+    """Read an EmbodiedGen single-link URDF.
+
+    Args:
+        urdf: path of the ``.urdf`` file.
+
+    Returns:
+        The asset's meshes, origins, friction (clipped per SPEC 2.1) and optional mass.
+
+    Raises:
+        LayoutError: when the file is missing or not valid URDF, or a mesh is missing.
+    """
+    urdf = Path(urdf).resolve()
+    if not urdf.is_file():
+        raise LayoutError(f"{urdf}: URDF file does not exist. Fix: restore it or fix `assets`.")
+    try:
+        root = ET.parse(urdf).getroot()
+    except ET.ParseError as e:
+        raise LayoutError(f"{urdf}: not valid XML ({e}). Fix: repair the URDF.") from e
+    links = root.findall("link") if root.tag == "robot" else []
+    if len(links) != 1:
+        raise LayoutError(
+            f"{urdf}: expected a <robot> with exactly one <link>, found {len(links)}."
+            " Fix: EmbodiedGen assets are single-link URDFs."
+        )
+    link = links[0]
+    visual = _mesh(link, "visual", urdf)
+    collision = _mesh(link, "collision", urdf)
+    mu1 = _float_text(link.find("collision/gazebo/mu1"), urdf, "collision/gazebo/mu1")
+    mu2 = _float_text(link.find("collision/gazebo/mu2"), urdf, "collision/gazebo/mu2")
+    mass = _float_text(link.find("inertial/mass"), urdf, "inertial/mass")
+    if mass is not None and mass <= 0:
+        raise LayoutError(f"{urdf}: inertial/mass must be positive, got {mass}")
+    return AssetSpec(
+        name=root.get("name", urdf.stem),
+        urdf_path=urdf,
+        visual=visual,
+        collision=collision,
+        static_friction=float(np.clip(DEFAULT_STATIC_FRICTION if mu1 is None else mu1,
+                                      *STATIC_FRICTION_RANGE)),
+        dynamic_friction=float(np.clip(DEFAULT_DYNAMIC_FRICTION if mu2 is None else mu2,
+                                       *DYNAMIC_FRICTION_RANGE)),
+        mass=mass,
+    )
+
+
+@dataclass(frozen=True)
+class AssetGeometry:
+    """Z-up geometry of an asset in its actor frame, computed once per file version."""
+
+    vertices: np.ndarray  # (n, 3) collision vertices in the actor frame (Z-up)
+    parts: tuple[np.ndarray, ...]  # vertices of each convex part, actor frame
+    volume: float  # total volume of the convex parts, m^3
+
+    @property
+    def min_z(self) -> float:
+        return float(self.vertices[:, 2].min())
+
+    @property
+    def max_z(self) -> float:
+        return float(self.vertices[:, 2].max())
+
+    def footprint(self) -> np.ndarray:
+        """Counter-clockwise 2D convex hull ``(m, 2)`` of the vertices projected on XY."""
+        return convex_hull_2d(self.vertices[:, :2])
+
+    def top_hull(self, band: float = 0.05) -> np.ndarray:
+        """2D hull of the vertices within ``band`` metres of the highest point (the top)."""
+        top = self.vertices[self.vertices[:, 2] >= self.max_z - band]
+        return convex_hull_2d(top[:, :2])
+
+
+def convex_hull_2d(points: np.ndarray) -> np.ndarray:
+    """Counter-clockwise convex hull of 2D points (Andrew's monotone chain)."""
+    # micrometre rounding and a relative turn tolerance drop the near-duplicate and
+    # near-collinear vertices that floating-point rotation creates
+    pts = np.unique(np.round(np.asarray(points, dtype=np.float64), 6), axis=0)
+    if len(pts) < 3:
+        return pts
+
+    def half(seq):
+        out: list[np.ndarray] = []
+        for p in seq:
+            while len(out) >= 2:
+                a, b = out[-2], out[-1]
+                cross = (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+                if cross > 1e-9 * np.hypot(*(b - a)) * np.hypot(*(p - a)) + 1e-14:
+                    break
+                out.pop()
+            out.append(p)
+        return out
+
+    lower = half(pts)
+    upper = half(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def _load_parts(mesh: MeshRef) -> list:
+    import trimesh
+
+    try:
+        loaded = trimesh.load(mesh.path, force="mesh", process=False, skip_materials=True)
+    except Exception as e:  # trimesh raises many types for unreadable files
+        raise LayoutError(f"{mesh.path}: not a readable mesh ({e}). Fix: re-export it.") from e
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.vertices) == 0 or len(loaded.faces) == 0:
+        raise LayoutError(
+            f"{mesh.path}: the mesh is empty (no vertices or faces). Fix: re-export the mesh."
+        )
+    loaded.merge_vertices()
+    parts = loaded.split(only_watertight=False)
+    return parts if len(parts) else [loaded]
+
+
+@functools.lru_cache(maxsize=256)
+def _geometry_cached(collision: MeshRef, mtime: float) -> AssetGeometry:
+    parts = []
+    volume = 0.0
+    for part in _load_parts(collision):
+        verts = collision.to_link_frame(part.vertices)
+        if len(verts) < 4:
+            continue
+        parts.append(verts)
+        try:
+            from scipy.spatial import ConvexHull
+
+            volume += float(ConvexHull(verts).volume)
+        except Exception:  # a flat part has no volume; it still collides
+            pass
+    if not parts:
+        raise LayoutError(
+            f"{collision.path}: no convex part with at least 4 vertices."
+            " Fix: export a closed collision mesh."
+        )
+    return AssetGeometry(np.concatenate(parts), tuple(parts), volume)
+
+
+def asset_geometry(spec: AssetSpec) -> AssetGeometry:
+    """Collision geometry of an asset in its Z-up actor frame (cached per file version)."""
+    return _geometry_cached(spec.collision, spec.collision.path.stat().st_mtime)

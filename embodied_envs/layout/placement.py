@@ -1,0 +1,331 @@
+"""Seeded, strict BFS placement of a layout's nodes (SPEC section 3).
+
+``place(layout, seed)`` re-draws the poses of the background, the context (table), the robot and
+every object, breadth first from the table and larger footprints first. Every draw comes from
+one ``numpy.random.Generator`` made from the seed. Candidates are sampled in vectorised batches;
+when an object cannot be placed a :class:`PlacementError` names it and the constraint that
+rejected the most candidates.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from embodied_envs.layout.assets import AssetGeometry, asset_geometry, convex_hull_2d, parse_urdf
+from embodied_envs.layout.errors import PlacementError
+from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.layout.schema import LayoutInfo
+
+SUPPORT_RELATIONS = ("ON", "IN", "INSIDE")
+
+
+@dataclass(frozen=True)
+class PlacementLimits:
+    """Tunable limits of :func:`place`."""
+
+    reach_min: float = 0.20  # m, manipulated object centre to robot base, exclusive
+    reach_max: float = 0.85  # m, exclusive
+    max_heading_deg: float = 60.0  # manipulated objects within this angle of the robot heading
+    hull_margin: float = 0.02  # m, the parent's top hull is shrunk by this much
+    clearance: float = 0.01  # m, minimum gap between footprints
+    robot_footprint: float = 0.12  # m, side of the robot base's square footprint
+    top_band: float = 0.05  # m, vertices this close to the highest point form the top
+    bottom_percentile: float = 1.0  # the context's lowest point is this percentile of its z
+    floor_radius: float = 1.5  # m, FLOOR objects are placed within this distance of the origin
+    max_attempts: int = 4096  # candidates per object before giving up
+    batch: int = 256  # candidates drawn per vectorised batch
+
+    @classmethod
+    def from_kwargs(cls, **kwargs) -> PlacementLimits:
+        names = {f.name for f in fields(cls)}
+        unknown = set(kwargs) - names
+        if unknown:
+            raise TypeError(f"unknown placement limit(s) {sorted(unknown)}; known: {sorted(names)}")
+        return cls(**kwargs)
+
+
+@functools.lru_cache(maxsize=256)
+def _geometry_for(urdf: Path, mtime: float) -> AssetGeometry:
+    return asset_geometry(parse_urdf(urdf))
+
+
+def node_geometry(layout: LayoutInfo, node: str) -> AssetGeometry:
+    """Collision geometry of a node's asset (parsed once per file version)."""
+    urdf = layout.urdf_path(node)
+    return _geometry_for(urdf, urdf.stat().st_mtime)
+
+
+@functools.lru_cache(maxsize=256)
+def _footprint_cached(urdf: Path, mtime: float) -> np.ndarray:
+    return _geometry_for(urdf, mtime).footprint()
+
+
+def node_footprint(layout: LayoutInfo, node: str) -> np.ndarray:
+    """2D convex footprint ``(m, 2)`` of a node in its own actor frame (counter-clockwise)."""
+    urdf = layout.urdf_path(node)
+    return _footprint_cached(urdf, urdf.stat().st_mtime)
+
+
+def polygon_area(poly: np.ndarray) -> float:
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def rotation_2d(yaw: np.ndarray) -> np.ndarray:
+    """``(..., 2, 2)`` rotation matrices for yaw angles of any shape."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+
+
+def half_planes(poly: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inward unit normals ``n`` and offsets ``c`` of a CCW polygon: inside iff ``n @ p >= c``."""
+    edges = np.roll(poly, -1, axis=0) - poly
+    normals = np.stack([-edges[:, 1], edges[:, 0]], axis=1)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return normals, np.einsum("ij,ij->i", normals, poly)
+
+
+def shrink_polygon(poly: np.ndarray, margin: float) -> np.ndarray:
+    """The CCW convex polygon moved inward by ``margin`` on every edge."""
+    n, c = half_planes(poly)
+    c = c + margin
+    pts = []
+    k = len(poly)
+    for i in range(k):
+        a = np.array([n[i - 1], n[i]])
+        if abs(np.linalg.det(a)) < 1e-12:
+            continue
+        pts.append(np.linalg.solve(a, [c[i - 1], c[i]]))
+    pts = np.array(pts)
+    keep = np.all(pts @ n.T >= c - 1e-9, axis=1) if len(pts) else np.zeros(0, bool)
+    if keep.sum() < 3:
+        raise ValueError(f"polygon vanishes when shrunk by {margin} m")
+    return convex_hull_2d(pts[keep])
+
+
+def polygons_overlap(p: np.ndarray, q: np.ndarray, clearance: float) -> np.ndarray:
+    """Separating-axis test of batched convex polygons against one polygon.
+
+    Args:
+        p: ``(b, m, 2)`` candidate polygons.
+        q: ``(k, 2)`` an obstacle polygon.
+        clearance: polygons closer than this along every axis count as overlapping.
+
+    Returns:
+        ``(b,)`` bool, True where a candidate overlaps (or is closer than ``clearance`` to) q.
+    """
+    def normals(poly):
+        e = np.roll(poly, -1, axis=-2) - poly
+        nrm = np.stack([-e[..., 1], e[..., 0]], axis=-1)
+        return nrm / np.maximum(np.linalg.norm(nrm, axis=-1, keepdims=True), 1e-12)
+
+    axes = np.concatenate([normals(p), np.broadcast_to(normals(q), (p.shape[0], *q.shape))], 1)
+    proj_p = np.einsum("bad,bmd->bam", axes, p)
+    proj_q = np.einsum("bad,kd->bak", axes, q)
+    separated = (proj_p.max(-1) + clearance <= proj_q.min(-1)) | (
+        proj_q.max(-1) + clearance <= proj_p.min(-1)
+    )
+    return ~separated.any(-1)
+
+
+def square(center: np.ndarray, side: float, yaw: float) -> np.ndarray:
+    h = side / 2.0
+    local = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+    return local @ rotation_2d(np.float64(yaw)).T + center[:2]
+
+
+def angle_diff(a: np.ndarray, b: float) -> np.ndarray:
+    return np.abs((a - b + np.pi) % (2 * np.pi) - np.pi)
+
+
+@dataclass(frozen=True)
+class Surface:
+    """The top of a placed support: its hull (world XY, CCW) and height."""
+
+    hull: np.ndarray
+    z: float
+
+
+def world_vertices(geom: AssetGeometry, pose: LayoutPose) -> np.ndarray:
+    return pose.transform_points(geom.vertices)
+
+
+def top_surface(vertices: np.ndarray, band: float) -> Surface:
+    top_z = float(vertices[:, 2].max())
+    top = vertices[vertices[:, 2] >= top_z - band]
+    return Surface(convex_hull_2d(top[:, :2]), top_z)
+
+
+def robot_base_pose(top: Surface, limits: PlacementLimits, u: float) -> LayoutPose:
+    """Robot base on the boundary of the shrunk top at perimeter fraction ``u``, facing the centre."""
+    edge_hull = shrink_polygon(top.hull, limits.hull_margin)
+    seg = np.roll(edge_hull, -1, axis=0) - edge_hull
+    lengths = np.linalg.norm(seg, axis=1)
+    s = u * lengths.sum()
+    i = int(np.searchsorted(np.cumsum(lengths), s, side="right"))
+    i = min(i, len(lengths) - 1)
+    t = (s - (np.cumsum(lengths)[i] - lengths[i])) / max(lengths[i], 1e-12)
+    xy = edge_hull[i] + t * seg[i]
+    centre = top.hull.mean(axis=0)
+    yaw = math.atan2(centre[1] - xy[1], centre[0] - xy[0])
+    return LayoutPose.from_xyz_yaw([xy[0], xy[1], top.z], yaw)
+
+
+class _Placer:
+    def __init__(self, layout: LayoutInfo, rng: np.random.Generator, limits: PlacementLimits):
+        self.layout = layout
+        self.rng = rng
+        self.limits = limits
+        self.poses: dict[str, LayoutPose] = {}
+        self.obstacles: dict[str, np.ndarray] = {}  # node -> world footprint polygon
+
+    def sample_object(self, node: str, surface: Surface, ancestors: set[str]) -> LayoutPose:
+        lim = self.limits
+        layout = self.layout
+        foot = node_footprint(layout, node)
+        geom = node_geometry(layout, node)
+        try:
+            region = shrink_polygon(surface.hull, lim.hull_margin)
+        except ValueError:
+            raise PlacementError(node, "footprint inside parent top", 0,
+                                 "the parent's top is smaller than twice the hull margin") from None
+        normals, offsets = half_planes(region)
+        lo, hi = region.min(0), region.max(0)
+        manipulated = node in layout.manipulated_objs
+        robot = self.poses[layout.robot]
+        robot_xy = np.array(robot.p[:2])
+        obstacles = [q for n, q in self.obstacles.items() if n not in ancestors]
+        fails = {"footprint inside parent top": 0, "no overlap with placed footprints": 0}
+        if manipulated:
+            fails[f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base"] = 0
+            fails[f"within {lim.max_heading_deg:g} deg of the robot heading"] = 0
+        tried = 0
+        while tried < lim.max_attempts:
+            b = min(lim.batch, lim.max_attempts - tried)
+            tried += b
+            yaw = self.rng.uniform(-np.pi, np.pi, b)
+            xy = self.rng.uniform(lo, hi, (b, 2))
+            poly = np.einsum("bij,mj->bmi", rotation_2d(yaw), foot) + xy[:, None, :]
+            ok = np.ones(b, bool)
+            inside = np.all(np.einsum("kd,bmd->bmk", normals, poly) >= offsets - 1e-9, axis=(1, 2))
+            fails["footprint inside parent top"] += int((~inside).sum())
+            ok &= inside
+            free = np.ones(b, bool)
+            for q in obstacles:
+                free &= ~polygons_overlap(poly, q, lim.clearance)
+            fails["no overlap with placed footprints"] += int((~free).sum())
+            ok &= free
+            if manipulated:
+                d = np.linalg.norm(xy - robot_xy, axis=1)
+                reach = (d > lim.reach_min) & (d < lim.reach_max)
+                bearing = np.arctan2(xy[:, 1] - robot_xy[1], xy[:, 0] - robot_xy[0])
+                facing = angle_diff(bearing, robot.yaw) <= np.deg2rad(lim.max_heading_deg)
+                keys = list(fails)
+                fails[keys[2]] += int((~reach).sum())
+                fails[keys[3]] += int((~facing).sum())
+                ok &= reach & facing
+            hits = np.flatnonzero(ok)
+            if len(hits):
+                k = hits[0]
+                z = surface.z - geom.min_z
+                self.obstacles[node] = poly[k]
+                return LayoutPose.from_xyz_yaw([xy[k, 0], xy[k, 1], z], float(yaw[k]))
+        worst = max(fails, key=fails.get)
+        raise PlacementError(node, worst, tried, f"rejections per constraint: {fails}")
+
+    def sample_floor_object(self, node: str) -> LayoutPose:
+        """An object standing on the floor (z = 0) around the table, clear of everything."""
+        lim = self.limits
+        foot = node_footprint(self.layout, node)
+        geom = node_geometry(self.layout, node)
+        ctx_poly = self.context_footprint
+        tried = 0
+        fails = {"no overlap with placed footprints": 0}
+        while tried < lim.max_attempts:
+            b = min(lim.batch, lim.max_attempts - tried)
+            tried += b
+            yaw = self.rng.uniform(-np.pi, np.pi, b)
+            r = lim.floor_radius * np.sqrt(self.rng.uniform(0, 1, b))
+            t = self.rng.uniform(-np.pi, np.pi, b)
+            xy = np.stack([r * np.cos(t), r * np.sin(t)], 1)
+            poly = np.einsum("bij,mj->bmi", rotation_2d(yaw), foot) + xy[:, None, :]
+            free = ~polygons_overlap(poly, ctx_poly, lim.clearance)
+            for q in self.obstacles.values():
+                free &= ~polygons_overlap(poly, q, lim.clearance)
+            fails["no overlap with placed footprints"] += int((~free).sum())
+            hits = np.flatnonzero(free)
+            if len(hits):
+                k = hits[0]
+                self.obstacles[node] = poly[k]
+                return LayoutPose.from_xyz_yaw([xy[k, 0], xy[k, 1], -geom.min_z], float(yaw[k]))
+        raise PlacementError(node, "no overlap with placed footprints", tried, str(fails))
+
+    def run(self) -> dict[str, LayoutPose]:
+        layout, lim, rng = self.layout, self.limits, self.rng
+        # 1. background: random yaw about its up axis, at the origin
+        self.poses[layout.background] = LayoutPose.from_xyz_yaw([0, 0, 0], rng.uniform(-np.pi, np.pi))
+        # 2. context: random yaw, centred, lowest point at z = 0
+        ctx = layout.context
+        ctx_geom = node_geometry(layout, ctx)
+        z0 = -float(np.percentile(ctx_geom.vertices[:, 2], lim.bottom_percentile))
+        ctx_pose = LayoutPose.from_xyz_yaw([0, 0, z0], rng.uniform(-np.pi, np.pi))
+        self.poses[ctx] = ctx_pose
+        ctx_world = world_vertices(ctx_geom, ctx_pose)
+        self.context_footprint = convex_hull_2d(ctx_world[:, :2])
+        surfaces = {ctx: top_surface(ctx_world, lim.top_band)}
+        # 3. robot on the table's edge, facing its centre
+        robot = robot_base_pose(surfaces[ctx], lim, rng.uniform(0, 1))
+        self.poses[layout.robot] = robot
+        self.obstacles[layout.robot] = square(np.array(robot.p), lim.robot_footprint, robot.yaw)
+        # 4. objects, breadth first from the table, larger footprints first
+        queue, ancestors = [ctx], {ctx: {ctx}}
+        while queue:
+            parent = queue.pop(0)
+            kids = [c for c, r in layout.children(parent) if r in SUPPORT_RELATIONS and c != layout.robot]
+            kids.sort(key=lambda n: -polygon_area(node_footprint(layout, n)))
+            for kid in kids:
+                self.poses[kid] = self.sample_object(kid, surfaces[parent], ancestors[parent])
+                kid_world = world_vertices(node_geometry(layout, kid), self.poses[kid])
+                surfaces[kid] = top_surface(kid_world, lim.top_band)
+                ancestors[kid] = ancestors[parent] | {kid}
+                queue.append(kid)
+        floor_kids = [
+            c for c, r in layout.children(layout.background)
+            if r == "FLOOR" and c not in self.poses and c != layout.robot
+        ]
+        for kid in floor_kids:
+            self.poses[kid] = self.sample_floor_object(kid)
+        missing = [n for n in layout.object_nodes() if n not in self.poses]
+        if missing:
+            raise PlacementError(missing[0], "reachable from the context or the floor in the tree", 0,
+                                 "the node has no ON/IN/INSIDE parent chain to the context")
+        return self.poses
+
+
+def place(layout: LayoutInfo, seed: int | np.random.Generator, **limits) -> LayoutInfo:
+    """Re-draw every pose of a layout (SPEC section 3).
+
+    Args:
+        layout: a validated layout (its asset folders must exist).
+        seed: an int, or a ``numpy.random.Generator`` that every draw then comes from.
+        **limits: overrides of :class:`PlacementLimits` fields.
+
+    Returns:
+        A new layout with the background, context, robot and object poses re-drawn.
+
+    Raises:
+        PlacementError: naming the object and the constraint that failed most often.
+    """
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    poses = _Placer(layout, rng, PlacementLimits.from_kwargs(**limits)).run()
+    return layout.with_poses(poses)
+
+
+def derive_seed(base_seed: int, env_index: int) -> int:
+    """Seed of env ``env_index``'s placement from a base seed (stable across machines)."""
+    return int(np.random.SeedSequence([int(base_seed) % 2**63, int(env_index)]).generate_state(1)[0])

@@ -1,0 +1,389 @@
+"""The layout file model (EmbodiedGen's ``LayoutInfo``): lossless load/save and validation.
+
+Validation runs at load, before any simulation object exists. Every problem names the file, the
+node and the field, and says what to fix. Unknown keys are kept and written back unchanged.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from embodied_envs.layout.assets import AssetSpec, node_stem, parse_urdf, urdf_path_for
+from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE, LayoutPose
+
+CATEGORIES = ("background", "context", "manipulated_objs", "distractor_objs")
+RELATIONS = ("ON", "IN", "INSIDE", "FLOOR")
+REQUIRED_FIELDS = ("tree", "relation", "objs_mapping", "assets", "position")
+KNOWN_FIELDS = (*REQUIRED_FIELDS, "objs_desc", "quality")
+POSE_DECIMALS = 4  # poses are rounded to this many decimals when written (as EmbodiedGen does)
+
+
+@dataclass
+class LayoutInfo:
+    """A scene layout: scene tree, roles, asset folders and poses.
+
+    ``source`` is the file it was read from; asset folders resolve against ``asset_root``
+    (the directory of the original layout file), so a layout written elsewhere still
+    finds its assets.
+    """
+
+    tree: dict[str, list[list[str]]]
+    relation: dict[str, Any]
+    objs_mapping: dict[str, str]
+    assets: dict[str, str]
+    position: dict[str, list[float]]
+    objs_desc: dict[str, str] | None = None
+    quality: dict[str, str] | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    source: Path | None = None
+    asset_root: Path | None = None
+
+    # --- roles ---------------------------------------------------------------------------
+    @property
+    def robot(self) -> str:
+        return self.relation["robot"]
+
+    @property
+    def background(self) -> str:
+        return self.relation["background"]
+
+    @property
+    def context(self) -> str:
+        return self.relation["context"]
+
+    @property
+    def manipulated_objs(self) -> list[str]:
+        return list(self.relation["manipulated_objs"])
+
+    @property
+    def distractor_objs(self) -> list[str]:
+        return list(self.relation["distractor_objs"])
+
+    @property
+    def target(self) -> str:
+        """The graded object: the first manipulated object."""
+        return self.manipulated_objs[0]
+
+    def object_nodes(self) -> list[str]:
+        """Simulated asset nodes (everything but the background), in ``objs_mapping`` order."""
+        return [n for n, c in self.objs_mapping.items() if c != "background"]
+
+    def pose(self, node: str) -> LayoutPose:
+        return LayoutPose.from_layout(self.position[node])
+
+    def asset_dir(self, node: str) -> Path:
+        root = self.asset_root or (self.source.parent if self.source else Path.cwd())
+        return (root / self.assets[node]).resolve()
+
+    def urdf_path(self, node: str) -> Path:
+        return urdf_path_for(self.asset_dir(node), node)
+
+    def asset_spec(self, node: str) -> AssetSpec:
+        return parse_urdf(self.urdf_path(node))
+
+    def gs_model_path(self) -> Path:
+        return self.asset_dir(self.background) / "gs_model.ply"
+
+    def children(self, parent: str) -> list[tuple[str, str]]:
+        return [(c, r) for c, r in self.tree.get(parent, [])]
+
+    def parent_of(self, node: str) -> tuple[str, str] | None:
+        for parent, kids in self.tree.items():
+            for child, rel in kids:
+                if child == node:
+                    return parent, rel
+        return None
+
+    def with_poses(self, poses: dict[str, LayoutPose]) -> LayoutInfo:
+        """A copy with some node poses replaced."""
+        new = copy.deepcopy(self)
+        for node, pose in poses.items():
+            new.position[node] = pose.to_layout()
+        return new
+
+    # --- serialisation -------------------------------------------------------------------
+    @classmethod
+    def from_dict(cls, data: dict, source: Path | None = None) -> LayoutInfo:
+        """Build from a parsed JSON object and validate its structure and poses.
+
+        Raises:
+            LayoutError: listing every problem found.
+        """
+        problems = _check_structure(data, _label(source))
+        if problems:
+            raise LayoutError(problems)
+        data = copy.deepcopy(data)
+        info = cls(
+            tree={k: [list(x) for x in v] for k, v in data["tree"].items()},
+            relation=data["relation"],
+            objs_mapping=data["objs_mapping"],
+            assets=data["assets"],
+            position={k: [float(x) for x in v] for k, v in data["position"].items()},
+            objs_desc=data.get("objs_desc"),
+            quality=data.get("quality"),
+            extra={k: v for k, v in data.items() if k not in KNOWN_FIELDS},
+            source=Path(source).resolve() if source else None,
+            asset_root=Path(source).resolve().parent if source else None,
+        )
+        # normalise quaternions within tolerance (rejected beyond it by _check_structure)
+        for node, values in info.position.items():
+            info.position[node] = LayoutPose.from_layout(values).to_layout()
+        return info
+
+    def to_dict(self, decimals: int | None = POSE_DECIMALS) -> dict:
+        """The JSON object, unknown keys included; poses rounded to ``decimals``."""
+        out: dict[str, Any] = {
+            "tree": copy.deepcopy(self.tree),
+            "relation": copy.deepcopy(self.relation),
+            "objs_mapping": dict(self.objs_mapping),
+            "assets": dict(self.assets),
+            "position": {
+                k: LayoutPose.from_layout(v).to_layout(decimals) for k, v in self.position.items()
+            },
+        }
+        if self.objs_desc is not None:
+            out["objs_desc"] = dict(self.objs_desc)
+        if self.quality is not None:
+            out["quality"] = dict(self.quality)
+        out.update(copy.deepcopy(self.extra))
+        return out
+
+    def save(self, path: Path | str, asset_root: Path | None = None) -> Path:
+        """Write to ``path``; asset folders are rewritten relative to the new file's folder.
+
+        Args:
+            path: destination file. Its folder is created.
+            asset_root: where the asset folders are (default: this layout's ``asset_root``).
+        """
+        path = Path(path).resolve()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        root = asset_root or self.asset_root
+        data = self.to_dict()
+        if root is not None:
+            data["assets"] = {
+                n: _relpath((Path(root) / d).resolve(), path.parent) for n, d in self.assets.items()
+            }
+        path.write_text(json.dumps(data, indent=4) + "\n")
+        return path
+
+
+def _relpath(target: Path, start: Path) -> str:
+    import os
+
+    return os.path.relpath(target, start)
+
+
+def _label(source: Path | str | None) -> str:
+    return str(source) if source else "<layout>"
+
+
+def _is_str_list(v) -> bool:
+    return isinstance(v, list) and all(isinstance(x, str) for x in v)
+
+
+def _check_pose(f: str, node: str, values) -> str | None:
+    where = f'{f}: position["{node}"]'
+    if not isinstance(values, list | tuple):
+        return f"{where} is not a list. Fix: write [x, y, z, qx, qy, qz, qw]."
+    if len(values) != 7:
+        return (
+            f"{where} has {len(values)} numbers, expected 7. "
+            "Fix: write [x, y, z, qx, qy, qz, qw] (quaternion scalar-last)."
+        )
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
+        return f"{where} holds a non-number. Fix: use 7 numbers."
+    if not all(math.isfinite(v) for v in values):
+        return f"{where} holds NaN or infinity. Fix: use 7 finite numbers."
+    norm = float(np.linalg.norm(values[3:]))
+    if abs(norm - 1.0) > QUAT_NORM_TOLERANCE:
+        return (
+            f"{where} quaternion has norm {norm:.4g}, expected 1 (within {QUAT_NORM_TOLERANCE}). "
+            "Fix: write a unit quaternion [qx, qy, qz, qw], e.g. [0, 0, 0, 1]."
+        )
+    return None
+
+
+def _check_structure(data, f: str) -> list[str]:
+    """Structural checks that need no files. Returns every problem found."""
+    if not isinstance(data, dict):
+        return [f"{f}: the top level must be a JSON object, got {type(data).__name__}."]
+    problems = []
+    types = {"tree": dict, "relation": dict, "objs_mapping": dict, "assets": dict, "position": dict}
+    for key in REQUIRED_FIELDS:
+        if key not in data:
+            problems.append(f'{f}: required field "{key}" is missing. Fix: add it (see SPEC 2).')
+        elif not isinstance(data[key], types[key]):
+            problems.append(f'{f}: field "{key}" must be a JSON object.')
+    for key in ("objs_desc", "quality"):
+        if key in data and data[key] is not None and not isinstance(data[key], dict):
+            problems.append(f'{f}: field "{key}" must be a JSON object when present.')
+    if problems:
+        return problems
+
+    rel, mapping, assets, position, tree = (
+        data["relation"], data["objs_mapping"], data["assets"], data["position"], data["tree"]
+    )
+    for key in ("robot", "background", "context"):
+        if not isinstance(rel.get(key), str) or not rel.get(key):
+            problems.append(f'{f}: relation["{key}"] must be a node name (string). Fix: add it.')
+    for key in ("manipulated_objs", "distractor_objs"):
+        if key not in rel or not _is_str_list(rel[key]):
+            problems.append(f'{f}: relation["{key}"] must be a list of node names. Fix: add it.')
+    if problems:
+        return problems
+    if not rel["manipulated_objs"]:
+        problems.append(
+            f'{f}: relation["manipulated_objs"] is empty. Fix: name at least one object to pick.'
+        )
+
+    for node, cat in mapping.items():
+        if cat not in CATEGORIES:
+            problems.append(
+                f'{f}: objs_mapping["{node}"] is "{cat}", expected one of {list(CATEGORIES)}.'
+            )
+    for cat in ("context", "background"):
+        nodes = [n for n, c in mapping.items() if c == cat]
+        if len(nodes) != 1:
+            problems.append(
+                f'{f}: objs_mapping has {len(nodes)} "{cat}" nodes {nodes}, expected exactly 1.'
+            )
+        elif nodes[0] != rel[cat]:
+            problems.append(
+                f'{f}: relation["{cat}"] is "{rel[cat]}" but objs_mapping marks "{nodes[0]}" as'
+                f' {cat}. Fix: make them agree.'
+            )
+    for cat in ("manipulated_objs", "distractor_objs"):
+        for node in rel[cat]:
+            if mapping.get(node) != cat:
+                problems.append(
+                    f'{f}: relation["{cat}"] lists "{node}" but objs_mapping["{node}"] is '
+                    f'{mapping.get(node)!r}. Fix: set objs_mapping["{node}"] to "{cat}".'
+                )
+    robot = rel["robot"]
+    if robot in mapping:
+        problems.append(f'{f}: the robot "{robot}" must not appear in objs_mapping.')
+    for node in mapping:
+        if node not in assets:
+            problems.append(
+                f'{f}: assets["{node}"] is missing. Fix: give the asset folder of "{node}"'
+                " relative to the layout file."
+            )
+        elif not isinstance(assets[node], str):
+            problems.append(f'{f}: assets["{node}"] must be a folder path (string).')
+        if node not in position:
+            problems.append(f'{f}: position["{node}"] is missing. Fix: add its pose.')
+    if robot not in position:
+        problems.append(f'{f}: position["{robot}"] (the robot) is missing. Fix: add its pose.')
+    for node, values in position.items():
+        msg = _check_pose(f, node, values)
+        if msg:
+            problems.append(msg)
+
+    known = set(mapping) | {robot}
+    parent_of: dict[str, str] = {}
+    for parent, kids in tree.items():
+        if parent not in known:
+            problems.append(f'{f}: tree has unknown parent node "{parent}". Fix: add it or remove.')
+        if not isinstance(kids, list):
+            problems.append(f'{f}: tree["{parent}"] must be a list of [child, relation] pairs.')
+            continue
+        for kid in kids:
+            if not (isinstance(kid, list | tuple) and len(kid) == 2 and _is_str_list(list(kid))):
+                problems.append(f'{f}: tree["{parent}"] entry {kid!r} is not [child, relation].')
+                continue
+            child, relation = kid
+            if relation not in RELATIONS:
+                problems.append(
+                    f'{f}: tree["{parent}"] relation of "{child}" is "{relation}", expected one '
+                    f"of {list(RELATIONS)}."
+                )
+            if child not in known:
+                problems.append(f'{f}: tree["{parent}"] has unknown child node "{child}".')
+            parent_of[child] = parent
+    if tree and next(iter(tree)) != rel["background"]:
+        problems.append(
+            f'{f}: the first key of "tree" must be the background "{rel["background"]}".'
+        )
+    for node in rel["manipulated_objs"] + rel["distractor_objs"]:
+        chain, cur = [], node
+        while cur in parent_of and cur not in chain:
+            chain.append(cur)
+            cur = parent_of[cur]
+        if rel["context"] not in chain[1:] + [cur] or node == rel["context"]:
+            problems.append(
+                f'{f}: tree: "{node}" does not rest on the context "{rel["context"]}". Fix: add'
+                f' ["{node}", "ON"] under "{rel["context"]}" (or under an object on it).'
+            )
+    return problems
+
+
+def check_asset_files(info: LayoutInfo) -> list[str]:
+    """File checks: every asset folder exists and holds a loadable URDF with its meshes."""
+    from embodied_envs.layout.assets import asset_geometry
+
+    f = _label(info.source)
+    problems = []
+    for node, cat in info.objs_mapping.items():
+        d = info.asset_dir(node)
+        if not d.is_dir():
+            problems.append(
+                f'{f}: assets["{node}"] folder {info.assets[node]} does not exist (looked at {d}).'
+                " Fix: make the path relative to the layout file's folder."
+            )
+            continue
+        if cat == "background":
+            continue
+        urdf = info.urdf_path(node)
+        if not urdf.is_file():
+            found = sorted(p.name for p in d.glob("*.urdf"))
+            problems.append(
+                f'{f}: assets["{node}"]: {node_stem(node)}.urdf not found in {d} (found {found}).'
+                " Fix: name the URDF after the node, spaces replaced by underscores."
+            )
+            continue
+        try:
+            asset_geometry(parse_urdf(urdf))
+        except LayoutError as e:
+            problems.extend(f'{f}: assets["{node}"]: {p}' for p in e.problems)
+    return problems
+
+
+def load_layout(path: Path | str, check_files: bool = True) -> LayoutInfo:
+    """Read, parse and validate a layout file.
+
+    Args:
+        path: the ``layout.json``.
+        check_files: also check every asset folder and its URDF and meshes.
+
+    Returns:
+        The validated layout; its ``source`` and ``asset_root`` point at the file.
+
+    Raises:
+        LayoutError: naming the file, node and field of every problem found.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise LayoutError(f"{path}: layout file does not exist. Fix: check the path.")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise LayoutError(
+            f"{path}: not valid JSON ({e.msg} at line {e.lineno}, column {e.colno})."
+            " Fix: repair the JSON syntax."
+        ) from e
+    except UnicodeDecodeError as e:
+        raise LayoutError(f"{path}: not a UTF-8 text file ({e}).") from e
+    info = LayoutInfo.from_dict(data, source=path)
+    if check_files:
+        problems = check_asset_files(info)
+        if problems:
+            raise LayoutError(problems)
+    return info

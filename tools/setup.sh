@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# Idempotent set-up: a .venv with torch (CPU build) first, the package with dev extras, and a
+# Vulkan device for SAPIEN (lavapipe from bookworm-backports when none is found).
+# Re-running only checks; it installs what is missing and nothing more.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+VENV=$ROOT/.venv
+PY=${PYTHON:-python3}
+export PIP_DISABLE_PIP_VERSION_CHECK=1
+
+log() { printf '[setup] %s\n' "$*" >&2; }
+
+if [ ! -x "$VENV/bin/python" ]; then
+    log "creating $VENV"
+    "$PY" -m venv "$VENV"
+fi
+VPY=$VENV/bin/python
+
+# torch first: torch==2.13.0 is a CPU build on these machines; anything that pulls torch
+# unpinned would otherwise fetch a multi-GB CUDA build.
+if ! "$VPY" -c "import torch" 2>/dev/null; then
+    log "installing torch==2.13.0"
+    "$VPY" -m pip install -q "torch==2.13.0"
+fi
+
+# Re-install the package only when pyproject.toml changed since the last install.
+STAMP=$VENV/.embodied_envs.stamp
+HASH=$(sha256sum pyproject.toml | cut -d' ' -f1)
+if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$HASH" ] || ! "$VPY" -c "import embodied_envs" 2>/dev/null; then
+    log "installing embodied-envs[dev] (editable)"
+    "$VPY" -m pip install -q -e ".[dev]"
+    echo "$HASH" >"$STAMP"
+fi
+
+# SAPIEN needs a Vulkan device even for state-only simulation.
+probe_vulkan() {
+    "$VPY" - <<'PYEOF' >/dev/null 2>&1
+import sapien
+sapien.render.RenderSystem()
+PYEOF
+}
+if ! probe_vulkan; then
+    if [ -f /etc/debian_version ] && command -v apt-get >/dev/null; then
+        log "no Vulkan render device: installing Mesa lavapipe from bookworm-backports"
+        SUDO=""
+        [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+        SRC=/etc/apt/sources.list.d/bookworm-backports.list
+        if ! grep -rqs "bookworm-backports" /etc/apt/sources.list /etc/apt/sources.list.d/; then
+            echo "deb http://deb.debian.org/debian bookworm-backports main" | $SUDO tee "$SRC" >/dev/null
+        fi
+        $SUDO apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq -t bookworm-backports \
+            mesa-vulkan-drivers libvulkan1 >/dev/null
+        if ! probe_vulkan; then
+            log "ERROR: SAPIEN still finds no Vulkan device after installing lavapipe."
+            exit 1
+        fi
+    else
+        log "ERROR: SAPIEN finds no Vulkan device. Install a Vulkan driver: Mesa's lavapipe"
+        log "(mesa-vulkan-drivers >= 23, e.g. Debian bookworm-backports, Ubuntu 24.04) or your GPU's driver."
+        exit 1
+    fi
+fi
+log "ready: $("$VPY" -c 'import torch, mani_skill, numpy; print(f"torch {torch.__version__}, mani_skill {mani_skill.__version__}, numpy {numpy.__version__}")')"
