@@ -221,7 +221,15 @@ def convex_hull_2d(points: np.ndarray) -> np.ndarray:
 
     lower = half(pts)
     upper = half(pts[::-1])
-    return np.array(lower[:-1] + upper[:-1])
+    hull = np.array(lower[:-1] + upper[:-1])
+    # drop vertices within 10 micrometres of their predecessor: such edges have no usable normal
+    keep = [0]
+    for i in range(1, len(hull)):
+        if np.hypot(*(hull[i] - hull[keep[-1]])) > 1e-5:
+            keep.append(i)
+    if len(keep) > 1 and np.hypot(*(hull[keep[-1]] - hull[keep[0]])) <= 1e-5:
+        keep.pop()
+    return hull[keep]
 
 
 def _load_parts(mesh: MeshRef) -> list:
@@ -235,7 +243,6 @@ def _load_parts(mesh: MeshRef) -> list:
         raise LayoutError(
             f"{mesh.path}: the mesh is empty (no vertices or faces). Fix: re-export the mesh."
         )
-    loaded.merge_vertices()
     parts = loaded.split(only_watertight=False)
     return parts if len(parts) else [loaded]
 

@@ -76,6 +76,17 @@ def polygon_area(poly: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
+def polygon_centroid(poly: np.ndarray) -> np.ndarray:
+    """Area centroid of a simple polygon."""
+    x, y = poly[:, 0], poly[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    area = cross.sum() / 2.0
+    if abs(area) < 1e-12:
+        return poly.mean(axis=0)
+    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
+
+
 def rotation_2d(yaw: np.ndarray) -> np.ndarray:
     """``(..., 2, 2)`` rotation matrices for yaw angles of any shape."""
     c, s = np.cos(yaw), np.sin(yaw)
@@ -171,7 +182,7 @@ def robot_base_pose(top: Surface, limits: PlacementLimits, u: float) -> LayoutPo
     i = min(i, len(lengths) - 1)
     t = (s - (np.cumsum(lengths)[i] - lengths[i])) / max(lengths[i], 1e-12)
     xy = edge_hull[i] + t * seg[i]
-    centre = top.hull.mean(axis=0)
+    centre = polygon_centroid(top.hull)
     yaw = math.atan2(centre[1] - xy[1], centre[0] - xy[0])
     return LayoutPose.from_xyz_yaw([xy[0], xy[1], top.z], yaw)
 

@@ -1,0 +1,189 @@
+"""``embodied-envs layout generate | validate | preview``."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from embodied_envs.layout import LayoutError, LayoutInfo, PlacementError, load_layout
+from embodied_envs.layout.placement import (
+    PlacementLimits,
+    node_footprint,
+    node_geometry,
+    place,
+    rotation_2d,
+    square,
+    top_surface,
+    world_vertices,
+)
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("layout", help="generate, validate and preview layouts")
+    lsub = p.add_subparsers(dest="layout_cmd", required=True)
+
+    g = lsub.add_parser("generate", help="write N placed variants of a layout")
+    g.add_argument("layout", type=Path)
+    g.add_argument("--num", type=int, required=True, help="number of variants")
+    g.add_argument("--seed", type=int, default=0, help="variant i uses seed + i")
+    g.add_argument("--out", type=Path, required=True, help="output folder (created)")
+    g.add_argument("--workers", type=int, default=1, help="parallel processes")
+    g.set_defaults(func=cmd_generate)
+
+    v = lsub.add_parser("validate", help="check layouts and their asset folders")
+    v.add_argument("layouts", type=Path, nargs="+")
+    v.add_argument("--no-placement", action="store_true", help="skip the placement check")
+    v.set_defaults(func=cmd_validate)
+
+    pr = lsub.add_parser("preview", help="top-down PNG of a layout")
+    pr.add_argument("layout", type=Path)
+    pr.add_argument("--out", type=Path, required=True)
+    pr.add_argument("--render", action="store_true", help="add a SAPIEN render beside it")
+    pr.add_argument("--size", type=int, default=640, help="image side in pixels")
+    pr.set_defaults(func=cmd_preview)
+
+
+def _generate_one(args: tuple[str, int, str]) -> str:
+    layout_path, seed, out = args
+    layout = load_layout(layout_path, check_files=False)
+    placed = place(layout, seed)
+    return str(placed.save(Path(out) / f"{Path(layout_path).stem}_{seed:06d}.json"))
+
+
+def cmd_generate(args) -> int:
+    if args.num < 1 or args.workers < 1:
+        print("error: --num and --workers must be at least 1", file=sys.stderr)
+        return 2
+    load_layout(args.layout)  # validate once, up front
+    args.out.mkdir(parents=True, exist_ok=True)
+    jobs = [(str(args.layout), args.seed + i, str(args.out)) for i in range(args.num)]
+    bar = tqdm(total=args.num, desc="placing", unit="layout")
+    if args.workers == 1:
+        for job in jobs:
+            _generate_one(job)
+            bar.update()
+    else:
+        with ProcessPoolExecutor(args.workers) as pool:
+            for _ in pool.map(_generate_one, jobs, chunksize=max(1, args.num // (4 * args.workers))):
+                bar.update()
+    bar.close()
+    print(f"wrote {args.num} layouts to {args.out}")
+    return 0
+
+
+def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
+    """Every problem of one layout, as user-facing lines (empty when valid)."""
+    try:
+        layout = load_layout(path)
+    except LayoutError as e:
+        return e.problems
+    from embodied_envs.envs.config import ROBOT_REGISTRY
+
+    problems = []
+    if layout.robot.lower().replace(" ", "_") not in ROBOT_REGISTRY:
+        problems.append(
+            f'{path}: relation["robot"] is "{layout.robot}", not a registered robot '
+            f"({sorted(ROBOT_REGISTRY)}). Fix: rename it or pass robot_uids to the env."
+        )
+    if check_placement:
+        try:
+            place(layout, 0)
+        except PlacementError as e:
+            problems.append(f"{path}: placement: {e}")
+    return problems
+
+
+def cmd_validate(args) -> int:
+    bad = 0
+    for path in args.layouts:
+        problems = validate_problems(path, not args.no_placement)
+        if problems:
+            bad += 1
+            print(f"FAIL {path}")
+            for p in problems:
+                print(f"  - {p}")
+        else:
+            print(f"ok   {path}")
+    return 1 if bad else 0
+
+
+def draw_top_down(layout: LayoutInfo, size: int = 640, limits: PlacementLimits | None = None):
+    """A top-down PIL image: table hull, labelled footprints, robot base, heading, reach band."""
+    from PIL import Image, ImageDraw
+
+    lim = limits or PlacementLimits()
+    ctx = layout.context
+    ctx_world = world_vertices(node_geometry(layout, ctx), layout.pose(ctx))
+    top = top_surface(ctx_world, lim.top_band)
+    robot = layout.pose(layout.robot)
+    pts = [top.hull, np.array([robot.p[:2]])]
+    lo = np.min(np.concatenate(pts), 0) - 0.25
+    hi = np.max(np.concatenate(pts), 0) + 0.25
+    scale = (size - 40) / float(max(hi - lo))
+
+    def px(xy):
+        xy = np.atleast_2d(xy)
+        return [(20 + (x - lo[0]) * scale, size - 20 - (y - lo[1]) * scale) for x, y in xy]
+
+    img = Image.new("RGB", (size, size), (250, 250, 248))
+    d = ImageDraw.Draw(img)
+    # reach band of manipulated objects
+    yaw = robot.yaw
+    half = math.radians(lim.max_heading_deg)
+    arc = np.linspace(yaw - half, yaw + half, 40)
+    outer = np.stack([np.cos(arc), np.sin(arc)], 1) * lim.reach_max + robot.p[:2]
+    inner = (np.stack([np.cos(arc), np.sin(arc)], 1) * lim.reach_min + robot.p[:2])[::-1]
+    d.polygon(px(np.concatenate([outer, inner])), fill=(215, 235, 215), outline=(120, 170, 120))
+    d.polygon(px(top.hull), outline=(120, 80, 40), width=3)
+    colours = {"manipulated_objs": (40, 90, 220), "distractor_objs": (200, 110, 40)}
+    for node in layout.object_nodes():
+        cat = layout.objs_mapping[node]
+        if cat == "context":
+            continue
+        pose = layout.pose(node)
+        foot = node_footprint(layout, node) @ rotation_2d(np.float64(pose.yaw)).T + pose.p[:2]
+        d.polygon(px(foot), outline=colours.get(cat, (90, 90, 90)), width=2)
+        cx, cy = px(pose.p[:2])[0]
+        d.text((cx + 4, cy - 12), node, fill=colours.get(cat, (40, 40, 40)))
+    d.polygon(px(square(np.array(robot.p), lim.robot_footprint, robot.yaw)), fill=(60, 60, 60))
+    tip = np.array(robot.p[:2]) + 0.2 * np.array([math.cos(yaw), math.sin(yaw)])
+    d.line(px(np.array([robot.p[:2], tip])), fill=(220, 30, 30), width=3)
+    d.text(px(robot.p[:2])[0], f"  {layout.robot}", fill=(0, 0, 0))
+    d.text((8, 4), f"{layout.source.name if layout.source else ''}: top-down (x right, y up); "
+           f"green band = reach of manipulated objects", fill=(0, 0, 0))
+    return img
+
+
+def cmd_preview(args) -> int:
+    from PIL import Image
+
+    layout = load_layout(args.layout)
+    img = draw_top_down(layout, args.size)
+    if args.render:
+        import gymnasium as gym
+
+        import embodied_envs  # noqa: F401  (registers the env)
+
+        env = gym.make(
+            "PickEmbodiedGen-v1", layout_file=str(args.layout), replace_objs=False,
+            render_mode="rgb_array",
+            camera_cfg=dict(image_hw=[args.size, args.size]),
+        )
+        env.reset(seed=0)
+        frame = env.render()
+        env.close()
+        frame = np.asarray(frame.cpu().numpy() if hasattr(frame, "cpu") else frame)[0]
+        both = Image.new("RGB", (img.width + frame.shape[1], max(img.height, frame.shape[0])), "white")
+        both.paste(img, (0, 0))
+        both.paste(Image.fromarray(frame), (img.width, 0))
+        img = both
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    img.save(args.out)
+    print(f"wrote {args.out}")
+    return 0

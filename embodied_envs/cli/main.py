@@ -1,0 +1,36 @@
+"""The ``embodied-envs`` command line: thin parsing over the package."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from embodied_envs.layout import LayoutError, PlacementError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from embodied_envs.cli import demo, layout_cmds, splat_cmds
+
+    parser = argparse.ArgumentParser(
+        prog="embodied-envs", description="Layout-driven ManiSkill pick environments."
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    layout_cmds.add_parser(sub)
+    demo.add_parser(sub)
+    splat_cmds.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (LayoutError, PlacementError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

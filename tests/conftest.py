@@ -1,0 +1,44 @@
+import copy
+import json
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+
+ROOT = Path(__file__).resolve().parent.parent
+LAYOUTS = sorted((ROOT / "layouts").glob("*.json"))
+DEFAULT_LAYOUT = ROOT / "layouts" / "default.json"
+
+
+@pytest.fixture
+def layout_dict():
+    return json.loads(DEFAULT_LAYOUT.read_text())
+
+
+@pytest.fixture
+def scene_copy(tmp_path):
+    """A copy of the shipped layouts and assets in a temporary folder (same relative layout)."""
+    shutil.copytree(ROOT / "assets", tmp_path / "assets")
+    shutil.copytree(ROOT / "layouts", tmp_path / "layouts")
+    return tmp_path
+
+
+def write_layout(folder: Path, data: dict, name: str = "layout.json") -> Path:
+    path = folder / name
+    path.write_text(json.dumps(data))
+    return path
+
+
+def snapshot(folder: Path) -> dict:
+    """Every file under a folder with its size and mtime, to prove nothing was written."""
+    return {
+        str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
+        for p in sorted(folder.rglob("*"))
+    }
+
+
+def deep(d):
+    return copy.deepcopy(d)

@@ -1,0 +1,73 @@
+import pytest
+from conftest import ROOT
+
+from embodied_envs.layout import LayoutError, asset_geometry, parse_urdf
+
+URDF = """<?xml version="1.0"?>
+<robot name="thing">
+  <link name="thing">
+    <visual><geometry><mesh filename="mesh/thing.obj" scale="1 1 1"/></geometry>
+      <origin xyz="0 0 0" rpy="1.5708 0 0"/></visual>
+    {collision}
+    {inertial}
+  </link>
+</robot>
+"""
+COLLISION = """<collision><geometry><mesh filename="mesh/thing_collision.obj"/></geometry>
+      <origin xyz="0 0 0.1" rpy="1.5708 0 0"/>{gazebo}</collision>"""
+
+
+def make_asset(tmp_path, collision=COLLISION, gazebo="", inertial="", mesh_text=None):
+    (tmp_path / "mesh").mkdir(exist_ok=True)
+    cube = (ROOT / "assets" / "cracker_box" / "mesh" / "cracker_box_collision.obj").read_text()
+    (tmp_path / "mesh" / "thing.obj").write_text(cube)
+    (tmp_path / "mesh" / "thing_collision.obj").write_text(mesh_text if mesh_text is not None else cube)
+    path = tmp_path / "thing.urdf"
+    path.write_text(URDF.format(collision=collision.format(gazebo=gazebo), inertial=inertial))
+    return path
+
+
+def test_parse_shipped_urdf_friction_clipped_and_mass():
+    spec = parse_urdf(ROOT / "assets" / "can" / "can.urdf")
+    assert spec.static_friction == 0.7 and spec.dynamic_friction == 0.6
+    assert spec.mass == pytest.approx(0.15)
+    assert spec.visual.rpy == pytest.approx((1.5708, 0, 0))
+    assert spec.collision.path.name == "can_collision.obj"
+
+
+def test_friction_clipping_and_defaults(tmp_path):
+    s = parse_urdf(make_asset(tmp_path, gazebo="<gazebo><mu1>2.0</mu1><mu2>0.01</mu2></gazebo>"))
+    assert (s.static_friction, s.dynamic_friction) == (0.7, 0.1)
+    s = parse_urdf(make_asset(tmp_path))
+    assert (s.static_friction, s.dynamic_friction) == (0.5, 0.4)
+    assert s.mass is None
+
+
+def test_origin_applied_y_up_to_z_up(tmp_path):
+    geom = asset_geometry(parse_urdf(make_asset(tmp_path)))
+    # the cracker box is 0.05 x 0.09 x 0.13 (Z-up design); stored Y-up; origin z + 0.1
+    ext = geom.vertices.max(0) - geom.vertices.min(0)
+    assert ext == pytest.approx([0.05, 0.09, 0.13], abs=1e-4)
+    assert (geom.vertices.max(0) + geom.vertices.min(0))[2] / 2 == pytest.approx(0.1, abs=1e-4)
+    assert len(geom.parts) == 2 and geom.volume == pytest.approx(0.05 * 0.09 * 0.13, rel=1e-3)
+
+
+def test_missing_collision_is_an_error(tmp_path):
+    with pytest.raises(LayoutError, match="link has no <collision>"):
+        parse_urdf(make_asset(tmp_path, collision=""))
+
+
+def test_not_a_mesh_and_empty_mesh(tmp_path):
+    spec = parse_urdf(make_asset(tmp_path, mesh_text="this is not a mesh\n"))
+    with pytest.raises(LayoutError, match="thing_collision.obj"):
+        asset_geometry(spec)
+    spec = parse_urdf(make_asset(tmp_path / "x" if (tmp_path / "x").mkdir() is None else tmp_path, mesh_text=""))
+    with pytest.raises(LayoutError, match="empty|not a readable mesh"):
+        asset_geometry(spec)
+
+
+def test_invalid_xml(tmp_path):
+    p = tmp_path / "bad.urdf"
+    p.write_text("<robot><link>")
+    with pytest.raises(LayoutError, match="not valid XML"):
+        parse_urdf(p)
