@@ -88,12 +88,16 @@ def write_asset(asset: Asset, out: Path) -> None:
     colours = sorted({p.color for p in parts})
     names = {c: f"mat{i}" for i, c in enumerate(colours)}
     mtl = [
-        f"newmtl {names[c]}\nKa 0 0 0\nKd {c[0]:.4f} {c[1]:.4f} {c[2]:.4f}\nKs 0.05 0.05 0.05\nNs 20\nd 1\nillum 2"
+        f"newmtl {names[c]}\nKa 0 0 0\nKd {c[0]:.4f} {c[1]:.4f} {c[2]:.4f}\n"
+        "Ks 0.05 0.05 0.05\nNs 20\nd 1\nillum 2"
         for c in colours
     ]
     (folder / "mesh" / f"{asset.stem}.mtl").write_text("\n\n".join(mtl) + "\n")
-    write_obj(folder / "mesh" / f"{asset.stem}.obj", [(p.mesh, names[p.color]) for p in parts],
-              f"{asset.stem}.mtl")
+    write_obj(
+        folder / "mesh" / f"{asset.stem}.obj",
+        [(p.mesh, names[p.color]) for p in parts],
+        f"{asset.stem}.mtl",
+    )
     if asset.collision:
         hulls = [c.copy() for c in asset.collision]
         for h in hulls:
@@ -104,8 +108,10 @@ def write_asset(asset: Asset, out: Path) -> None:
     write_obj(folder / "mesh" / f"{asset.stem}_collision.obj", [(h, None) for h in hulls], None)
     gazebo = ""
     if asset.mu is not None:
-        gazebo = (f"\n      <gazebo>\n        <mu1>{asset.mu[0]}</mu1>\n        <mu2>{asset.mu[1]}</mu2>"
-                  "\n      </gazebo>")
+        gazebo = (
+            f"\n      <gazebo>\n        <mu1>{asset.mu[0]}</mu1>\n        <mu2>{asset.mu[1]}</mu2>"
+            "\n      </gazebo>"
+        )
     inertial = ""
     if asset.mass is not None:
         inertial = f'\n    <inertial>\n      <mass value="{asset.mass}"/>\n    </inertial>'
@@ -177,11 +183,20 @@ def bottle() -> Asset:
     body = revolve([[0, 0], [0.03, 0], [0.03, 0.13], [0.012, 0.17], [0, 0.17]], sections=32)
     neck = cylinder(0.012, 0.035, [0, 0, 0.1875], sections=24)
     cap = cylinder(0.014, 0.015, [0, 0, 0.2125], sections=24)
-    collision = [cylinder(0.03, 0.13, [0, 0, 0.065]),
-                 revolve([[0, 0.13], [0.03, 0.13], [0.012, 0.17], [0, 0.17]]),
-                 cylinder(0.014, 0.05, [0, 0, 0.195])]
-    return Asset("bottle", [Part(body, (0.15, 0.6, 0.25)), Part(neck, (0.15, 0.6, 0.25)),
-                            Part(cap, (0.95, 0.95, 0.95))], collision=collision)
+    collision = [
+        cylinder(0.03, 0.13, [0, 0, 0.065]),
+        revolve([[0, 0.13], [0.03, 0.13], [0.012, 0.17], [0, 0.17]]),
+        cylinder(0.014, 0.05, [0, 0, 0.195]),
+    ]
+    return Asset(
+        "bottle",
+        [
+            Part(body, (0.15, 0.6, 0.25)),
+            Part(neck, (0.15, 0.6, 0.25)),
+            Part(cap, (0.95, 0.95, 0.95)),
+        ],
+        collision=collision,
+    )
 
 
 def mug() -> Asset:
@@ -237,20 +252,26 @@ def room_mesh() -> trimesh.Trimesh:
     pieces = []
 
     def add(mesh, colour):
-        mesh.visual.vertex_colors = np.tile(np.array([*colour, 255], np.uint8), (len(mesh.vertices), 1))
+        mesh.visual.vertex_colors = np.tile(
+            np.array([*colour, 255], np.uint8), (len(mesh.vertices), 1)
+        )
         pieces.append(mesh)
 
     # floor: checker of wooden planks
     n = 10
     for i in range(n):
         for j in range(n):
-            tile = box([size / n, size / n, 0.02], [-size / 2 + (i + 0.5) * size / n,
-                                                     -size / 2 + (j + 0.5) * size / n, -0.01])
+            tile = box(
+                [size / n, size / n, 0.02],
+                [-size / 2 + (i + 0.5) * size / n, -size / 2 + (j + 0.5) * size / n, -0.01],
+            )
             add(tile, (150, 110, 70) if (i + j) % 2 else (170, 130, 85))
-    walls = [([size, 0.05, wall_h], [0, size / 2, wall_h / 2], (225, 220, 205)),
-             ([size, 0.05, wall_h], [0, -size / 2, wall_h / 2], (210, 215, 225)),
-             ([0.05, size, wall_h], [size / 2, 0, wall_h / 2], (220, 210, 200)),
-             ([0.05, size, wall_h], [-size / 2, 0, wall_h / 2], (200, 215, 205))]
+    walls = [
+        ([size, 0.05, wall_h], [0, size / 2, wall_h / 2], (225, 220, 205)),
+        ([size, 0.05, wall_h], [0, -size / 2, wall_h / 2], (210, 215, 225)),
+        ([0.05, size, wall_h], [size / 2, 0, wall_h / 2], (220, 210, 200)),
+        ([0.05, size, wall_h], [-size / 2, 0, wall_h / 2], (200, 215, 205)),
+    ]
     for ext, c, col in walls:
         add(box(ext, c), col)
     # window on the -x wall: light blue pane with a white frame
@@ -268,8 +289,10 @@ def room_mesh() -> trimesh.Trimesh:
         while x < 1.7:
             w = rng.uniform(0.03, 0.07)
             hgt = rng.uniform(0.18, 0.3)
-            add(box([w, 0.2, hgt], [x + w / 2, size / 2 - 0.2, z + 0.015 + hgt / 2]),
-                tuple(int(v) for v in rng.integers(40, 230, 3)))
+            add(
+                box([w, 0.2, hgt], [x + w / 2, size / 2 - 0.2, z + 0.015 + hgt / 2]),
+                tuple(int(v) for v in rng.integers(40, 230, 3)),
+            )
             x += w + 0.005
     # ceiling
     add(box([size, size, 0.02], [0, 0, wall_h + 0.01]), (240, 240, 240))
@@ -279,7 +302,9 @@ def room_mesh() -> trimesh.Trimesh:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent.parent / "assets")
     args = ap.parse_args()
     for make in ASSETS:

@@ -75,7 +75,9 @@ def base_layout(name: str, spec: dict, out_dir: Path) -> LayoutInfo:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--out", type=Path, default=ROOT / "layouts")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)

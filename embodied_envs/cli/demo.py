@@ -37,7 +37,9 @@ def add_parser(sub) -> None:
     p.add_argument("--fovy-deg", type=float, default=75.0)
     p.add_argument("--frame-every", type=int, default=2, help="record every k-th control step")
     p.add_argument("--out", type=Path, default=Path("outputs/demo"))
-    p.add_argument("--workers", type=int, default=None, help="processes (default: min(envs, cores))")
+    p.add_argument(
+        "--workers", type=int, default=None, help="processes (default: min(envs, cores))"
+    )
     p.set_defaults(func=cmd_demo)
 
 
@@ -80,12 +82,19 @@ def _run_env(job: dict) -> list[EnvEpisode]:
             recorder = _Recorder(env, frames, every)
             result = PickPlaceSolver(recorder, seed=seed).solve()
             frames.append(_frame(env))
-            out.append(EnvEpisode(
-                episode=e, env=job["env"], seed=seed, layout=job["layout"],
-                success=bool(result.success[0]), steps=result.steps,
-                plan_failures=result.reports[0].plan_failures,
-                wall_time_s=round(time.perf_counter() - t0, 3), frames=frames,
-            ))
+            out.append(
+                EnvEpisode(
+                    episode=e,
+                    env=job["env"],
+                    seed=seed,
+                    layout=job["layout"],
+                    success=bool(result.success[0]),
+                    steps=result.steps,
+                    plan_failures=result.reports[0].plan_failures,
+                    wall_time_s=round(time.perf_counter() - t0, 3),
+                    frames=frames,
+                )
+            )
             if job.get("progress") is not None:
                 job["progress"].put(1)
     finally:
@@ -124,7 +133,7 @@ def tile(frames: list[np.ndarray]) -> np.ndarray:
     grid = np.zeros((rows * h, cols * w, c), np.uint8)
     for i, f in enumerate(frames):
         r, col = divmod(i, cols)
-        grid[r * h:(r + 1) * h, col * w:(col + 1) * w] = f
+        grid[r * h : (r + 1) * h, col * w : (col + 1) * w] = f
     return grid
 
 
@@ -155,12 +164,21 @@ def cmd_demo(args) -> int:
         raise SystemExit("error: --num-envs and --episodes must be at least 1")
     args.out.mkdir(parents=True, exist_ok=True)
     layouts = env_layouts(layout_path, args.num_envs, args.seed, args.out)
-    camera_cfg = dict(camera_eye=args.camera_eye, camera_target_pt=args.camera_target,
-                      image_hw=list(args.image_hw), fovy_deg=args.fovy_deg)
+    camera_cfg = dict(
+        camera_eye=args.camera_eye,
+        camera_target_pt=args.camera_target,
+        image_hw=list(args.image_hw),
+        fovy_deg=args.fovy_deg,
+    )
     jobs = [
-        dict(env=k, layout=layouts[k], render_mode=args.render_mode, camera_cfg=camera_cfg,
-             frame_every=args.frame_every,
-             seeds=[args.seed + e * args.num_envs + k for e in range(args.episodes)])
+        dict(
+            env=k,
+            layout=layouts[k],
+            render_mode=args.render_mode,
+            camera_cfg=camera_cfg,
+            frame_every=args.frame_every,
+            seeds=[args.seed + e * args.num_envs + k for e in range(args.episodes)],
+        )
         for k in range(args.num_envs)
     ]
     t0 = time.perf_counter()
@@ -178,20 +196,34 @@ def cmd_demo(args) -> int:
                 bar.update(len(r))
     bar.close()
     fps = max(1, int(round(50 / args.frame_every)))
-    summary = dict(layout=str(layout_path), num_envs=args.num_envs, seed=args.seed,
-                   render_mode=args.render_mode, fps=fps, episodes=[])
+    summary = dict(
+        layout=str(layout_path),
+        num_envs=args.num_envs,
+        seed=args.seed,
+        render_mode=args.render_mode,
+        fps=fps,
+        episodes=[],
+    )
     for e in range(args.episodes):
         eps = [results[k][e] for k in range(args.num_envs)]
         video = args.out / f"episode_{e:03d}.mp4"
         n_frames = write_video(video, [ep.frames for ep in eps], fps)
         envs = [{k: v for k, v in asdict(ep).items() if k != "frames"} for ep in eps]
-        summary["episodes"].append(dict(episode=e, video=str(video), frames=n_frames,
-                                        success_rate=float(np.mean([ep.success for ep in eps])),
-                                        envs=envs))
+        summary["episodes"].append(
+            dict(
+                episode=e,
+                video=str(video),
+                frames=n_frames,
+                success_rate=float(np.mean([ep.success for ep in eps])),
+                envs=envs,
+            )
+        )
         ok = sum(ep.success for ep in eps)
         fails = sum(bool(ep.plan_failures) for ep in eps)
-        print(f"episode {e}: success {ok}/{len(eps)}, plan failures {fails}, "
-              f"steps {[ep.steps for ep in eps]}, video {video}")
+        print(
+            f"episode {e}: success {ok}/{len(eps)}, plan failures {fails}, "
+            f"steps {[ep.steps for ep in eps]}, video {video}"
+        )
     summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
     (args.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     print(f"wrote {args.out / 'summary.json'}")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -70,7 +69,9 @@ def cmd_generate(args) -> int:
             bar.update()
     else:
         with ProcessPoolExecutor(args.workers) as pool:
-            for _ in pool.map(_generate_one, jobs, chunksize=max(1, args.num // (4 * args.workers))):
+            for _ in pool.map(
+                _generate_one, jobs, chunksize=max(1, args.num // (4 * args.workers))
+            ):
                 bar.update()
     bar.close()
     print(f"wrote {args.num} layouts to {args.out}")
@@ -155,8 +156,12 @@ def draw_top_down(layout: LayoutInfo, size: int = 640, limits: PlacementLimits |
     tip = np.array(robot.p[:2]) + 0.2 * np.array([math.cos(yaw), math.sin(yaw)])
     d.line(px(np.array([robot.p[:2], tip])), fill=(220, 30, 30), width=3)
     d.text(px(robot.p[:2])[0], f"  {layout.robot}", fill=(0, 0, 0))
-    d.text((8, 4), f"{layout.source.name if layout.source else ''}: top-down (x right, y up); "
-           f"green band = reach of manipulated objects", fill=(0, 0, 0))
+    d.text(
+        (8, 4),
+        f"{layout.source.name if layout.source else ''}: top-down (x right, y up); "
+        f"green band = reach of manipulated objects",
+        fill=(0, 0, 0),
+    )
     return img
 
 
@@ -171,7 +176,9 @@ def cmd_preview(args) -> int:
         import embodied_envs  # noqa: F401  (registers the env)
 
         env = gym.make(
-            "PickEmbodiedGen-v1", layout_file=str(args.layout), replace_objs=False,
+            "PickEmbodiedGen-v1",
+            layout_file=str(args.layout),
+            replace_objs=False,
             render_mode="rgb_array",
             camera_cfg=dict(image_hw=[args.size, args.size]),
         )
@@ -179,7 +186,9 @@ def cmd_preview(args) -> int:
         frame = env.render()
         env.close()
         frame = np.asarray(frame.cpu().numpy() if hasattr(frame, "cpu") else frame)[0]
-        both = Image.new("RGB", (img.width + frame.shape[1], max(img.height, frame.shape[0])), "white")
+        both = Image.new(
+            "RGB", (img.width + frame.shape[1], max(img.height, frame.shape[0])), "white"
+        )
         both.paste(img, (0, 0))
         both.paste(Image.fromarray(frame), (img.width, 0))
         img = both

@@ -71,7 +71,9 @@ class CameraSpec:
             raise ValueError("camera_cfg: camera_eye and camera_target_pt need 3 finite numbers")
         if math.dist(eye, target) < 1e-6:
             raise ValueError("camera_cfg: camera_eye equals camera_target_pt. Fix: move the eye.")
-        if len(hw) != 2 or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in hw):
+        if len(hw) != 2 or not all(
+            isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in hw
+        ):
             raise ValueError(
                 f"camera_cfg: image_hw={list(hw)} must be two positive integers [height, width]"
             )

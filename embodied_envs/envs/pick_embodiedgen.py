@@ -18,7 +18,7 @@ from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
 from embodied_envs.envs.config import SUPPORTED_ROBOTS, CameraSpec, resolve_robot
-from embodied_envs.layout import LayoutError, LayoutInfo, load_layout
+from embodied_envs.layout import LayoutInfo, load_layout
 from embodied_envs.layout.placement import derive_seed, place
 from embodied_envs.paths import default_layout
 from embodied_envs.scene import GoalRegion, LayoutScene, load_layout_scene
@@ -55,7 +55,9 @@ robot name), ``robot_init_qpos_noise``, ``init_3dgs_quat``, ``objs_z_offset``,
 plus ManiSkill's own (``num_envs``, ``obs_mode``, ``control_mode``, ``render_mode``, ...).
 """
 
-REST_QPOS = np.array([0.0, np.pi / 8, 0.0, -3 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04])
+REST_QPOS = np.array(
+    [0.0, np.pi / 8, 0.0, -3 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04]
+)
 
 
 def _has_display() -> bool:
@@ -167,7 +169,9 @@ class PickEmbodiedGenEnv(BaseEnv):
             return [self.base_layout] * self.num_envs
         seeds = np.asarray(self._episode_seed).reshape(-1)
         return [
-            self.base_layout if (first and k == 0) else place(self.base_layout, derive_seed(seeds[k], k))
+            self.base_layout
+            if (first and k == 0)
+            else place(self.base_layout, derive_seed(seeds[k], k))
             for k in range(self.num_envs)
         ]
 
@@ -207,7 +211,8 @@ class PickEmbodiedGenEnv(BaseEnv):
         if self._hybrid is not None:
             self._hybrid.prepare(self)
 
-    def _reconfigure(self, options=dict()):
+    def _reconfigure(self, options: dict | None = None):
+        options = {} if options is None else options
         if self.render_mode == "human" and not _has_display():
             # headless: no viewer window; "human" then returns the render camera's frames
             self.render_mode = "rgb_array"
@@ -237,7 +242,9 @@ class PickEmbodiedGenEnv(BaseEnv):
                 actor.set_linear_velocity(zeros)
                 actor.set_angular_velocity(zeros)
             k = torch.as_tensor(rng.randint(0, ls.goal_xy.shape[1]).reshape(b), dtype=torch.long)
-            h = torch.as_tensor(rng.uniform(*self.goal_region.height).reshape(b), dtype=torch.float32)
+            h = torch.as_tensor(
+                rng.uniform(*self.goal_region.height).reshape(b), dtype=torch.float32
+            )
             goal = torch.zeros((b, 3))
             goal[:, :2] = ls.goal_xy[env_idx, k]
             goal[:, 2] = ls.top_z[env_idx] + h
@@ -310,5 +317,3 @@ class PickEmbodiedGenEnv(BaseEnv):
         if self.render_mode == "hybrid":
             return self._hybrid.render(self)
         return super().render()
-
-

@@ -165,10 +165,12 @@ def parse_urdf(urdf: Path | str) -> AssetSpec:
         urdf_path=urdf,
         visual=visual,
         collision=collision,
-        static_friction=float(np.clip(DEFAULT_STATIC_FRICTION if mu1 is None else mu1,
-                                      *STATIC_FRICTION_RANGE)),
-        dynamic_friction=float(np.clip(DEFAULT_DYNAMIC_FRICTION if mu2 is None else mu2,
-                                       *DYNAMIC_FRICTION_RANGE)),
+        static_friction=float(
+            np.clip(DEFAULT_STATIC_FRICTION if mu1 is None else mu1, *STATIC_FRICTION_RANGE)
+        ),
+        dynamic_friction=float(
+            np.clip(DEFAULT_DYNAMIC_FRICTION if mu2 is None else mu2, *DYNAMIC_FRICTION_RANGE)
+        ),
         mass=mass,
     )
 
@@ -200,28 +202,17 @@ class AssetGeometry:
 
 
 def convex_hull_2d(points: np.ndarray) -> np.ndarray:
-    """Counter-clockwise convex hull of 2D points (Andrew's monotone chain)."""
-    # micrometre rounding and a relative turn tolerance drop the near-duplicate and
-    # near-collinear vertices that floating-point rotation creates
+    """Counter-clockwise convex hull ``(m, 2)`` of 2D points (qhull)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    # micrometre rounding drops the near-duplicates that floating-point rotation creates
     pts = np.unique(np.round(np.asarray(points, dtype=np.float64), 6), axis=0)
     if len(pts) < 3:
         return pts
-
-    def half(seq):
-        out: list[np.ndarray] = []
-        for p in seq:
-            while len(out) >= 2:
-                a, b = out[-2], out[-1]
-                cross = (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
-                if cross > 1e-9 * np.hypot(*(b - a)) * np.hypot(*(p - a)) + 1e-14:
-                    break
-                out.pop()
-            out.append(p)
-        return out
-
-    lower = half(pts)
-    upper = half(pts[::-1])
-    hull = np.array(lower[:-1] + upper[:-1])
+    try:
+        hull = pts[ConvexHull(pts).vertices]  # counter-clockwise in 2D
+    except QhullError:  # all points collinear
+        return pts[[0, -1]]
     # drop vertices within 10 micrometres of their predecessor: such edges have no usable normal
     keep = [0]
     for i in range(1, len(hull)):
@@ -239,7 +230,11 @@ def _load_parts(mesh: MeshRef) -> list:
         loaded = trimesh.load(mesh.path, force="mesh", process=False, skip_materials=True)
     except Exception as e:  # trimesh raises many types for unreadable files
         raise LayoutError(f"{mesh.path}: not a readable mesh ({e}). Fix: re-export it.") from e
-    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.vertices) == 0 or len(loaded.faces) == 0:
+    if (
+        not isinstance(loaded, trimesh.Trimesh)
+        or len(loaded.vertices) == 0
+        or len(loaded.faces) == 0
+    ):
         raise LayoutError(
             f"{mesh.path}: the mesh is empty (no vertices or faces). Fix: re-export the mesh."
         )

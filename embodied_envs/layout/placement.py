@@ -38,7 +38,7 @@ class PlacementLimits:
     bottom_percentile: float = 1.0  # the context's lowest point is this percentile of its z
     floor_radius: float = 1.5  # m, FLOOR objects are placed within this distance of the origin
     max_attempts: int = 4096  # candidates per object before giving up
-    batch: int = 256  # candidates drawn per vectorised batch
+    batch: int = 96  # candidates drawn per vectorised batch
 
     @classmethod
     def from_kwargs(cls, **kwargs) -> PlacementLimits:
@@ -63,6 +63,25 @@ def node_geometry(layout: LayoutInfo, node: str) -> AssetGeometry:
 @functools.lru_cache(maxsize=256)
 def _footprint_cached(urdf: Path, mtime: float) -> np.ndarray:
     return _geometry_for(urdf, mtime).footprint()
+
+
+@functools.lru_cache(maxsize=256)
+def _bottom_cached(urdf: Path, mtime: float, percentile: float) -> float:
+    return float(np.percentile(_geometry_for(urdf, mtime).vertices[:, 2], percentile))
+
+
+@functools.lru_cache(maxsize=256)
+def _top_cached(urdf: Path, mtime: float, band: float) -> tuple[np.ndarray, float]:
+    geom = _geometry_for(urdf, mtime)
+    return geom.top_hull(band), geom.max_z
+
+
+def node_top(layout: LayoutInfo, node: str, pose: LayoutPose, band: float) -> Surface:
+    """The top surface of a node standing upright at ``pose`` (yaw-only rotation)."""
+    urdf = layout.urdf_path(node)
+    hull, top_z = _top_cached(urdf, urdf.stat().st_mtime, band)
+    world = hull @ rotation_2d(np.float64(pose.yaw)).T + np.asarray(pose.p[:2])
+    return Surface(world, top_z + pose.p[2])
 
 
 def node_footprint(layout: LayoutInfo, node: str) -> np.ndarray:
@@ -105,14 +124,12 @@ def shrink_polygon(poly: np.ndarray, margin: float) -> np.ndarray:
     """The CCW convex polygon moved inward by ``margin`` on every edge."""
     n, c = half_planes(poly)
     c = c + margin
-    pts = []
-    k = len(poly)
-    for i in range(k):
-        a = np.array([n[i - 1], n[i]])
-        if abs(np.linalg.det(a)) < 1e-12:
-            continue
-        pts.append(np.linalg.solve(a, [c[i - 1], c[i]]))
-    pts = np.array(pts)
+    n0, c0 = np.roll(n, 1, axis=0), np.roll(c, 1)  # edge i-1 meets edge i at vertex i
+    det = n0[:, 0] * n[:, 1] - n0[:, 1] * n[:, 0]
+    ok = np.abs(det) > 1e-12
+    x = (c0 * n[:, 1] - n0[:, 1] * c)[ok] / det[ok]
+    y = (n0[:, 0] * c - c0 * n[:, 0])[ok] / det[ok]
+    pts = np.stack([x, y], 1)
     keep = np.all(pts @ n.T >= c - 1e-9, axis=1) if len(pts) else np.zeros(0, bool)
     if keep.sum() < 3:
         raise ValueError(f"polygon vanishes when shrunk by {margin} m")
@@ -130,6 +147,7 @@ def polygons_overlap(p: np.ndarray, q: np.ndarray, clearance: float) -> np.ndarr
     Returns:
         ``(b,)`` bool, True where a candidate overlaps (or is closer than ``clearance`` to) q.
     """
+
     def normals(poly):
         e = np.roll(poly, -1, axis=-2) - poly
         nrm = np.stack([-e[..., 1], e[..., 0]], axis=-1)
@@ -173,7 +191,7 @@ def top_surface(vertices: np.ndarray, band: float) -> Surface:
 
 
 def robot_base_pose(top: Surface, limits: PlacementLimits, u: float) -> LayoutPose:
-    """Robot base on the boundary of the shrunk top at perimeter fraction ``u``, facing the centre."""
+    """Robot base on the shrunk top's boundary at perimeter fraction ``u``, facing the centre."""
     edge_hull = shrink_polygon(top.hull, limits.hull_margin)
     seg = np.roll(edge_hull, -1, axis=0) - edge_hull
     lengths = np.linalg.norm(seg, axis=1)
@@ -194,18 +212,29 @@ class _Placer:
         self.limits = limits
         self.poses: dict[str, LayoutPose] = {}
         self.obstacles: dict[str, np.ndarray] = {}  # node -> world footprint polygon
+        self.regions: dict[str, tuple] = {}  # parent -> (shrunk hull, normals, offsets)
+        # resolve each node's asset once per call (file lookups are the slow part)
+        self.foot = {n: node_footprint(layout, n) for n in layout.object_nodes()}
+        self.min_z = {n: node_geometry(layout, n).min_z for n in layout.object_nodes()}
 
-    def sample_object(self, node: str, surface: Surface, ancestors: set[str]) -> LayoutPose:
+    def sample_object(
+        self, node: str, parent: str, surface: Surface, ancestors: set[str]
+    ) -> LayoutPose:
         lim = self.limits
         layout = self.layout
-        foot = node_footprint(layout, node)
-        geom = node_geometry(layout, node)
-        try:
-            region = shrink_polygon(surface.hull, lim.hull_margin)
-        except ValueError:
-            raise PlacementError(node, "footprint inside parent top", 0,
-                                 "the parent's top is smaller than twice the hull margin") from None
-        normals, offsets = half_planes(region)
+        foot = self.foot[node]
+        if parent not in self.regions:
+            try:
+                region = shrink_polygon(surface.hull, lim.hull_margin)
+            except ValueError:
+                raise PlacementError(
+                    node,
+                    "footprint inside parent top",
+                    0,
+                    "the parent's top is smaller than twice the hull margin",
+                ) from None
+            self.regions[parent] = (region, *half_planes(region))
+        region, normals, offsets = self.regions[parent]
         lo, hi = region.min(0), region.max(0)
         manipulated = node in layout.manipulated_objs
         robot = self.poses[layout.robot]
@@ -215,35 +244,43 @@ class _Placer:
         if manipulated:
             fails[f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base"] = 0
             fails[f"within {lim.max_heading_deg:g} deg of the robot heading"] = 0
+        foot_r = float(np.linalg.norm(foot, axis=1).max())
+        obstacle_circles = [
+            (q.mean(0), float(np.linalg.norm(q - q.mean(0), axis=1).max())) for q in obstacles
+        ]
+        keys = list(fails)
         tried = 0
         while tried < lim.max_attempts:
             b = min(lim.batch, lim.max_attempts - tried)
             tried += b
             yaw = self.rng.uniform(-np.pi, np.pi, b)
             xy = self.rng.uniform(lo, hi, (b, 2))
-            poly = np.einsum("bij,mj->bmi", rotation_2d(yaw), foot) + xy[:, None, :]
-            ok = np.ones(b, bool)
-            inside = np.all(np.einsum("kd,bmd->bmk", normals, poly) >= offsets - 1e-9, axis=(1, 2))
-            fails["footprint inside parent top"] += int((~inside).sum())
-            ok &= inside
-            free = np.ones(b, bool)
-            for q in obstacles:
-                free &= ~polygons_overlap(poly, q, lim.clearance)
-            fails["no overlap with placed footprints"] += int((~free).sum())
-            ok &= free
+            # cheap constraints first, then the separating-axis test on the survivors only
+            poly = rotation_2d(yaw) @ foot.T  # (b, 2, m)
+            poly = np.swapaxes(poly, 1, 2) + xy[:, None, :]
+            inside = ((poly @ normals.T) >= offsets - 1e-9).all(axis=(1, 2))
+            fails[keys[0]] += int((~inside).sum())
+            ok = inside
             if manipulated:
                 d = np.linalg.norm(xy - robot_xy, axis=1)
                 reach = (d > lim.reach_min) & (d < lim.reach_max)
                 bearing = np.arctan2(xy[:, 1] - robot_xy[1], xy[:, 0] - robot_xy[0])
                 facing = angle_diff(bearing, robot.yaw) <= np.deg2rad(lim.max_heading_deg)
-                keys = list(fails)
                 fails[keys[2]] += int((~reach).sum())
                 fails[keys[3]] += int((~facing).sum())
-                ok &= reach & facing
-            hits = np.flatnonzero(ok)
+                ok = ok & reach & facing
+            idx = np.flatnonzero(ok)
+            free = np.ones(len(idx), bool)
+            for (centre, radius), q in zip(obstacle_circles, obstacles, strict=True):
+                near = np.linalg.norm(xy[idx] - centre, axis=1) < foot_r + radius + lim.clearance
+                cand = np.flatnonzero(near & free)
+                if len(cand):
+                    free[cand] = ~polygons_overlap(poly[idx[cand]], q, lim.clearance)
+            fails[keys[1]] += int((~free).sum())
+            hits = idx[free]
             if len(hits):
                 k = hits[0]
-                z = surface.z - geom.min_z
+                z = surface.z - self.min_z[node]
                 self.obstacles[node] = poly[k]
                 return LayoutPose.from_xyz_yaw([xy[k, 0], xy[k, 1], z], float(yaw[k]))
         worst = max(fails, key=fails.get)
@@ -279,16 +316,19 @@ class _Placer:
     def run(self) -> dict[str, LayoutPose]:
         layout, lim, rng = self.layout, self.limits, self.rng
         # 1. background: random yaw about its up axis, at the origin
-        self.poses[layout.background] = LayoutPose.from_xyz_yaw([0, 0, 0], rng.uniform(-np.pi, np.pi))
+        self.poses[layout.background] = LayoutPose.from_xyz_yaw(
+            [0, 0, 0], rng.uniform(-np.pi, np.pi)
+        )
         # 2. context: random yaw, centred, lowest point at z = 0
         ctx = layout.context
-        ctx_geom = node_geometry(layout, ctx)
-        z0 = -float(np.percentile(ctx_geom.vertices[:, 2], lim.bottom_percentile))
+        urdf = layout.urdf_path(ctx)
+        z0 = -_bottom_cached(urdf, urdf.stat().st_mtime, lim.bottom_percentile)
         ctx_pose = LayoutPose.from_xyz_yaw([0, 0, z0], rng.uniform(-np.pi, np.pi))
         self.poses[ctx] = ctx_pose
-        ctx_world = world_vertices(ctx_geom, ctx_pose)
-        self.context_footprint = convex_hull_2d(ctx_world[:, :2])
-        surfaces = {ctx: top_surface(ctx_world, lim.top_band)}
+        self.context_footprint = (
+            node_footprint(layout, ctx) @ rotation_2d(np.float64(ctx_pose.yaw)).T
+        )
+        surfaces = {ctx: node_top(layout, ctx, ctx_pose, lim.top_band)}
         # 3. robot on the table's edge, facing its centre
         robot = robot_base_pose(surfaces[ctx], lim, rng.uniform(0, 1))
         self.poses[layout.robot] = robot
@@ -297,24 +337,34 @@ class _Placer:
         queue, ancestors = [ctx], {ctx: {ctx}}
         while queue:
             parent = queue.pop(0)
-            kids = [c for c, r in layout.children(parent) if r in SUPPORT_RELATIONS and c != layout.robot]
-            kids.sort(key=lambda n: -polygon_area(node_footprint(layout, n)))
+            kids = [
+                c
+                for c, r in layout.children(parent)
+                if r in SUPPORT_RELATIONS and c != layout.robot
+            ]
+            kids.sort(key=lambda n: -polygon_area(self.foot[n]))
             for kid in kids:
-                self.poses[kid] = self.sample_object(kid, surfaces[parent], ancestors[parent])
-                kid_world = world_vertices(node_geometry(layout, kid), self.poses[kid])
-                surfaces[kid] = top_surface(kid_world, lim.top_band)
+                self.poses[kid] = self.sample_object(
+                    kid, parent, surfaces[parent], ancestors[parent]
+                )
+                surfaces[kid] = node_top(layout, kid, self.poses[kid], lim.top_band)
                 ancestors[kid] = ancestors[parent] | {kid}
                 queue.append(kid)
         floor_kids = [
-            c for c, r in layout.children(layout.background)
+            c
+            for c, r in layout.children(layout.background)
             if r == "FLOOR" and c not in self.poses and c != layout.robot
         ]
         for kid in floor_kids:
             self.poses[kid] = self.sample_floor_object(kid)
         missing = [n for n in layout.object_nodes() if n not in self.poses]
         if missing:
-            raise PlacementError(missing[0], "reachable from the context or the floor in the tree", 0,
-                                 "the node has no ON/IN/INSIDE parent chain to the context")
+            raise PlacementError(
+                missing[0],
+                "reachable from the context or the floor in the tree",
+                0,
+                "the node has no ON/IN/INSIDE parent chain to the context",
+            )
         return self.poses
 
 
@@ -339,4 +389,6 @@ def place(layout: LayoutInfo, seed: int | np.random.Generator, **limits) -> Layo
 
 def derive_seed(base_seed: int, env_index: int) -> int:
     """Seed of env ``env_index``'s placement from a base seed (stable across machines)."""
-    return int(np.random.SeedSequence([int(base_seed) % 2**63, int(env_index)]).generate_state(1)[0])
+    return int(
+        np.random.SeedSequence([int(base_seed) % 2**63, int(env_index)]).generate_state(1)[0]
+    )

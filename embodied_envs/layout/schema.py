@@ -7,6 +7,7 @@ node and the field, and says what to fix. Unknown keys are kept and written back
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -104,10 +105,20 @@ class LayoutInfo:
 
     def with_poses(self, poses: dict[str, LayoutPose]) -> LayoutInfo:
         """A copy with some node poses replaced."""
-        new = copy.deepcopy(self)
+        position = {k: list(v) for k, v in self.position.items()}
         for node, pose in poses.items():
-            new.position[node] = pose.to_layout()
-        return new
+            position[node] = pose.to_layout()
+        return dataclasses.replace(
+            self,
+            tree={k: [list(x) for x in v] for k, v in self.tree.items()},
+            relation=copy.deepcopy(self.relation),
+            objs_mapping=dict(self.objs_mapping),
+            assets=dict(self.assets),
+            position=position,
+            objs_desc=dict(self.objs_desc) if self.objs_desc is not None else None,
+            quality=dict(self.quality) if self.quality is not None else None,
+            extra=copy.deepcopy(self.extra),
+        )
 
     # --- serialisation -------------------------------------------------------------------
     @classmethod
@@ -229,7 +240,11 @@ def _check_structure(data, f: str) -> list[str]:
         return problems
 
     rel, mapping, assets, position, tree = (
-        data["relation"], data["objs_mapping"], data["assets"], data["position"], data["tree"]
+        data["relation"],
+        data["objs_mapping"],
+        data["assets"],
+        data["position"],
+        data["tree"],
     )
     for key in ("robot", "background", "context"):
         if not isinstance(rel.get(key), str) or not rel.get(key):
@@ -258,7 +273,7 @@ def _check_structure(data, f: str) -> list[str]:
         elif nodes[0] != rel[cat]:
             problems.append(
                 f'{f}: relation["{cat}"] is "{rel[cat]}" but objs_mapping marks "{nodes[0]}" as'
-                f' {cat}. Fix: make them agree.'
+                f" {cat}. Fix: make them agree."
             )
     for cat in ("manipulated_objs", "distractor_objs"):
         for node in rel[cat]:
@@ -381,7 +396,19 @@ def load_layout(path: Path | str, check_files: bool = True) -> LayoutInfo:
         ) from e
     except UnicodeDecodeError as e:
         raise LayoutError(f"{path}: not a UTF-8 text file ({e}).") from e
-    info = LayoutInfo.from_dict(data, source=path)
+    try:
+        info = LayoutInfo.from_dict(data, source=path)
+    except LayoutError as e:
+        # report missing asset folders too, so that one run lists every problem
+        if check_files and isinstance(data, dict) and isinstance(data.get("assets"), dict):
+            for node, folder in data["assets"].items():
+                if isinstance(folder, str) and not (path.parent / folder).is_dir():
+                    e.problems.append(
+                        f'{path}: assets["{node}"] folder {folder} does not exist.'
+                        " Fix: make the path relative to the layout file's folder."
+                    )
+            raise LayoutError(e.problems) from None
+        raise
     if check_files:
         problems = check_asset_files(info)
         if problems:

@@ -10,7 +10,13 @@ import numpy as np
 import torch
 
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.placement import half_planes, node_geometry, shrink_polygon, top_surface, world_vertices
+from embodied_envs.layout.placement import (
+    half_planes,
+    node_geometry,
+    shrink_polygon,
+    top_surface,
+    world_vertices,
+)
 from embodied_envs.layout.schema import LayoutInfo
 from embodied_envs.scene.builder import build_asset_actor
 
@@ -112,7 +118,9 @@ def load_layout_scene(
     nodes = layouts[0].object_nodes()
     for i, layout in enumerate(layouts):
         if layout.object_nodes() != nodes:
-            raise LayoutError(f"env {i}: layout nodes {layout.object_nodes()} differ from env 0's {nodes}")
+            raise LayoutError(
+                f"env {i}: layout nodes {layout.object_nodes()} differ from env 0's {nodes}"
+            )
     specs = {node: layouts[0].asset_spec(node) for node in nodes}
     env_actors: dict[str, dict[str, Actor]] = {}
     node_poses = {node: np.zeros((num_envs, 7), np.float32) for node in nodes}
@@ -125,7 +133,9 @@ def load_layout_scene(
             static = layout.objs_mapping[node] == "context"
             pose = layout.pose(node).translated(0.0 if static else objs_z_offset)
             node_poses[node][i] = pose.to_raw()
-            actors[node] = build_asset_actor(scene, specs[node], pose, f"env{i}/{node}", [i], static)
+            actors[node] = build_asset_actor(
+                scene, specs[node], pose, f"env{i}/{node}", [i], static
+            )
         env_actors[f"env{i}"] = actors
         robot_poses[i] = layout.pose(layout.robot).translated(robot_z_offset).to_raw()
         candidates, top_z[i] = goal_candidates(layout, goal_region)

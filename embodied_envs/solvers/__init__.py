@@ -1,5 +1,5 @@
 """Scripted policies."""
 
-from embodied_envs.solvers.pick_place import EnvReport, PickPlaceSolver, SolveResult, SolverConfig
+from embodied_envs.solvers.pick_place import EnvReport, PickPlaceSolver, SolverConfig, SolveResult
 
 __all__ = ["EnvReport", "PickPlaceSolver", "SolveResult", "SolverConfig"]

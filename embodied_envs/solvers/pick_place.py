@@ -82,7 +82,9 @@ def _sample_surface(vertices_parts: tuple[np.ndarray, ...], n: int, rng: np.rand
     return np.concatenate(points)
 
 
-def grasp_frame(vertices_world: np.ndarray, support_z: float, cfg: SolverConfig, current_y: np.ndarray):
+def grasp_frame(
+    vertices_world: np.ndarray, support_z: float, cfg: SolverConfig, current_y: np.ndarray
+):
     """Grasp centre and closing direction for a top-down grasp.
 
     The closing direction is the narrow side of the minimum-area rectangle around the object's
@@ -150,8 +152,12 @@ class PickPlaceSolver:
                 move_group="panda_hand_tcp",
             )
             planner.set_base_pose(base_poses[i])
-            planner.joint_vel_limits = np.asarray(planner.joint_vel_limits) * self.cfg.joint_vel_scale
-            planner.joint_acc_limits = np.asarray(planner.joint_acc_limits) * self.cfg.joint_acc_scale
+            planner.joint_vel_limits = (
+                np.asarray(planner.joint_vel_limits) * self.cfg.joint_vel_scale
+            )
+            planner.joint_acc_limits = (
+                np.asarray(planner.joint_acc_limits) * self.cfg.joint_acc_scale
+            )
             self.planners.append(planner)
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
         self.steps = 0
@@ -177,13 +183,15 @@ class PickPlaceSolver:
                 clouds.append(_sample_surface(parts, self.cfg.obstacle_points, self.rng))
             cloud = np.concatenate(clouds)
             base = self.base.layout_scene.robot_poses[i, :3].cpu().numpy()
-            near_base = (np.linalg.norm(cloud[:, :2] - base[:2], axis=1) < self.cfg.base_clearance) & (
-                cloud[:, 2] < base[2] + self.cfg.base_clearance_height
-            )
+            near_base = (
+                np.linalg.norm(cloud[:, :2] - base[:2], axis=1) < self.cfg.base_clearance
+            ) & (cloud[:, 2] < base[2] + self.cfg.base_clearance_height)
             self.planners[i].update_point_cloud(cloud[~near_base], radius=self.cfg.obstacle_radius)
 
     # --- planning ------------------------------------------------------------------------
-    def _plan(self, i, pose: sapien.Pose, qpos: np.ndarray, stage: str, screw_first=True, obstacles=True):
+    def _plan(
+        self, i, pose: sapien.Pose, qpos: np.ndarray, stage: str, screw_first=True, obstacles=True
+    ):
         """A joint path to ``pose`` for env i, or None (the failure is recorded).
 
         ``obstacles=False`` is for the short straight moves next to the support surface (the
@@ -196,11 +204,17 @@ class PickPlaceSolver:
         attempts = ("screw", "rrt") if screw_first else ("rrt", "screw")
         for how in attempts:
             if how == "screw":
-                res = planner.plan_screw(target, qpos.copy(), time_step=dt, use_point_cloud=obstacles)
+                res = planner.plan_screw(
+                    target, qpos.copy(), time_step=dt, use_point_cloud=obstacles
+                )
             else:
                 res = planner.plan_qpos_to_pose(
-                    target, qpos.copy(), time_step=dt, use_point_cloud=obstacles,
-                    planning_time=self.cfg.rrt_planning_time, wrt_world=True,
+                    target,
+                    qpos.copy(),
+                    time_step=dt,
+                    use_point_cloud=obstacles,
+                    planning_time=self.cfg.rrt_planning_time,
+                    wrt_world=True,
                 )
             if res["status"] == "Success" and len(res["position"]):
                 return res["position"]
@@ -233,7 +247,9 @@ class PickPlaceSolver:
         self.gripper[:] = value
         self._execute([None] * self.num_envs, extra_steps=self.cfg.gripper_steps)
 
-    def _per_env(self, stage: str, targets: list[sapien.Pose | None], screw_first=True, obstacles=True):
+    def _per_env(
+        self, stage: str, targets: list[sapien.Pose | None], screw_first=True, obstacles=True
+    ):
         qpos = self._qpos()
         paths = []
         for i, target in enumerate(targets):
@@ -262,7 +278,9 @@ class PickPlaceSolver:
         """Run the whole pick-and-place in every env; returns per-env reports and the last info."""
         cfg = self.cfg
         grasps = self.grasp_poses()
-        self._per_env("approach", [g * sapien.Pose([0, 0, -cfg.approach_offset]) for g in grasps], False)
+        self._per_env(
+            "approach", [g * sapien.Pose([0, 0, -cfg.approach_offset]) for g in grasps], False
+        )
         self._per_env("grasp", grasps, obstacles=False)
         self._gripper(GRIPPER_CLOSED)
         lifts = [sapien.Pose(g.p + np.array([0, 0, cfg.lift_height]), g.q) for g in grasps]
@@ -271,7 +289,9 @@ class PickPlaceSolver:
         tcp = self.base.agent.tcp.pose.p.cpu().numpy()
         obj = self.base.obj.pose.p.cpu().numpy()
         goal = self.base.goal_site.pose.p.cpu().numpy()
-        carries = [sapien.Pose(goal[i] + (tcp[i] - obj[i]), lifts[i].q) for i in range(self.num_envs)]
+        carries = [
+            sapien.Pose(goal[i] + (tcp[i] - obj[i]), lifts[i].q) for i in range(self.num_envs)
+        ]
         self._per_env("carry", carries, screw_first=False)
         # fine correction: re-measure the in-hand offset and move the last few millimetres
         tcp = self.base.agent.tcp.pose.p.cpu().numpy()

@@ -21,7 +21,9 @@ def make_asset(tmp_path, collision=COLLISION, gazebo="", inertial="", mesh_text=
     (tmp_path / "mesh").mkdir(exist_ok=True)
     cube = (ROOT / "assets" / "cracker_box" / "mesh" / "cracker_box_collision.obj").read_text()
     (tmp_path / "mesh" / "thing.obj").write_text(cube)
-    (tmp_path / "mesh" / "thing_collision.obj").write_text(mesh_text if mesh_text is not None else cube)
+    (tmp_path / "mesh" / "thing_collision.obj").write_text(
+        mesh_text if mesh_text is not None else cube
+    )
     path = tmp_path / "thing.urdf"
     path.write_text(URDF.format(collision=collision.format(gazebo=gazebo), inertial=inertial))
     return path
@@ -61,7 +63,9 @@ def test_not_a_mesh_and_empty_mesh(tmp_path):
     spec = parse_urdf(make_asset(tmp_path, mesh_text="this is not a mesh\n"))
     with pytest.raises(LayoutError, match="thing_collision.obj"):
         asset_geometry(spec)
-    spec = parse_urdf(make_asset(tmp_path / "x" if (tmp_path / "x").mkdir() is None else tmp_path, mesh_text=""))
+    spec = parse_urdf(
+        make_asset(tmp_path / "x" if (tmp_path / "x").mkdir() is None else tmp_path, mesh_text="")
+    )
     with pytest.raises(LayoutError, match="empty|not a readable mesh"):
         asset_geometry(spec)
 

@@ -47,8 +47,9 @@ def check_constraints(layout):
         bad.append("robot does not face the table centre")
     half = 0.06
     c, s = heading[0] / np.hypot(*heading[:2]), heading[1] / np.hypot(*heading[:2])
-    robot_sq = MultiPoint([(rx + c * a - s * b, ry + s * a + c * b)
-                           for a in (-half, half) for b in (-half, half)]).convex_hull
+    robot_sq = MultiPoint(
+        [(rx + c * a - s * b, ry + s * a + c * b) for a in (-half, half) for b in (-half, half)]
+    ).convex_hull
     feet = {"robot": robot_sq}
     for node in layout.object_nodes():
         if node == layout.context:
@@ -68,7 +69,9 @@ def check_constraints(layout):
             d = math.hypot(ox - rx, oy - ry)
             if not 0.2 < d < 0.85:
                 bad.append(f"{node} at {d:.3f} m from the robot")
-            ang = math.degrees(abs(math.atan2(oy - ry, ox - rx) - math.atan2(heading[1], heading[0])))
+            ang = math.degrees(
+                abs(math.atan2(oy - ry, ox - rx) - math.atan2(heading[1], heading[0]))
+            )
             ang = min(ang, 360 - ang)
             if ang > 60 + 1e-6:
                 bad.append(f"{node} at {ang:.1f} deg off the robot heading")
@@ -98,8 +101,12 @@ def test_same_seed_same_layout_across_processes():
         "from embodied_envs.layout.placement import place;"
         f"print(json.dumps(place(load_layout({str(LAYOUTS[0])!r}), 123).to_dict()['position']))"
     )
-    outs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-            for _ in range(2)]
+    outs = [
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        ).stdout
+        for _ in range(2)
+    ]
     here = place(load_layout(LAYOUTS[0]), 123).to_dict()["position"]
     assert json.loads(outs[0]) == json.loads(outs[1]) == here
 

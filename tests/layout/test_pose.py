@@ -23,7 +23,9 @@ def test_raw_round_trip_and_order():
 
 def test_yaw_rotates_x_axis():
     pose = LayoutPose.from_xyz_yaw([0, 0, 0], np.pi / 2)
-    np.testing.assert_allclose(pose.transform_points(np.array([[1.0, 0, 0]])), [[0, 1, 0]], atol=1e-9)
+    np.testing.assert_allclose(
+        pose.transform_points(np.array([[1.0, 0, 0]])), [[0, 1, 0]], atol=1e-9
+    )
     assert pose.yaw == pytest.approx(np.pi / 2)
 
 
@@ -31,8 +33,12 @@ def test_quat_multiply_applies_right_first():
     # +90 deg about X (Y-up -> Z-up) then yaw 90 deg about Z: Y axis -> Z -> Z
     q = quat_multiply_xyzw(yaw_quat_xyzw(np.pi / 2), [0.7071068, 0, 0, 0.7071068])
     pose = LayoutPose.from_layout([0, 0, 0, *q])
-    np.testing.assert_allclose(pose.transform_points(np.array([[0, 1.0, 0]])), [[0, 0, 1]], atol=1e-6)
-    np.testing.assert_allclose(pose.transform_points(np.array([[1.0, 0, 0]])), [[0, 1, 0]], atol=1e-6)
+    np.testing.assert_allclose(
+        pose.transform_points(np.array([[0, 1.0, 0]])), [[0, 0, 1]], atol=1e-6
+    )
+    np.testing.assert_allclose(
+        pose.transform_points(np.array([[1.0, 0, 0]])), [[0, 1, 0]], atol=1e-6
+    )
 
 
 def test_pose_rounding_only_on_request():

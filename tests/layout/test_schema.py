@@ -52,18 +52,53 @@ CASES = [
     ("missing objs_mapping", lambda d: d.pop("objs_mapping"), ['"objs_mapping" is missing']),
     ("missing assets", lambda d: d.pop("assets"), ['"assets" is missing']),
     ("missing position", lambda d: d.pop("position"), ['"position" is missing']),
-    ("6 numbers", lambda d: d["position"]["can"].pop(), ['position["can"] has 6 numbers, expected 7']),
-    ("nan", lambda d: d["position"]["can"].__setitem__(0, float("nan")), ['position["can"]', "NaN"]),
-    ("zero quat", lambda d: d["position"]["can"].__setitem__(slice(3, 7), [0, 0, 0, 0]),
-     ['position["can"] quaternion has norm 0']),
-    ("robot pose", lambda d: d["position"].pop("franka"), ['position["franka"] (the robot) is missing']),
+    (
+        "6 numbers",
+        lambda d: d["position"]["can"].pop(),
+        ['position["can"] has 6 numbers, expected 7'],
+    ),
+    (
+        "nan",
+        lambda d: d["position"]["can"].__setitem__(0, float("nan")),
+        ['position["can"]', "NaN"],
+    ),
+    (
+        "zero quat",
+        lambda d: d["position"]["can"].__setitem__(slice(3, 7), [0, 0, 0, 0]),
+        ['position["can"] quaternion has norm 0'],
+    ),
+    (
+        "robot pose",
+        lambda d: d["position"].pop("franka"),
+        ['position["franka"] (the robot) is missing'],
+    ),
     ("asset missing", lambda d: d["assets"].pop("mug"), ['assets["mug"] is missing']),
     ("position missing", lambda d: d["position"].pop("mug"), ['position["mug"] is missing']),
-    ("two contexts", lambda d: d["objs_mapping"].__setitem__("mug", "context"), ['2 "context" nodes']),
-    ("bad category", lambda d: d["objs_mapping"].__setitem__("mug", "furniture"), ['objs_mapping["mug"] is "furniture"']),
-    ("bad relation", lambda d: d["tree"]["table"].__setitem__(0, ["can", "ABOVE"]), ['relation of "can" is "ABOVE"']),
-    ("not on table", lambda d: d["tree"]["table"].remove(["can", "ON"]), ['"can" does not rest on the context "table"']),
-    ("no manipulated", lambda d: d["relation"].__setitem__("manipulated_objs", []), ['manipulated_objs"] is empty']),
+    (
+        "two contexts",
+        lambda d: d["objs_mapping"].__setitem__("mug", "context"),
+        ['2 "context" nodes'],
+    ),
+    (
+        "bad category",
+        lambda d: d["objs_mapping"].__setitem__("mug", "furniture"),
+        ['objs_mapping["mug"] is "furniture"'],
+    ),
+    (
+        "bad relation",
+        lambda d: d["tree"]["table"].__setitem__(0, ["can", "ABOVE"]),
+        ['relation of "can" is "ABOVE"'],
+    ),
+    (
+        "not on table",
+        lambda d: d["tree"]["table"].remove(["can", "ON"]),
+        ['"can" does not rest on the context "table"'],
+    ),
+    (
+        "no manipulated",
+        lambda d: d["relation"].__setitem__("manipulated_objs", []),
+        ['manipulated_objs"] is empty'],
+    ),
 ]
 
 
@@ -100,7 +135,9 @@ def test_urdf_named_after_node_with_underscores(tmp_path, layout_dict, scene_cop
     layout = scene_copy / "layouts" / "default.json"
     data = json.loads(layout.read_text())
     # a node name with a space maps to a file stem with an underscore
-    (scene_copy / "assets" / "can" / "can.urdf").rename(scene_copy / "assets" / "can" / "blue_can.urdf")
+    (scene_copy / "assets" / "can" / "can.urdf").rename(
+        scene_copy / "assets" / "can" / "blue_can.urdf"
+    )
     text = json.dumps(data).replace('"can"', '"blue can"')
     layout.write_text(text)
     info = load_layout(layout)

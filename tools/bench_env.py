@@ -1,0 +1,61 @@
+#!/usr/bin/env python
+"""Benchmark: state-only steps/s of PickEmbodiedGen-v1 vs ManiSkill's PickCube-v1 (same run).
+
+Usage: python tools/bench_env.py [--steps 2000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+
+import gymnasium as gym  # noqa: E402
+import mani_skill.envs  # noqa: E402,F401
+import numpy as np  # noqa: E402
+
+import embodied_envs  # noqa: E402,F401
+
+
+def steps_per_second(env_id: str, steps: int, reset_every: int | None, **kwargs) -> float:
+    env = gym.make(env_id, obs_mode="state", **kwargs)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (steps, *env.action_space.shape)).astype(np.float32)
+    for a in actions[:50]:  # warm-up
+        env.step(a)
+    t = time.perf_counter()
+    for i, a in enumerate(actions):
+        _, _, term, trunc, _ = env.step(a)
+        if reset_every and (i + 1) % reset_every == 0:
+            env.reset()
+    elapsed = time.perf_counter() - t
+    env.close()
+    return steps / elapsed
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--steps", type=int, default=2000)
+    args = ap.parse_args()
+    # episodes of 100 steps (our registry limit); one env reconfigures on every reset
+    ours = steps_per_second("PickEmbodiedGen-v1", args.steps, 100, replace_objs=False)
+    base = steps_per_second("PickCube-v1", args.steps, 100)
+    print(
+        f"with a reset every 100 steps:  PickEmbodiedGen-v1 {ours:7.1f} steps/s, "
+        f"PickCube-v1 {base:7.1f} steps/s, ratio {ours / base:.2f}"
+    )
+    ours = steps_per_second("PickEmbodiedGen-v1", args.steps, None, replace_objs=False)
+    base = steps_per_second("PickCube-v1", args.steps, None)
+    print(
+        f"stepping only (no resets):     PickEmbodiedGen-v1 {ours:7.1f} steps/s, "
+        f"PickCube-v1 {base:7.1f} steps/s, ratio {ours / base:.2f}"
+    )
+
+
+if __name__ == "__main__":
+    main()
