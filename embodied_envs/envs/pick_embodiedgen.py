@@ -116,10 +116,10 @@ class PickEmbodiedGenEnv(BaseEnv):
         self.hybrid_depth_test = hybrid_depth_test
         self._hybrid = None
         if render_mode == "hybrid":
-            from embodied_envs.envs.hybrid import HybridRenderer
-
-            self._hybrid = HybridRenderer(
-                self.base_layout, self.init_3dgs_quat, depth_test=hybrid_depth_test
+            # declared for EmbodiedGen compatibility; the splat backend is not built yet
+            raise NotImplementedError(
+                'render_mode="hybrid" needs the Gaussian-splat renderer, which this version does'
+                ' not have yet; use "rgb_array", "sensors", "all" or "human".'
             )
         if reconfiguration_freq is None:
             reconfiguration_freq = 1 if num_envs == 1 else 0
