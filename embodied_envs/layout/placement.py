@@ -71,17 +71,31 @@ def _bottom_cached(urdf: Path, mtime: float, percentile: float) -> float:
 
 
 @functools.lru_cache(maxsize=256)
-def _top_cached(urdf: Path, mtime: float, band: float) -> tuple[np.ndarray, float]:
+def _top_cached(urdf: Path, mtime: float, band: float, margin: float):
     geom = _geometry_for(urdf, mtime)
-    return geom.top_hull(band), geom.max_z
+    hull = geom.top_hull(band)
+    try:
+        shrunk = shrink_polygon(hull, margin)
+    except ValueError:
+        shrunk = None
+    return hull, geom.max_z, shrunk
 
 
-def node_top(layout: LayoutInfo, node: str, pose: LayoutPose, band: float) -> Surface:
-    """The top surface of a node standing upright at ``pose`` (yaw-only rotation)."""
+def node_top(
+    layout: LayoutInfo, node: str, pose: LayoutPose, band: float, margin: float
+) -> Surface:
+    """The top surface of a node standing upright at ``pose`` (yaw-only rotation).
+
+    Shrinking commutes with rotation and translation, so the shrunk hull is computed once per
+    asset in its own frame.
+    """
     urdf = layout.urdf_path(node)
-    hull, top_z = _top_cached(urdf, urdf.stat().st_mtime, band)
-    world = hull @ rotation_2d(np.float64(pose.yaw)).T + np.asarray(pose.p[:2])
-    return Surface(world, top_z + pose.p[2])
+    hull, top_z, shrunk = _top_cached(urdf, urdf.stat().st_mtime, band, margin)
+    rot = rotation_2d(np.float64(pose.yaw)).T
+    xy = np.asarray(pose.p[:2])
+    return Surface(
+        hull @ rot + xy, top_z + pose.p[2], None if shrunk is None else shrunk @ rot + xy
+    )
 
 
 def node_footprint(layout: LayoutInfo, node: str) -> np.ndarray:
@@ -174,10 +188,12 @@ def angle_diff(a: np.ndarray, b: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Surface:
-    """The top of a placed support: its hull (world XY, CCW) and height."""
+    """The top of a placed support: its hull (world XY, CCW), height, and the hull shrunk by
+    the placement margin (None when the top is too small to shrink)."""
 
     hull: np.ndarray
     z: float
+    shrunk: np.ndarray | None = None
 
 
 def world_vertices(geom: AssetGeometry, pose: LayoutPose) -> np.ndarray:
@@ -192,7 +208,9 @@ def top_surface(vertices: np.ndarray, band: float) -> Surface:
 
 def robot_base_pose(top: Surface, limits: PlacementLimits, u: float) -> LayoutPose:
     """Robot base on the shrunk top's boundary at perimeter fraction ``u``, facing the centre."""
-    edge_hull = shrink_polygon(top.hull, limits.hull_margin)
+    edge_hull = (
+        top.shrunk if top.shrunk is not None else shrink_polygon(top.hull, limits.hull_margin)
+    )
     seg = np.roll(edge_hull, -1, axis=0) - edge_hull
     lengths = np.linalg.norm(seg, axis=1)
     s = u * lengths.sum()
@@ -224,15 +242,14 @@ class _Placer:
         layout = self.layout
         foot = self.foot[node]
         if parent not in self.regions:
-            try:
-                region = shrink_polygon(surface.hull, lim.hull_margin)
-            except ValueError:
+            region = surface.shrunk
+            if region is None:
                 raise PlacementError(
                     node,
                     "footprint inside parent top",
                     0,
                     "the parent's top is smaller than twice the hull margin",
-                ) from None
+                )
             self.regions[parent] = (region, *half_planes(region))
         region, normals, offsets = self.regions[parent]
         lo, hi = region.min(0), region.max(0)
@@ -328,7 +345,7 @@ class _Placer:
         self.context_footprint = (
             node_footprint(layout, ctx) @ rotation_2d(np.float64(ctx_pose.yaw)).T
         )
-        surfaces = {ctx: node_top(layout, ctx, ctx_pose, lim.top_band)}
+        surfaces = {ctx: node_top(layout, ctx, ctx_pose, lim.top_band, lim.hull_margin)}
         # 3. robot on the table's edge, facing its centre
         robot = robot_base_pose(surfaces[ctx], lim, rng.uniform(0, 1))
         self.poses[layout.robot] = robot
@@ -347,7 +364,9 @@ class _Placer:
                 self.poses[kid] = self.sample_object(
                     kid, parent, surfaces[parent], ancestors[parent]
                 )
-                surfaces[kid] = node_top(layout, kid, self.poses[kid], lim.top_band)
+                surfaces[kid] = node_top(
+                    layout, kid, self.poses[kid], lim.top_band, lim.hull_margin
+                )
                 ancestors[kid] = ancestors[parent] | {kid}
                 queue.append(kid)
         floor_kids = [
