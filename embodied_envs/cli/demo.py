@@ -95,8 +95,6 @@ def _run_env(job: dict) -> list[EnvEpisode]:
                     frames=frames,
                 )
             )
-            if job.get("progress") is not None:
-                job["progress"].put(1)
     finally:
         env.close()
     return out

@@ -84,14 +84,13 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
         layout = load_layout(path)
     except LayoutError as e:
         return e.problems
-    from embodied_envs.envs.config import ROBOT_REGISTRY
+    from embodied_envs.envs.config import resolve_robot
 
     problems = []
-    if layout.robot.lower().replace(" ", "_") not in ROBOT_REGISTRY:
-        problems.append(
-            f'{path}: relation["robot"] is "{layout.robot}", not a registered robot '
-            f"({sorted(ROBOT_REGISTRY)}). Fix: rename it or pass robot_uids to the env."
-        )
+    try:
+        resolve_robot(layout.robot, None, str(path))
+    except LayoutError as e:
+        problems.extend(e.problems)
     if check_placement:
         try:
             place(layout, 0)

@@ -10,7 +10,7 @@ from embodied_envs.layout import LayoutError, PlacementError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from embodied_envs.cli import demo, layout_cmds, splat_cmds
+    from embodied_envs.cli import demo, layout_cmds
 
     parser = argparse.ArgumentParser(
         prog="embodied-envs", description="Layout-driven ManiSkill pick environments."
@@ -18,7 +18,6 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     layout_cmds.add_parser(sub)
     demo.add_parser(sub)
-    splat_cmds.add_parser(sub)
     return parser
 
 

@@ -51,7 +51,8 @@ Visual modes add the 128x128 ``base_camera`` (hybrid-composited in ``hybrid`` re
 
 **Arguments:** ``layout_file``, ``replace_objs``, ``robot_uids`` (default: from the layout's
 robot name), ``robot_init_qpos_noise``, ``init_3dgs_quat``, ``objs_z_offset``,
-``robot_z_offset``, ``camera_cfg``, ``enable_grasp`` (accepted, unused), ``hybrid_depth_test``,
+``robot_z_offset``, ``camera_cfg``, ``enable_grasp`` (accepted, unused),
+``hybrid_depth_test`` (for hybrid mode, not built yet),
 plus ManiSkill's own (``num_envs``, ``obs_mode``, ``control_mode``, ``render_mode``, ...).
 """
 
@@ -113,8 +114,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         self.objs_z_offset = float(objs_z_offset)
         self.robot_z_offset = float(robot_z_offset)
         self.enable_grasp = enable_grasp
-        self.hybrid_depth_test = hybrid_depth_test
-        self._hybrid = None
+        self.hybrid_depth_test = hybrid_depth_test  # used by hybrid mode once it exists
         if render_mode == "hybrid":
             # declared for EmbodiedGen compatibility; the splat backend is not built yet
             raise NotImplementedError(
@@ -207,10 +207,6 @@ class PickEmbodiedGenEnv(BaseEnv):
         )
         self._hidden_objects.append(self.goal_site)
 
-    def _after_reconfigure(self, options: dict):
-        if self._hybrid is not None:
-            self._hybrid.prepare(self)
-
     def _reconfigure(self, options: dict | None = None):
         options = {} if options is None else options
         if self.render_mode == "human" and not _has_display():
@@ -302,18 +298,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         return self.compute_dense_reward(obs=obs, action=action, info=info) / self.max_reward
 
     # --- rendering -----------------------------------------------------------------------
-    def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
-        data = super()._get_obs_sensor_data(apply_texture_transforms)
-        if self._hybrid is not None:
-            data = self._hybrid.composite_sensor_obs(self, data)
-        return data
-
     def render_human(self):
         if _has_display():
             super().render_human()
         return self.render_rgb_array()
-
-    def render(self):
-        if self.render_mode == "hybrid":
-            return self._hybrid.render(self)
-        return super().render()

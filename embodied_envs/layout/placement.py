@@ -208,9 +208,14 @@ def top_surface(vertices: np.ndarray, band: float) -> Surface:
 
 def robot_base_pose(top: Surface, limits: PlacementLimits, u: float) -> LayoutPose:
     """Robot base on the shrunk top's boundary at perimeter fraction ``u``, facing the centre."""
-    edge_hull = (
-        top.shrunk if top.shrunk is not None else shrink_polygon(top.hull, limits.hull_margin)
-    )
+    if top.shrunk is None:
+        raise PlacementError(
+            "robot",
+            "on the table top's shrunk boundary",
+            0,
+            "the table top is smaller than twice the hull margin",
+        )
+    edge_hull = top.shrunk
     seg = np.roll(edge_hull, -1, axis=0) - edge_hull
     lengths = np.linalg.norm(seg, axis=1)
     s = u * lengths.sum()

@@ -22,10 +22,6 @@ GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
 GRIPPER_CLOSED = -1.0  # and for closed fingers
 
 
-class PlanFailure(RuntimeError):
-    """Raised by :meth:`PickPlaceSolver.solve` callers that want failures as exceptions."""
-
-
 @dataclass(frozen=True)
 class SolverConfig:
     """Tunable numbers of the scripted policy."""
