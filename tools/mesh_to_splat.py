@@ -1,0 +1,46 @@
+"""Convert a textured or coloured mesh into a 3DGS splat PLY (flat Gaussians, SH degree 0).
+
+With no arguments it makes the shipped room background:
+
+    .venv/bin/python tools/mesh_to_splat.py
+      -> assets/background/gs_model.ply from assets/background/mesh_model.ply
+
+The mesh keeps its frame (the shipped room is Y-up, metres, floor at y = 0). Only faces that
+face ``--visible-from`` are sampled when it is given (a room seen from the inside).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import trimesh
+
+from embodied_envs.splat import mesh_to_splat, write_ply
+
+ROOT = Path(__file__).resolve().parent.parent
+BACKGROUND = ROOT / "assets" / "background"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("mesh", type=Path, nargs="?", default=BACKGROUND / "mesh_model.ply")
+    ap.add_argument("--out", type=Path, default=BACKGROUND / "gs_model.ply")
+    ap.add_argument("--count", type=int, default=120_000, help="number of Gaussians")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--visible-from", type=float, nargs=3, default=(0.0, 1.3, 0.0),
+                    metavar=("X", "Y", "Z"), help="sample only faces facing this point")
+    ap.add_argument("--all-faces", action="store_true", help="ignore --visible-from")
+    args = ap.parse_args()
+    mesh = trimesh.load(args.mesh, force="mesh")
+    splat = mesh_to_splat(mesh, args.count, seed=args.seed,
+                          visible_from=None if args.all_faces else args.visible_from)
+    write_ply(splat, args.out)
+    size_mb = args.out.stat().st_size / 1e6
+    print(f"wrote {args.out}: {len(splat)} Gaussians, {size_mb:.1f} MB")
+
+
+if __name__ == "__main__":
+    main()
