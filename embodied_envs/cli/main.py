@@ -7,10 +7,11 @@ import os
 import sys
 
 from embodied_envs.layout import LayoutError, PlacementError
+from embodied_envs.splat import SplatFileError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from embodied_envs.cli import demo, layout_cmds
+    from embodied_envs.cli import demo, layout_cmds, splat_cmds
 
     parser = argparse.ArgumentParser(
         prog="embodied-envs", description="Layout-driven ManiSkill pick environments."
@@ -18,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     layout_cmds.add_parser(sub)
     demo.add_parser(sub)
+    splat_cmds.add_parser(sub)
     return parser
 
 
@@ -26,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (LayoutError, PlacementError) as e:
+    except (LayoutError, PlacementError, SplatFileError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
 

@@ -12,13 +12,16 @@ import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
+from mani_skill.utils.visualization.misc import tile_images
 from mani_skill.utils.building import actors
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
 from embodied_envs.envs.config import SUPPORTED_ROBOTS, CameraSpec, resolve_robot
+from embodied_envs.envs.hybrid import HybridRenderer
 from embodied_envs.layout import LayoutInfo, load_layout
+from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.layout.placement import derive_seed, place
 from embodied_envs.paths import default_layout
 from embodied_envs.scene import GoalRegion, LayoutScene, load_layout_scene
@@ -52,13 +55,20 @@ Visual modes add the 128x128 ``base_camera`` (hybrid-composited in ``hybrid`` re
 **Arguments:** ``layout_file``, ``replace_objs``, ``robot_uids`` (default: from the layout's
 robot name), ``robot_init_qpos_noise``, ``init_3dgs_quat``, ``objs_z_offset``,
 ``robot_z_offset``, ``camera_cfg``, ``enable_grasp`` (accepted, unused),
-``hybrid_depth_test`` (for hybrid mode, not built yet),
+``hybrid_depth_test`` (hybrid mode: hide simulated pixels behind the splat surface),
+``splat_backend`` (hybrid mode: ``"auto"``, ``"torch"`` or ``"gsplat"``),
 plus ManiSkill's own (``num_envs``, ``obs_mode``, ``control_mode``, ``render_mode``, ...).
 """
 
 REST_QPOS = np.array(
     [0.0, np.pi / 8, 0.0, -3 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04]
 )
+
+
+def _sim_device(sim_backend: str, num_envs: int) -> str:
+    """Where the env's tensors will live, known before the simulation exists."""
+    gpu = sim_backend in ("gpu", "physx_cuda") or (sim_backend == "auto" and num_envs > 1)
+    return "cuda" if gpu and torch.cuda.is_available() else "cpu"
 
 
 def _has_display() -> bool:
@@ -93,6 +103,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         camera_cfg: dict | None = None,
         enable_grasp: bool = False,
         hybrid_depth_test: bool = True,
+        splat_backend: str = "auto",
         num_envs: int = 1,
         reconfiguration_freq: int | None = None,
         render_mode: str | None = None,
@@ -114,12 +125,16 @@ class PickEmbodiedGenEnv(BaseEnv):
         self.objs_z_offset = float(objs_z_offset)
         self.robot_z_offset = float(robot_z_offset)
         self.enable_grasp = enable_grasp
-        self.hybrid_depth_test = hybrid_depth_test  # used by hybrid mode once it exists
+        self.hybrid_depth_test = bool(hybrid_depth_test)
+        self.hybrid: HybridRenderer | None = None
         if render_mode == "hybrid":
-            # declared for EmbodiedGen compatibility; the splat backend is not built yet
-            raise NotImplementedError(
-                'render_mode="hybrid" needs the Gaussian-splat renderer, which this version does'
-                ' not have yet; use "rgb_array", "sensors", "all" or "human".'
+            self.hybrid = HybridRenderer(
+                self.base_layout.gs_model_path(),
+                self.init_3dgs_quat,
+                depth_test=self.hybrid_depth_test,
+                backend=splat_backend,
+                device=_sim_device(kwargs.get("sim_backend", "auto"), num_envs),
+                layout_file=self.layout_file,
             )
         if reconfiguration_freq is None:
             reconfiguration_freq = 1 if num_envs == 1 else 0
@@ -298,6 +313,65 @@ class PickEmbodiedGenEnv(BaseEnv):
         return self.compute_dense_reward(obs=obs, action=action, info=info) / self.max_reward
 
     # --- rendering -----------------------------------------------------------------------
+    def _after_reconfigure(self, options: dict):
+        super()._after_reconfigure(options)
+        if self.hybrid is not None:
+            self._hybrid_ids = self._foreground_ids()
+
+    def _foreground_ids(self) -> dict[bool, list[torch.Tensor]]:
+        """Per env, the segmentation ids drawn over the background: robot links and layout
+        actors, plus (in human cameras, where they are visible) the hidden objects."""
+        ids: dict[bool, list[torch.Tensor]] = {False: [], True: []}
+        for k in range(self.num_envs):
+            own = [link.per_scene_id[k] for link in self.agent.robot.links]
+            own += [a.per_scene_id[0] for a in self.env_actors[f"env{k}"].values()]
+            hidden = [obj.per_scene_id[k] for obj in self._hidden_objects]
+            ids[False].append(torch.stack(own).reshape(-1))
+            ids[True].append(torch.stack(own + hidden).reshape(-1))
+        return ids
+
+    def _hybrid_composite(self, name: str, camera, data: dict, human: bool) -> torch.Tensor:
+        extra = camera.get_obs(rgb=False, depth=True, position=False, segmentation=True)
+        bg = self.base_layout.background
+        return self.hybrid.composite(
+            name,
+            data["rgb"],
+            extra["segmentation"],
+            extra["depth"],
+            camera.camera.get_model_matrix(),
+            camera.camera.get_intrinsic_matrix(),
+            self._hybrid_ids[human],
+            [LayoutPose.from_layout(layout.position[bg]) for layout in self.layouts],
+        )
+
+    def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
+        obs = super()._get_obs_sensor_data(apply_texture_transforms)
+        if self.hybrid is not None and apply_texture_transforms:
+            for name, data in obs.items():  # a policy sees what a person sees
+                if "rgb" in data:
+                    data["rgb"] = self._hybrid_composite(name, self.scene.sensors[name], data,
+                                                         human=False)
+        return obs
+
+    def render_hybrid(self) -> torch.Tensor:
+        """The human render cameras' images composited over the splat background."""
+        for obj in self._hidden_objects:
+            obj.show_visual()
+        self.scene.update_render(update_sensors=False, update_human_render_cameras=True)
+        images = []
+        for name, camera in self.scene.human_render_cameras.items():
+            camera.capture()
+            data = camera.get_obs(rgb=True, depth=False, position=False, segmentation=False)
+            images.append(self._hybrid_composite(name, camera, data, human=True))
+        for obj in self._hidden_objects:
+            obj.hide_visual()
+        return images[0] if len(images) == 1 else tile_images(images)
+
+    def render(self):
+        if self.render_mode == "hybrid":
+            return self.render_hybrid()
+        return super().render()
+
     def render_human(self):
         if _has_display():
             super().render_human()
