@@ -31,7 +31,7 @@ FOOTPRINT_SIGMA = 3.0  # a Gaussian covers pixels within this many sigmas (Mahal
 ALPHA_MAX = 0.99  # per-Gaussian alpha clamp
 ALPHA_MIN = 1.0 / 255.0  # contributions below this alpha are skipped
 T_MIN = 1e-4  # a pixel stops before its transmittance would drop below this
-MAX_PAIRS_PER_CHUNK = 1 << 22  # (pixel, Gaussian) pairs expanded at once; bounds memory
+MAX_PAIRS_PER_CHUNK = 1 << 19  # pairs expanded at once; smaller chunks skip more hidden pairs
 
 
 @dataclass(frozen=True)

@@ -198,8 +198,3 @@ def test_bad_arguments_fail_before_simulation(tmp_path, scene_copy):
     e.reset(seed=0)
     e.close()
     assert snapshot(scene_copy) == before  # nothing written beside the input
-
-
-def test_hybrid_mode_says_it_is_not_available_yet():
-    with pytest.raises(NotImplementedError, match='render_mode="hybrid" needs the Gaussian-splat'):
-        gym.make(ENV_ID, render_mode="hybrid")

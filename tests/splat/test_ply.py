@@ -1,0 +1,106 @@
+import numpy as np
+import pytest
+import torch
+from conftest import random_splat
+
+from embodied_envs.splat import SplatFileError, read_ply, write_ply
+
+PROPS = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1",
+         "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+
+
+def write_raw(path, names, rows, fmt="binary_little_endian", element="vertex", count=None,
+              types=None):
+    """An independent PLY writer: any property order and types."""
+    types = types or ["float"] * len(names)
+    np_types = {"float": "<f4", "double": "<f8", "uchar": "u1"}
+    dtype = np.dtype([(n, np_types[t]) for n, t in zip(names, types, strict=True)])
+    table = np.zeros(len(rows), dtype=dtype)
+    for i, n in enumerate(names):
+        table[n] = rows[:, i]
+    header = ["ply", f"format {fmt} 1.0", f"element {element} {count or len(rows)}"]
+    header += [f"property {t} {n}" for n, t in zip(names, types, strict=True)]
+    path.write_bytes(("\n".join([*header, "end_header"]) + "\n").encode() + table.tobytes())
+    return path
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3])
+@pytest.mark.parametrize("normals", [False, True])
+def test_round_trip_is_lossless(tmp_path, degree, normals):
+    s = random_splat(degree, n=50, sh_degree=degree, normals=normals)
+    back = read_ply(write_ply(s, tmp_path / "s.ply"))
+    assert back.sh_degree == degree
+    for f in ("means", "quats_wxyz", "log_scales", "opacity_logits", "sh"):
+        assert torch.equal(getattr(back, f), getattr(s, f)), f
+    assert (back.normals is None) == (not normals)
+    if normals:
+        assert torch.equal(back.normals, s.normals)
+
+
+def test_reads_inria_layout_with_sh_channel_major_and_other_types(tmp_path):
+    # INRIA order: x y z nx ny nz f_dc_0..2 f_rest_0..44 opacity scale_* rot_*
+    rest = [f"f_rest_{i}" for i in range(45)]
+    names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", *rest, "opacity",
+             "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    rng = np.random.default_rng(0)
+    rows = rng.normal(size=(7, len(names)))
+    types = ["double" if n == "opacity" else "float" for n in names]
+    s = read_ply(write_raw(tmp_path / "inria.ply", names, rows, types=types))
+    assert len(s) == 7 and s.sh_degree == 3
+    col = {n: i for i, n in enumerate(names)}
+    # coefficient k >= 1 of channel c is f_rest_{c * 15 + k - 1}
+    assert s.sh[3, 4, 2].item() == pytest.approx(rows[3, col["f_rest_33"]], abs=1e-6)
+    assert s.sh[3, 0, 1].item() == pytest.approx(rows[3, col["f_dc_1"]], abs=1e-6)
+    assert s.opacity_logits[5].item() == pytest.approx(rows[5, col["opacity"]], abs=1e-6)
+    assert s.quats_wxyz[2, 0].item() == pytest.approx(rows[2, col["rot_0"]], abs=1e-6)
+    assert s.normals is not None
+
+
+def test_activations(tmp_path):
+    rows = np.array([[0, 0, 0, 0.1, 0.2, 0.3, 0.0, np.log(0.5), 0, 0, 2, 0, 0, 0]], float)
+    s = read_ply(write_raw(tmp_path / "a.ply", PROPS, rows))
+    assert s.opacities.item() == pytest.approx(0.5)
+    assert s.scales[0].tolist() == pytest.approx([0.5, 1.0, 1.0])
+    assert s.unit_quats_wxyz[0].tolist() == pytest.approx([1, 0, 0, 0])
+
+
+@pytest.mark.parametrize(
+    "case, words",
+    [
+        ("missing_opacity", ["lacks", "opacity"]),
+        ("truncated", ["truncated", "10 vertices"]),
+        ("no_vertex", ["no 'vertex' element"]),
+        ("ascii", ["binary_little_endian"]),
+        ("bad_rest", ["f_rest", "0, 9, 24 or 45"]),
+        ("not_ply", ["not a PLY"]),
+        ("missing_file", ["does not exist"]),
+        ("nan", ["NaN"]),
+    ],
+)
+def test_malformed_files_are_rejected_with_the_file_and_the_fix(tmp_path, case, words):
+    rows = np.ones((10, len(PROPS)))
+    path = tmp_path / f"{case}.ply"
+    if case == "missing_opacity":
+        keep = [i for i, n in enumerate(PROPS) if n != "opacity"]
+        write_raw(path, [PROPS[i] for i in keep], rows[:, keep])
+    elif case == "truncated":
+        write_raw(path, PROPS, rows)
+        path.write_bytes(path.read_bytes()[:-30])
+    elif case == "no_vertex":
+        write_raw(path, PROPS, rows, element="face")
+    elif case == "ascii":
+        write_raw(path, PROPS, rows, fmt="ascii")
+    elif case == "bad_rest":
+        names = PROPS + [f"f_rest_{i}" for i in range(10)]
+        write_raw(path, names, np.ones((10, len(names))))
+    elif case == "not_ply":
+        path.write_text("solid cube\nendsolid\n")
+    elif case == "nan":
+        rows[3, 0] = np.nan
+        write_raw(path, PROPS, rows)
+    with pytest.raises(SplatFileError) as e:
+        read_ply(path)
+    msg = str(e.value)
+    assert str(path) in msg and "Fix:" in msg
+    for w in words:
+        assert w in msg, msg
