@@ -64,8 +64,10 @@ def main() -> None:
             worst = max(worst, med)
             print(f"{count:>10,} {name:>14} {med:>9.3f} {target:>9.2f}")
         verdict = "meets" if worst <= target else "MISSES"
-        print(f"{count:>10,} {'worst view':>14} {worst:>9.3f} {target:>9.2f}  "
-              f"{verdict} target (ratio {worst / target:.2f})")
+        print(
+            f"{count:>10,} {'worst view':>14} {worst:>9.3f} {target:>9.2f}  "
+            f"{verdict} target (ratio {worst / target:.2f})"
+        )
 
 
 if __name__ == "__main__":

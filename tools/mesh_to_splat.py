@@ -30,13 +30,20 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=BACKGROUND / "gs_model.ply")
     ap.add_argument("--count", type=int, default=120_000, help="number of Gaussians")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--visible-from", type=float, nargs=3, default=(0.0, 1.3, 0.0),
-                    metavar=("X", "Y", "Z"), help="sample only faces facing this point")
+    ap.add_argument(
+        "--visible-from",
+        type=float,
+        nargs=3,
+        default=(0.0, 1.3, 0.0),
+        metavar=("X", "Y", "Z"),
+        help="sample only faces facing this point",
+    )
     ap.add_argument("--all-faces", action="store_true", help="ignore --visible-from")
     args = ap.parse_args()
     mesh = trimesh.load(args.mesh, force="mesh")
-    splat = mesh_to_splat(mesh, args.count, seed=args.seed,
-                          visible_from=None if args.all_faces else args.visible_from)
+    splat = mesh_to_splat(
+        mesh, args.count, seed=args.seed, visible_from=None if args.all_faces else args.visible_from
+    )
     write_ply(splat, args.out)
     size_mb = args.out.stat().st_size / 1e6
     print(f"wrote {args.out}: {len(splat)} Gaussians, {size_mb:.1f} MB")

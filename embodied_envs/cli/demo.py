@@ -30,8 +30,12 @@ def add_parser(sub) -> None:
     p.add_argument("--num-envs", type=int, default=1)
     p.add_argument("--episodes", type=int, default=1)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--render-mode", choices=["hybrid", "rgb_array"], default="hybrid",
-                   help="hybrid: simulated scene over the layout's splat background")
+    p.add_argument(
+        "--render-mode",
+        choices=["hybrid", "rgb_array"],
+        default="hybrid",
+        help="hybrid: simulated scene over the layout's splat background",
+    )
     p.add_argument("--camera-eye", type=float, nargs=3, default=[0.9, 0.0, 1.1])
     p.add_argument("--camera-target", type=float, nargs=3, default=[0.0, 0.0, 0.9])
     p.add_argument("--image-hw", type=int, nargs=2, default=[256, 256])

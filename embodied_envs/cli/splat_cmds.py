@@ -32,26 +32,35 @@ def add_parser(sub) -> None:
     r.add_argument("--height", type=int, default=256)
     r.add_argument("--fovy", type=float, default=60.0, help="vertical field of view, degrees")
     r.add_argument("--backend", choices=[b for b in BACKENDS], default="auto")
-    r.add_argument("--background", type=float, nargs=3, default=(0.0, 0.0, 0.0),
-                   metavar=("R", "G", "B"), help="colour behind the splat, in [0, 1]")
+    r.add_argument(
+        "--background",
+        type=float,
+        nargs=3,
+        default=(0.0, 0.0, 0.0),
+        metavar=("R", "G", "B"),
+        help="colour behind the splat, in [0, 1]",
+    )
     r.add_argument("--out", type=Path, required=True, help="PNG to write")
-    r.add_argument("--depth-out", type=Path,
-                   help="also write the expected depth as a 16-bit PNG, in millimetres "
-                   "(0 where nothing is drawn)")
+    r.add_argument(
+        "--depth-out",
+        type=Path,
+        help="also write the expected depth as a 16-bit PNG, in millimetres "
+        "(0 where nothing is drawn)",
+    )
     r.set_defaults(func=cmd_render)
 
 
 def cmd_render(args) -> int:
-    camera = PinholeCamera.look_at(args.eye, args.target, args.up, args.width, args.height,
-                                   args.fovy)
+    camera = PinholeCamera.look_at(
+        args.eye, args.target, args.up, args.width, args.height, args.fovy
+    )
     splat = read_ply(args.ply)
     start = time.perf_counter()
     image = render(splat, camera, backend=args.backend, background=tuple(args.background))
     seconds = time.perf_counter() - start
     args.out.parent.mkdir(parents=True, exist_ok=True)
     iio.imwrite(args.out, image.rgb_uint8().cpu().numpy())
-    print(f"wrote {args.out} ({len(splat)} Gaussians, {args.width}x{args.height}, "
-          f"{seconds:.2f} s)")
+    print(f"wrote {args.out} ({len(splat)} Gaussians, {args.width}x{args.height}, {seconds:.2f} s)")
     if args.depth_out is not None:
         depth = image.surface_depth(min_alpha=0.5).cpu().numpy()
         depth = np.where(np.isfinite(depth), depth * DEPTH_PNG_SCALE, 0.0)

@@ -90,8 +90,13 @@ class HybridRenderer:
     def clear(self) -> None:
         self._cache.clear()
 
-    def background(self, camera_name: str, env: int, camera: PinholeCamera,
-                   pose: LayoutPose) -> CachedBackground:
+    def cached(self, camera_name: str, env: int) -> CachedBackground | None:
+        """The cached background of (camera, env), if any."""
+        return self._cache.get((camera_name, env))
+
+    def background(
+        self, camera_name: str, env: int, camera: PinholeCamera, pose: LayoutPose
+    ) -> CachedBackground:
         """The cached background of (camera, env), rendered now if missing or stale."""
         key = (camera_name, env)
         cached = self._cache.get(key)

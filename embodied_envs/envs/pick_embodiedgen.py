@@ -12,17 +12,17 @@ import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
-from mani_skill.utils.visualization.misc import tile_images
 from mani_skill.utils.building import actors
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
+from mani_skill.utils.visualization.misc import tile_images
 
 from embodied_envs.envs.config import SUPPORTED_ROBOTS, CameraSpec, resolve_robot
 from embodied_envs.envs.hybrid import HybridRenderer
 from embodied_envs.layout import LayoutInfo, load_layout
-from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.layout.placement import derive_seed, place
+from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.paths import default_layout
 from embodied_envs.scene import GoalRegion, LayoutScene, load_layout_scene
 
@@ -349,8 +349,9 @@ class PickEmbodiedGenEnv(BaseEnv):
         if self.hybrid is not None and apply_texture_transforms:
             for name, data in obs.items():  # a policy sees what a person sees
                 if "rgb" in data:
-                    data["rgb"] = self._hybrid_composite(name, self.scene.sensors[name], data,
-                                                         human=False)
+                    data["rgb"] = self._hybrid_composite(
+                        name, self.scene.sensors[name], data, human=False
+                    )
         return obs
 
     def render_hybrid(self) -> torch.Tensor:

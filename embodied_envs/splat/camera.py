@@ -41,8 +41,9 @@ class PinholeCamera:
         object.__setattr__(self, "world_to_cam", m)
 
     @classmethod
-    def from_fovy(cls, world_to_cam: np.ndarray, width: int, height: int,
-                  fovy_rad: float) -> PinholeCamera:
+    def from_fovy(
+        cls, world_to_cam: np.ndarray, width: int, height: int, fovy_rad: float
+    ) -> PinholeCamera:
         """SPEC camera: fy = H / (2 tan(fovy / 2)), fx = fy, principal point at the centre."""
         if not 0.0 < fovy_rad < math.pi:
             raise ValueError(f"fovy must be in (0, 180) degrees, got {math.degrees(fovy_rad)}")
@@ -50,9 +51,15 @@ class PinholeCamera:
         return cls(world_to_cam, int(width), int(height), f, f, width / 2.0, height / 2.0)
 
     @classmethod
-    def look_at(cls, eye: Sequence[float], target: Sequence[float],
-                up: Sequence[float] = (0.0, 0.0, 1.0), width: int = 256, height: int = 256,
-                fovy_deg: float = 60.0) -> PinholeCamera:
+    def look_at(
+        cls,
+        eye: Sequence[float],
+        target: Sequence[float],
+        up: Sequence[float] = (0.0, 0.0, 1.0),
+        width: int = 256,
+        height: int = 256,
+        fovy_deg: float = 60.0,
+    ) -> PinholeCamera:
         """A camera at ``eye`` looking at ``target`` with image-up as close to ``up`` as possible.
 
         Raises:
@@ -71,17 +78,24 @@ class PinholeCamera:
         cam_to_world = np.eye(4)
         cam_to_world[:3, :3] = np.stack([right, down, forward], axis=1)
         cam_to_world[:3, 3] = eye
-        return cls.from_fovy(np.linalg.inv(cam_to_world), width, height,
-                             math.radians(fovy_deg))
+        return cls.from_fovy(np.linalg.inv(cam_to_world), width, height, math.radians(fovy_deg))
 
     @classmethod
-    def from_opengl(cls, cam_to_world_gl: np.ndarray, intrinsic: np.ndarray, width: int,
-                    height: int) -> PinholeCamera:
+    def from_opengl(
+        cls, cam_to_world_gl: np.ndarray, intrinsic: np.ndarray, width: int, height: int
+    ) -> PinholeCamera:
         """From a SAPIEN camera: its OpenGL model matrix and 3x3 intrinsic matrix."""
         cam_to_world = np.asarray(cam_to_world_gl, dtype=np.float64) @ GL_TO_CV
         k = np.asarray(intrinsic, dtype=np.float64)
-        return cls(np.linalg.inv(cam_to_world), int(width), int(height),
-                   float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2]))
+        return cls(
+            np.linalg.inv(cam_to_world),
+            int(width),
+            int(height),
+            float(k[0, 0]),
+            float(k[1, 1]),
+            float(k[0, 2]),
+            float(k[1, 2]),
+        )
 
     @property
     def center(self) -> np.ndarray:

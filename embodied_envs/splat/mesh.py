@@ -92,7 +92,9 @@ def mesh_to_splat(
     flip = r1 + r2 > 1.0
     r1, r2 = np.where(flip, 1.0 - r1, r1), np.where(flip, 1.0 - r2, r2)
     tri = mesh.triangles[picked]
-    points = tri[:, 0] + r1[:, None] * (tri[:, 1] - tri[:, 0]) + r2[:, None] * (tri[:, 2] - tri[:, 0])
+    points = (
+        tri[:, 0] + r1[:, None] * (tri[:, 1] - tri[:, 0]) + r2[:, None] * (tri[:, 2] - tri[:, 0])
+    )
     normals = mesh.face_normals[picked]
     colors = _sample_colors(mesh, points, picked)
     spacing = math.sqrt(areas.sum() / count)

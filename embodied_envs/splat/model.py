@@ -57,8 +57,11 @@ class GaussianSplat:
             if tuple(t.shape) != shape:
                 raise ValueError(f"GaussianSplat.{name} has shape {tuple(t.shape)}, want {shape}")
         k = self.sh.shape[1] if self.sh.ndim == 3 else -1
-        if self.sh.ndim != 3 or self.sh.shape[0] != n or self.sh.shape[2] != 3 or k not in (
-            sh_coeff_count(d) for d in range(MAX_SH_DEGREE + 1)
+        if (
+            self.sh.ndim != 3
+            or self.sh.shape[0] != n
+            or self.sh.shape[2] != 3
+            or k not in (sh_coeff_count(d) for d in range(MAX_SH_DEGREE + 1))
         ):
             raise ValueError(
                 f"GaussianSplat.sh has shape {tuple(self.sh.shape)}, want ({n}, (d+1)^2, 3) "
@@ -94,9 +97,18 @@ class GaussianSplat:
 
         return replace(
             self,
-            **{f: move(getattr(self, f)) for f in (
-                "means", "quats_wxyz", "log_scales", "opacity_logits", "sh", "normals", "sh_frame"
-            )},
+            **{
+                f: move(getattr(self, f))
+                for f in (
+                    "means",
+                    "quats_wxyz",
+                    "log_scales",
+                    "opacity_logits",
+                    "sh",
+                    "normals",
+                    "sh_frame",
+                )
+            },
         )
 
     def subset(self, index: torch.Tensor) -> GaussianSplat:
@@ -116,9 +128,15 @@ def quat_wxyz_to_matrix(q: torch.Tensor) -> torch.Tensor:
     """(N, 4) unit quaternions (scalar first) to (N, 3, 3) rotation matrices."""
     w, x, y, z = q.unbind(-1)
     rows = [
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+        1 - 2 * (y * y + z * z),
+        2 * (x * y - w * z),
+        2 * (x * z + w * y),
+        2 * (x * y + w * z),
+        1 - 2 * (x * x + z * z),
+        2 * (y * z - w * x),
+        2 * (x * z - w * y),
+        2 * (y * z + w * x),
+        1 - 2 * (x * x + y * y),
     ]
     return torch.stack(rows, dim=-1).reshape(*q.shape[:-1], 3, 3)
 
@@ -168,10 +186,22 @@ def pose_splat(
 
 # Real spherical-harmonic constants of degrees 1..3, in the order 3DGS uses.
 SH_C1 = 0.4886025119029199
-SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
-         -1.0925484305920792, 0.5462742152960396)
-SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-         -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+SH_C2 = (
+    1.0925484305920792,
+    -1.0925484305920792,
+    0.31539156525252005,
+    -1.0925484305920792,
+    0.5462742152960396,
+)
+SH_C3 = (
+    -0.5900435899266435,
+    2.890611442640554,
+    -0.4570457994644658,
+    0.3731763325901154,
+    -0.4570457994644658,
+    1.445305721320277,
+    -0.5900435899266435,
+)
 
 
 def sh_basis(dirs: torch.Tensor, degree: int) -> torch.Tensor:
@@ -183,20 +213,28 @@ def sh_basis(dirs: torch.Tensor, degree: int) -> torch.Tensor:
     if degree >= 2:
         xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
         out += [
-            SH_C2[0] * xy, SH_C2[1] * yz, SH_C2[2] * (2 * zz - xx - yy), SH_C2[3] * xz,
+            SH_C2[0] * xy,
+            SH_C2[1] * yz,
+            SH_C2[2] * (2 * zz - xx - yy),
+            SH_C2[3] * xz,
             SH_C2[4] * (xx - yy),
         ]
     if degree >= 3:
         out += [
-            SH_C3[0] * y * (3 * xx - yy), SH_C3[1] * xy * z, SH_C3[2] * y * (4 * zz - xx - yy),
-            SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy), SH_C3[4] * x * (4 * zz - xx - yy),
-            SH_C3[5] * z * (xx - yy), SH_C3[6] * x * (xx - 3 * yy),
+            SH_C3[0] * y * (3 * xx - yy),
+            SH_C3[1] * xy * z,
+            SH_C3[2] * y * (4 * zz - xx - yy),
+            SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy),
+            SH_C3[4] * x * (4 * zz - xx - yy),
+            SH_C3[5] * z * (xx - yy),
+            SH_C3[6] * x * (xx - 3 * yy),
         ]
     return torch.stack(out, dim=-1)
 
 
-def sh_colors(splat: GaussianSplat, camera_center: torch.Tensor,
-              index: torch.Tensor | None = None) -> torch.Tensor:
+def sh_colors(
+    splat: GaussianSplat, camera_center: torch.Tensor, index: torch.Tensor | None = None
+) -> torch.Tensor:
     """RGB in [0, 1] of each Gaussian (or of ``index``) seen from ``camera_center``.
 
     Colour = 0.5 + sum_k basis_k(view direction) * sh_k, clamped to [0, 1], with the view

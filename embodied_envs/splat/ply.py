@@ -17,14 +17,38 @@ import torch
 from embodied_envs.splat.model import MAX_SH_DEGREE, GaussianSplat, sh_coeff_count
 
 PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
 }
 REQUIRED = (
-    "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-    "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+    "x",
+    "y",
+    "z",
+    "f_dc_0",
+    "f_dc_1",
+    "f_dc_2",
+    "opacity",
+    "scale_0",
+    "scale_1",
+    "scale_2",
+    "rot_0",
+    "rot_1",
+    "rot_2",
+    "rot_3",
 )
 MAX_HEADER_BYTES = 1 << 20  # a header longer than this is not a PLY header
 
@@ -41,7 +65,8 @@ def _read_header(path: Path, data: bytes) -> tuple[list[tuple[str, int, list]], 
     end = data.find(b"end_header\n", 0, MAX_HEADER_BYTES)
     if not data.startswith(b"ply\n") or end < 0:
         raise SplatFileError(
-            path, "not a PLY file (no 'ply' magic line or no 'end_header')",
+            path,
+            "not a PLY file (no 'ply' magic line or no 'end_header')",
             "give a 3DGS PLY file, e.g. the point_cloud.ply a 3DGS training run writes",
         )
     elements: list[tuple[str, int, list]] = []
@@ -60,11 +85,15 @@ def _read_header(path: Path, data: bytes) -> tuple[list[tuple[str, int, list]], 
             elif len(words) == 3 and words[1] in PLY_TYPES:
                 elements[-1][2].append((words[2], PLY_TYPES[words[1]]))
             else:
-                raise SplatFileError(path, f"unknown PLY property line {raw!r}",
-                                     "re-export the file with standard PLY types")
+                raise SplatFileError(
+                    path,
+                    f"unknown PLY property line {raw!r}",
+                    "re-export the file with standard PLY types",
+                )
         else:
-            raise SplatFileError(path, f"malformed PLY header line {raw!r}",
-                                 "re-export the file as a standard PLY")
+            raise SplatFileError(
+                path, f"malformed PLY header line {raw!r}", "re-export the file as a standard PLY"
+            )
     return elements, end + len(b"end_header\n"), fmt
 
 
@@ -78,20 +107,28 @@ def read_ply(path: str | os.PathLike) -> GaussianSplat:
     """
     path = Path(path)
     if not path.is_file():
-        raise SplatFileError(path, "file does not exist",
-                             "check the path (a layout's background folder needs gs_model.ply)")
+        raise SplatFileError(
+            path,
+            "file does not exist",
+            "check the path (a layout's background folder needs gs_model.ply)",
+        )
     data = path.read_bytes()
     elements, offset, fmt = _read_header(path, data)
     if fmt != "binary_little_endian":
-        raise SplatFileError(path, f"PLY format is {fmt or 'missing'!r}, only "
-                             "binary_little_endian is read",
-                             "re-export the splat as binary little-endian PLY")
+        raise SplatFileError(
+            path,
+            f"PLY format is {fmt or 'missing'!r}, only binary_little_endian is read",
+            "re-export the splat as binary little-endian PLY",
+        )
     vertex = None
     for name, count, props in elements:
         if any(dtype is None for _, dtype in props):
             if name == "vertex" or vertex is None:
-                raise SplatFileError(path, f"element {name!r} has list properties",
-                                     "give a 3DGS PLY whose vertex properties are scalars")
+                raise SplatFileError(
+                    path,
+                    f"element {name!r} has list properties",
+                    "give a 3DGS PLY whose vertex properties are scalars",
+                )
             break  # after the vertex element: never read
         dtype = np.dtype([(p, "<" + t) for p, t in props])
         if name == "vertex":
@@ -99,27 +136,36 @@ def read_ply(path: str | os.PathLike) -> GaussianSplat:
             break
         offset += count * dtype.itemsize
     if vertex is None:
-        raise SplatFileError(path, "no 'vertex' element",
-                             "give a 3DGS PLY whose Gaussians are the 'vertex' element")
+        raise SplatFileError(
+            path, "no 'vertex' element", "give a 3DGS PLY whose Gaussians are the 'vertex' element"
+        )
     count, dtype, offset = vertex
     names = set(dtype.names)
     missing = [p for p in REQUIRED if p not in names]
     if missing:
-        raise SplatFileError(path, f"vertex element lacks the properties {missing}",
-                             "write every 3DGS property (x y z, f_dc_*, opacity, scale_*, rot_*)")
+        raise SplatFileError(
+            path,
+            f"vertex element lacks the properties {missing}",
+            "write every 3DGS property (x y z, f_dc_*, opacity, scale_*, rot_*)",
+        )
     n_rest = sum(1 for p in names if p.startswith("f_rest_"))
     degrees = {3 * (sh_coeff_count(d) - 1): d for d in range(MAX_SH_DEGREE + 1)}
     if n_rest not in degrees or any(f"f_rest_{i}" not in names for i in range(n_rest)):
         raise SplatFileError(
-            path, f"{n_rest} f_rest_* properties, not numbered 0.. or not a count for SH degree "
-            "0..3 (0, 9, 24 or 45)", "write f_rest_0..f_rest_{3*((d+1)^2-1)-1} for one degree d")
+            path,
+            f"{n_rest} f_rest_* properties, not numbered 0.. or not a count for SH degree "
+            "0..3 (0, 9, 24 or 45)",
+            "write f_rest_0..f_rest_{3*((d+1)^2-1)-1} for one degree d",
+        )
     need = offset + count * dtype.itemsize
     if len(data) < need:
         have = max(0, (len(data) - offset) // dtype.itemsize)
         raise SplatFileError(
-            path, f"truncated: the header promises {count} vertices ({need} bytes) but the file "
+            path,
+            f"truncated: the header promises {count} vertices ({need} bytes) but the file "
             f"has {len(data)} bytes ({have} whole vertices)",
-            "re-copy or re-export the file; it was cut short")
+            "re-copy or re-export the file; it was cut short",
+        )
     v = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
 
     def cols(*props: str) -> torch.Tensor:
@@ -144,8 +190,11 @@ def read_ply(path: str | os.PathLike) -> GaussianSplat:
     )
     bad = ~torch.isfinite(torch.cat([splat.means, splat.quats_wxyz, splat.log_scales], 1)).all(1)
     if bool(bad.any()):
-        raise SplatFileError(path, f"{int(bad.sum())} Gaussians have NaN or infinite position, "
-                             "rotation or scale", "remove them or re-export the splat")
+        raise SplatFileError(
+            path,
+            f"{int(bad.sum())} Gaussians have NaN or infinite position, rotation or scale",
+            "remove them or re-export the splat",
+        )
     return splat
 
 

@@ -72,7 +72,7 @@ class Projected:
 
     @property
     def q_max(self) -> torch.Tensor:
-        """Largest Mahalanobis q^2 a Gaussian contributes at: the footprint or alpha >= ALPHA_MIN."""
+        """Largest Mahalanobis q a Gaussian contributes at (footprint, alpha >= ALPHA_MIN)."""
         return (2.0 * torch.log(self.opacity / ALPHA_MIN)).clamp_max(FOOTPRINT_SIGMA**2)
 
 
@@ -149,8 +149,10 @@ def _expand(pr: Projected, g: torch.Tensor, v0: torch.Tensor, rows: torch.Tensor
     pair_row = torch.repeat_interleave(torch.arange(n_rows, device=dev), span, output_size=n_pairs)
     first_px = (span.cumsum(0) - span - v * width - u0).index_select(0, pair_row)
     pixel = torch.arange(n_pairs, device=dev) - first_px  # = v * width + u
-    dx = (pixel - v.index_select(0, pair_row) * width).float() + 0.5 - center.index_select(
-        0, pair_row
+    dx = (
+        (pixel - v.index_select(0, pair_row) * width).float()
+        + 0.5
+        - center.index_select(0, pair_row)
     )
     q = q_row.index_select(0, pair_row) + dx * dx / cond.index_select(0, pair_row)
     return pixel, row_g.index_select(0, pair_row), q
@@ -202,8 +204,9 @@ def rasterize_torch(
             mx = pr.mx.index_select(0, g)
             u0 = torch.ceil(mx - hx - 0.5).clamp(0, w).long()
             u1 = torch.floor(mx + hx - 0.5).clamp(-1, w - 1).long()
-            live = _live_counts(done, w, h, u0, v0.index_select(0, g),
-                                (u1 - u0 + 1).clamp_min(0), r)
+            live = _live_counts(
+                done, w, h, u0, v0.index_select(0, g), (u1 - u0 + 1).clamp_min(0), r
+            )
             r = torch.where(live > 0, r, torch.zeros_like(r))
         if int(r.sum()) == 0:
             continue

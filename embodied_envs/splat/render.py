@@ -47,8 +47,9 @@ def resolve_backend(backend: str) -> str:
     return backend
 
 
-def _rasterize_gsplat(splat: GaussianSplat, camera: PinholeCamera,
-                      background: tuple[float, float, float]) -> SplatImage:
+def _rasterize_gsplat(
+    splat: GaussianSplat, camera: PinholeCamera, background: tuple[float, float, float]
+) -> SplatImage:
     from gsplat import rasterization
 
     dev = splat.device

@@ -9,8 +9,9 @@ sys.path.insert(0, str(Path(__file__).parent))
 from embodied_envs.splat.model import SH_C0, GaussianSplat  # noqa: E402
 
 
-def random_splat(seed: int, n: int = 200, sh_degree: int = 0, spread: float = 1.0,
-                 normals: bool = False) -> GaussianSplat:
+def random_splat(
+    seed: int, n: int = 200, sh_degree: int = 0, spread: float = 1.0, normals: bool = False
+) -> GaussianSplat:
     """Gaussians around the origin with varied size, shape, orientation and opacity."""
     rng = np.random.default_rng(seed)
     k = (sh_degree + 1) ** 2

@@ -13,15 +13,30 @@ SH_C0 = 0.28209479177387814
 
 def quat_to_matrix(q):
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
-def render_reference(means, quats, scales, opacities, colors, w2c, fx, fy, cx, cy, width,
-                     height, background=(0.0, 0.0, 0.0)):
+def render_reference(
+    means,
+    quats,
+    scales,
+    opacities,
+    colors,
+    w2c,
+    fx,
+    fy,
+    cx,
+    cy,
+    width,
+    height,
+    background=(0.0, 0.0, 0.0),
+):
     """Activated parameters in, (rgb (H, W, 3), alpha (H, W), depth (H, W)) out."""
     us, vs = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
     color = np.zeros((height, width, 3))

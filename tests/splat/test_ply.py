@@ -5,12 +5,27 @@ from conftest import random_splat
 
 from embodied_envs.splat import SplatFileError, read_ply, write_ply
 
-PROPS = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1",
-         "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+PROPS = [
+    "x",
+    "y",
+    "z",
+    "f_dc_0",
+    "f_dc_1",
+    "f_dc_2",
+    "opacity",
+    "scale_0",
+    "scale_1",
+    "scale_2",
+    "rot_0",
+    "rot_1",
+    "rot_2",
+    "rot_3",
+]
 
 
-def write_raw(path, names, rows, fmt="binary_little_endian", element="vertex", count=None,
-              types=None):
+def write_raw(
+    path, names, rows, fmt="binary_little_endian", element="vertex", count=None, types=None
+):
     """An independent PLY writer: any property order and types."""
     types = types or ["float"] * len(names)
     np_types = {"float": "<f4", "double": "<f8", "uchar": "u1"}
@@ -40,8 +55,26 @@ def test_round_trip_is_lossless(tmp_path, degree, normals):
 def test_reads_inria_layout_with_sh_channel_major_and_other_types(tmp_path):
     # INRIA order: x y z nx ny nz f_dc_0..2 f_rest_0..44 opacity scale_* rot_*
     rest = [f"f_rest_{i}" for i in range(45)]
-    names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", *rest, "opacity",
-             "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    names = [
+        "x",
+        "y",
+        "z",
+        "nx",
+        "ny",
+        "nz",
+        "f_dc_0",
+        "f_dc_1",
+        "f_dc_2",
+        *rest,
+        "opacity",
+        "scale_0",
+        "scale_1",
+        "scale_2",
+        "rot_0",
+        "rot_1",
+        "rot_2",
+        "rot_3",
+    ]
     rng = np.random.default_rng(0)
     rows = rng.normal(size=(7, len(names)))
     types = ["double" if n == "opacity" else "float" for n in names]

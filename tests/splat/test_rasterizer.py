@@ -17,10 +17,19 @@ TOL = 2.0 / 255.0
 def reference(splat, cam, background=(0.0, 0.0, 0.0)):
     colors = sh_colors(splat, torch.as_tensor(cam.center, dtype=torch.float32))
     return render_reference(
-        splat.means.double().numpy(), splat.unit_quats_wxyz.double().numpy(),
-        splat.scales.double().numpy(), splat.opacities.double().numpy(),
-        colors.double().numpy(), cam.world_to_cam, cam.fx, cam.fy, cam.cx, cam.cy,
-        cam.width, cam.height, background,
+        splat.means.double().numpy(),
+        splat.unit_quats_wxyz.double().numpy(),
+        splat.scales.double().numpy(),
+        splat.opacities.double().numpy(),
+        colors.double().numpy(),
+        cam.world_to_cam,
+        cam.fx,
+        cam.fy,
+        cam.cx,
+        cam.cy,
+        cam.width,
+        cam.height,
+        background,
     )
 
 
@@ -38,7 +47,9 @@ def single(mean, scale, opacity=0.8, color=(1.0, 0.5, 0.25)):
         return torch.tensor([a], dtype=torch.float32)
 
     return GaussianSplat(
-        means=t(mean), quats_wxyz=t([1.0, 0, 0, 0]), log_scales=t([math.log(scale)] * 3),
+        means=t(mean),
+        quats_wxyz=t([1.0, 0, 0, 0]),
+        log_scales=t([math.log(scale)] * 3),
         opacity_logits=t(math.log(opacity / (1 - opacity))),
         sh=((t(color) - 0.5) / SH_C0)[:, None, :],
     )
@@ -69,13 +80,17 @@ def test_matches_reference_when_pixels_saturate_and_chunks_are_small(monkeypatch
     n = 400
     s = random_splat(11, n=n)
     s = GaussianSplat(
-        means=torch.tensor(rng.uniform([-0.6, -0.6, -1], [0.6, 0.6, 1], (n, 3)),
-                           dtype=torch.float32),
-        quats_wxyz=s.quats_wxyz, log_scales=s.log_scales,
-        opacity_logits=torch.full((n,), 5.0), sh=s.sh,
+        means=torch.tensor(
+            rng.uniform([-0.6, -0.6, -1], [0.6, 0.6, 1], (n, 3)), dtype=torch.float32
+        ),
+        quats_wxyz=s.quats_wxyz,
+        log_scales=s.log_scales,
+        opacity_logits=torch.full((n,), 5.0),
+        sh=s.sh,
     )
-    cam = PinholeCamera.look_at((0, 0, 3), (0, 0, 0), up=(0, 1, 0), width=40, height=40,
-                                fovy_deg=30)
+    cam = PinholeCamera.look_at(
+        (0, 0, 3), (0, 0, 0), up=(0, 1, 0), width=40, height=40, fovy_deg=30
+    )
     monkeypatch.setattr(rast, "MAX_PAIRS_PER_CHUNK", 700)
     image = rast.rasterize_torch(s, cam)
     ref = reference(s, cam)
@@ -87,8 +102,9 @@ def test_matches_reference_when_pixels_saturate_and_chunks_are_small(monkeypatch
 
 def test_one_isotropic_gaussian_has_the_expected_peak_and_footprint():
     f_deg, size, dist, scale, opacity = 60.0, 64, 2.0, 0.05, 0.8
-    cam = PinholeCamera.look_at((0, 0, dist), (0, 0, 0), up=(0, 1, 0), width=size,
-                                height=size, fovy_deg=f_deg)
+    cam = PinholeCamera.look_at(
+        (0, 0, dist), (0, 0, 0), up=(0, 1, 0), width=size, height=size, fovy_deg=f_deg
+    )
     image = rast.rasterize_torch(single((0, 0, 0), scale, opacity), cam)
     f = size / (2 * math.tan(math.radians(f_deg) / 2))
     var = (f * scale / dist) ** 2 + rast.LOW_PASS  # screen variance, px^2
@@ -105,8 +121,9 @@ def test_one_isotropic_gaussian_has_the_expected_peak_and_footprint():
     np.testing.assert_allclose(image.rgb.numpy()[..., 0], expected, atol=1e-5)
     np.testing.assert_allclose(image.depth.numpy(), expected * dist, atol=1e-4)
     finite = torch.isfinite(image.surface_depth(0.5))
-    assert finite.any() and torch.allclose(image.surface_depth(0.5)[finite],
-                                           torch.tensor(dist), atol=1e-4)
+    assert finite.any() and torch.allclose(
+        image.surface_depth(0.5)[finite], torch.tensor(dist), atol=1e-4
+    )
 
 
 @pytest.mark.parametrize("z", [-1.0, 0.005])
@@ -119,8 +136,9 @@ def test_gaussians_behind_or_at_the_camera_render_nothing(z):
 
 
 def test_gaussian_beside_the_camera_does_not_smear_over_the_image():
-    cam = PinholeCamera.look_at((0, 0, 0), (0, 0, -1), up=(0, 1, 0), width=32, height=32,
-                                fovy_deg=60)
+    cam = PinholeCamera.look_at(
+        (0, 0, 0), (0, 0, -1), up=(0, 1, 0), width=32, height=32, fovy_deg=60
+    )
     # just in front of the camera plane and far to the side: outside the 1.3x frustum
     image = rast.rasterize_torch(single((1.0, 0.0, -0.05), 0.2, 0.99), cam)
     assert image.alpha.max().item() == 0.0
@@ -150,8 +168,9 @@ def test_posed_splat_seen_by_a_camera_equals_the_splat_seen_by_the_moved_camera(
     pose = np.eye(4)
     pose[:3, :3] = quat_wxyz_to_matrix(q[None].double())[0].numpy()
     pose[:3, 3] = t.numpy()
-    moved_cam = PinholeCamera(cam.world_to_cam @ pose, cam.width, cam.height, cam.fx, cam.fy,
-                              cam.cx, cam.cy)
+    moved_cam = PinholeCamera(
+        cam.world_to_cam @ pose, cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy
+    )
     original = render(splat, moved_cam, backend="torch")
     assert original.alpha.mean() > 0.2
     assert (np.abs(posed.rgb.numpy() - original.rgb.numpy()) > TOL).mean() <= 0.01
@@ -161,8 +180,9 @@ def test_posed_splat_seen_by_a_camera_equals_the_splat_seen_by_the_moved_camera(
 def test_degree_one_sh_colour_depends_on_view_direction():
     sh = torch.zeros((1, 4, 3))
     sh[0, 3, 0] = 1.0  # red varies with -x of the view direction
-    s = GaussianSplat(torch.zeros((1, 3)), torch.tensor([[1.0, 0, 0, 0]]), torch.zeros((1, 3)),
-                      torch.zeros(1), sh)
+    s = GaussianSplat(
+        torch.zeros((1, 3)), torch.tensor([[1.0, 0, 0, 0]]), torch.zeros((1, 3)), torch.zeros(1), sh
+    )
     from_left = sh_colors(s, torch.tensor([-2.0, 0, 0]))  # view direction +x
     from_right = sh_colors(s, torch.tensor([2.0, 0, 0]))  # view direction -x
     c1 = 0.4886025119029199

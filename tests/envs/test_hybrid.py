@@ -1,0 +1,214 @@
+"""Hybrid rendering: simulated foreground over the splat background (SPEC 5)."""
+
+import json
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from conftest import DEFAULT_LAYOUT, snapshot
+
+import embodied_envs  # noqa: F401
+from embodied_envs.layout.pose import LayoutPose, quat_multiply_xyzw
+from embodied_envs.splat import (
+    GaussianSplat,
+    PinholeCamera,
+    SplatFileError,
+    pose_splat,
+    read_ply,
+    render,
+    write_ply,
+)
+from embodied_envs.splat.model import SH_C0
+
+ENV_ID = "PickEmbodiedGen-v1"
+MAGENTA = (1.0, 0.0, 1.0)
+
+
+def make(layout=DEFAULT_LAYOUT, **kw):
+    kw.setdefault("obs_mode", "rgb")
+    return gym.make(ENV_ID, layout_file=str(layout), render_mode="hybrid", **kw)
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = make()
+    e.reset(seed=0)
+    yield e
+    e.close()
+
+
+def camera_data(u, name="render_camera"):
+    """Raw simulated colour, segmentation and depth of a human camera in the current state."""
+    cam = u.scene.human_render_cameras[name]
+    for obj in u._hidden_objects:
+        obj.show_visual()
+    u.scene.update_render(update_sensors=False, update_human_render_cameras=True)
+    cam.capture()
+    data = cam.get_obs(rgb=True, depth=True, segmentation=True, position=False)
+    return cam, data
+
+
+def foreground_ids(u, env_idx=0, hidden=True):
+    ids = [int(link.per_scene_id[env_idx]) for link in u.agent.robot.links]
+    ids += [int(a.per_scene_id[0]) for a in u.env_actors[f"env{env_idx}"].values()]
+    if hidden:
+        ids.append(int(u.goal_site.per_scene_id[env_idx]))
+    return ids
+
+
+def independent_background(u, cam):
+    """The splat render the background should be, posed here from env 0's layout."""
+    layout = u.layouts[0]
+    pose = layout.pose(layout.background)
+    q = quat_multiply_xyzw(pose.q_xyzw, (0.7071, 0.0, 0.0, 0.7071))
+    splat = pose_splat(
+        read_ply(layout.gs_model_path()), torch.tensor(pose.p), torch.tensor(q[[3, 0, 1, 2]])
+    )
+    c = PinholeCamera.from_opengl(
+        cam.camera.get_model_matrix()[0].numpy(),
+        cam.camera.get_intrinsic_matrix()[0].numpy(),
+        256,
+        256,
+    )
+    return render(splat, c, backend="torch")
+
+
+def test_foreground_is_the_simulated_render_and_background_the_splat(env):
+    u = env.unwrapped
+    hybrid = env.render()
+    assert hybrid.shape == (1, 256, 256, 3) and hybrid.dtype == torch.uint8
+    cam, data = camera_data(u)
+    seg, depth = data["segmentation"][0, ..., 0], data["depth"][0, ..., 0].float() / 1000.0
+    bg = independent_background(u, cam)
+    fg = torch.isin(seg, torch.tensor(foreground_ids(u), dtype=seg.dtype))
+    fg &= depth <= bg.surface_depth(0.5)
+    assert 0.1 < fg.float().mean() < 0.9, "the view should hold both robot/table and room"
+    assert torch.equal(hybrid[0][fg], data["rgb"][0][fg])
+    assert torch.equal(hybrid[0][~fg], bg.rgb_uint8()[~fg])
+    # the room is drawn: background pixels are not the simulator's empty black
+    assert hybrid[0][~fg].float().mean() > 60
+
+
+def test_sensor_rgb_is_composited_like_the_human_view(env):
+    u = env.unwrapped
+    obs = u.get_obs()
+    rgb = obs["sensor_data"]["base_camera"]["rgb"][0]
+    sensor = u.scene.sensors["base_camera"]
+    raw = sensor.get_obs(rgb=True, depth=True, segmentation=True, position=False)
+    seg = raw["segmentation"][0, ..., 0]
+    # sensors do not see hidden objects (the goal marker)
+    fg = torch.isin(seg, torch.tensor(foreground_ids(u, hidden=False), dtype=seg.dtype))
+    bg = u.hybrid.background("base_camera", 0, *_sensor_camera_and_pose(u, sensor))
+    fg &= raw["depth"][0, ..., 0].float() / 1000.0 <= bg.depth
+    assert 0.05 < fg.float().mean() < 0.95
+    assert torch.equal(rgb[fg], raw["rgb"][0][fg])
+    assert torch.equal(rgb[~fg], bg.rgb[~fg])
+
+
+def _sensor_camera_and_pose(u, sensor):
+    cam = PinholeCamera.from_opengl(
+        sensor.camera.get_model_matrix()[0].numpy(),
+        sensor.camera.get_intrinsic_matrix()[0].numpy(),
+        128,
+        128,
+    )
+    layout = u.layouts[0]
+    return cam, layout.pose(layout.background)
+
+
+def test_background_is_rendered_once_per_camera_and_configuration(env):
+    u = env.unwrapped
+    env.render()
+    before = u.hybrid.renders
+    for _ in range(3):
+        env.step(env.action_space.sample())
+        env.render()
+    assert u.hybrid.renders == before
+
+
+def occluder_splat() -> GaussianSplat:
+    """An opaque magenta wall at world x = 0.5 (between render camera and table), stored Y-up
+    for an identity background pose: world (x, y, z) = file (x, -z, y) after +90 deg about X."""
+    ys, zs = np.meshgrid(np.linspace(-0.15, 0.15, 61), np.linspace(0.95, 1.15, 41))
+    n = ys.size
+    world = np.stack([np.full(n, 0.5), ys.ravel(), zs.ravel()], 1)
+    file = np.stack([world[:, 0], world[:, 2], -world[:, 1]], 1)
+
+    def t(a):
+        return torch.as_tensor(np.asarray(a), dtype=torch.float32)
+
+    return GaussianSplat(
+        means=t(file),
+        quats_wxyz=t(np.tile([1.0, 0, 0, 0], (n, 1))),
+        log_scales=t(np.tile(np.log([0.002, 0.006, 0.006]), (n, 1))),
+        opacity_logits=t(np.full(n, 6.0)),
+        sh=t(((np.array(MAGENTA) - 0.5) / SH_C0)[None, None].repeat(n, 0)),
+    )
+
+
+def test_depth_test_hides_objects_behind_a_splat_occluder(scene_copy):
+    layout_file = scene_copy / "layouts" / "default.json"
+    data = json.loads(layout_file.read_text())
+    data["position"]["background"] = [0, 0, 0, 0, 0, 0, 1]
+    layout_file.write_text(json.dumps(data))
+    write_ply(occluder_splat(), scene_copy / "assets" / "background" / "gs_model.ply")
+    images = {}
+    for depth_test in (True, False):
+        e = make(layout_file, hybrid_depth_test=depth_test, replace_objs=False)
+        e.reset(seed=0)
+        images[depth_test] = e.render()[0]
+        cam, raw = camera_data(e.unwrapped)
+        wall = independent_background(e.unwrapped, cam)
+        fg = torch.isin(
+            raw["segmentation"][0, ..., 0],
+            torch.tensor(foreground_ids(e.unwrapped), dtype=torch.int16),
+        )
+        e.close()
+    covered = wall.alpha >= 0.5
+    hidden = covered & fg
+    assert hidden.float().mean() > 0.05, "the wall should cover part of the simulated scene"
+    magenta = torch.tensor([255, 0, 255], dtype=torch.uint8)
+    with_test, without = images[True], images[False]
+    assert torch.equal(with_test[hidden], wall.rgb_uint8()[hidden])
+    solid = hidden & (wall.alpha > 0.99)
+    assert solid.float().mean() > 0.03
+    assert ((with_test[solid].int() - magenta.int()).abs() <= 3).all()
+    assert torch.equal(without[hidden], raw["rgb"][0][hidden])
+
+
+def test_background_yaw_changes_the_background_image(scene_copy):
+    layout_file = scene_copy / "layouts" / "default.json"
+    data = json.loads(layout_file.read_text())
+    x, y, z, qx, qy, qz, qw = data["position"]["background"]
+    turn = quat_multiply_xyzw(
+        [0, 0, math.sin(math.pi / 4), math.cos(math.pi / 4)], [qx, qy, qz, qw]
+    )
+    data["position"]["background"] = [x, y, z, *turn.tolist()]
+    layout_file.write_text(json.dumps(data))
+    e = make(layout_file, replace_objs=False)
+    e.reset(seed=0)
+    e.render()
+    hybrid = e.unwrapped.hybrid
+    turned = hybrid.cached("render_camera", 0)
+    assert turned.pose == LayoutPose.from_layout(data["position"]["background"])
+    # the same camera with the shipped yaw, through the same cache
+    original = hybrid.background(
+        "probe", 0, turned.camera, LayoutPose.from_layout([x, y, z, qx, qy, qz, qw])
+    )
+    e.close()
+    diff = (turned.rgb.float() - original.rgb.float()).abs().mean()
+    assert diff > 10, f"mean abs difference {diff:.1f} should show a turned room"
+
+
+def test_missing_background_splat_fails_at_construction(scene_copy):
+    (scene_copy / "assets" / "background" / "gs_model.ply").unlink()
+    before = snapshot(scene_copy)
+    layout_file = scene_copy / "layouts" / "default.json"
+    with pytest.raises(SplatFileError) as e:
+        make(layout_file)
+    msg = str(e.value)
+    assert "gs_model.ply" in msg and 'render_mode="hybrid"' in msg and str(layout_file) in msg
+    assert "mesh_to_splat" in msg
+    assert snapshot(scene_copy) == before
