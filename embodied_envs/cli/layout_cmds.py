@@ -21,6 +21,7 @@ from embodied_envs.layout.placement import (
     top_surface,
     world_vertices,
 )
+from embodied_envs.splat import SplatFileError, read_ply
 
 
 def add_parser(sub) -> None:
@@ -91,11 +92,17 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
         resolve_robot(layout.robot, None, str(path))
     except LayoutError as e:
         problems.extend(e.problems)
+    splat = layout.gs_model_path()
+    if splat.is_file():  # optional: only hybrid rendering needs it, but it must be readable
+        try:
+            read_ply(splat)
+        except SplatFileError as e:
+            problems.append(str(e))
     if check_placement:
         try:
             place(layout, 0)
         except PlacementError as e:
-            problems.append(f"{path}: placement: {e}")
+            problems.append(f"placement: {e}")
     return problems
 
 

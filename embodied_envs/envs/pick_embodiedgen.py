@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import sapien
 import torch
+from gymnasium.utils import seeding
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
@@ -120,6 +121,8 @@ class PickEmbodiedGenEnv(BaseEnv):
         self.base_layout: LayoutInfo = load_layout(self.layout_file)
         robot = resolve_robot(self.base_layout.robot, robot_uids, str(self.layout_file))
         self.replace_objs = bool(replace_objs)
+        if self.replace_objs:
+            place(self.base_layout, 0)  # an impossible layout fails here, not mid-simulation
         self.robot_init_qpos_noise = float(robot_init_qpos_noise)
         self.init_3dgs_quat = tuple(float(v) for v in init_3dgs_quat)
         self.objs_z_offset = float(objs_z_offset)
@@ -235,6 +238,38 @@ class PickEmbodiedGenEnv(BaseEnv):
             super()._reconfigure(options)
 
     # --- episodes ------------------------------------------------------------------------
+    def reset(self, seed: int | list[int] | None = None, options: dict | None = None):
+        if seed is not None:
+            # gymnasium's own generator follows the reset seed too, as gymnasium's checker and
+            # wrappers expect (ManiSkill only seeds its episode RNGs); nothing here draws from it
+            first = np.asarray(seed).reshape(-1)[0]
+            self._np_random, self._np_random_seed = seeding.np_random(int(first))
+        return super().reset(seed=seed, options=options)
+
+    def step(self, action):
+        self._check_action(action)
+        return super().step(action)
+
+    def _check_action(self, action) -> None:
+        """Reject actions the simulator would silently turn into NaN states or broadcast."""
+        if action is None or isinstance(action, dict):
+            return  # ManiSkill's own meanings (no-op, multi-agent)
+        a = torch.as_tensor(action)
+        single = tuple(self.single_action_space.shape)
+        if tuple(a.shape) not in (single, (self.num_envs, *single)):
+            raise ValueError(
+                f"action has shape {tuple(a.shape)}; {self.spec.id if self.spec else 'the env'}"
+                f" with control_mode={self.control_mode!r} takes {single} or "
+                f"({self.num_envs}, {single[0]})"
+            )
+        finite = torch.isfinite(a.reshape(-1, *single).float()).all(dim=1)
+        if not bool(finite.all()):
+            bad = (~finite).nonzero().reshape(-1).tolist()
+            raise ValueError(
+                f"action contains NaN or inf (env {bad}); check the policy's output before "
+                "stepping, the simulation state would become NaN"
+            )
+
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         with torch.device(self.device):
             b = len(env_idx)
@@ -343,6 +378,14 @@ class PickEmbodiedGenEnv(BaseEnv):
             self._hybrid_ids[human],
             [LayoutPose.from_layout(layout.position[bg]) for layout in self.layouts],
         )
+
+    def get_sensor_params(self) -> dict[str, dict[str, torch.Tensor]]:
+        # new tensors on every call: SAPIEN returns its cached intrinsic matrix, and an
+        # observation must not change when a later one is taken
+        return {
+            name: {k: v.clone() for k, v in params.items()}
+            for name, params in super().get_sensor_params().items()
+        }
 
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
         obs = super()._get_obs_sensor_data(apply_texture_transforms)

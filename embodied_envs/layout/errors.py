@@ -29,11 +29,16 @@ class PlacementError(RuntimeError):
         constraint: the constraint that rejected the most candidates.
     """
 
-    def __init__(self, node: str, constraint: str, attempts: int, detail: str = ""):
+    def __init__(
+        self, node: str, constraint: str, attempts: int, detail: str = "", source: str = ""
+    ):
         self.node = node
         self.constraint = constraint
         self.attempts = attempts
-        msg = (
+        self.detail = detail
+        self.source = source
+        msg = f"{source}: " if source else ""
+        msg += (
             f'cannot place "{node}": no pose out of {attempts} candidates satisfied the '
             f'constraints; the one failed most often was "{constraint}"'
         )
@@ -41,3 +46,7 @@ class PlacementError(RuntimeError):
             msg += f" ({detail})"
         msg += ". Fix: use a larger parent surface, fewer or smaller objects, or relax the limit."
         super().__init__(msg)
+
+    def with_source(self, source: str) -> PlacementError:
+        """The same error, naming the layout file it concerns."""
+        return PlacementError(self.node, self.constraint, self.attempts, self.detail, source)

@@ -407,7 +407,12 @@ def place(layout: LayoutInfo, seed: int | np.random.Generator, **limits) -> Layo
         PlacementError: naming the object and the constraint that failed most often.
     """
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-    poses = _Placer(layout, rng, PlacementLimits.from_kwargs(**limits)).run()
+    try:
+        poses = _Placer(layout, rng, PlacementLimits.from_kwargs(**limits)).run()
+    except PlacementError as e:
+        if layout.source is None or e.source:
+            raise
+        raise e.with_source(str(layout.source)) from None
     return layout.with_poses(poses)
 
 
