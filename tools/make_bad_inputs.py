@@ -40,8 +40,17 @@ def copy_asset(case: Path, name: str, new_name: str) -> Path:
     return dst
 
 
-def write_case(name: str, what: str, error: str | None, words: list[str], layout=None,
-               env_kwargs=None, validate=True, raw_layout: str | None = None, setup=None):
+def write_case(
+    name: str,
+    what: str,
+    error: str | None,
+    words: list[str],
+    layout=None,
+    env_kwargs=None,
+    validate=True,
+    raw_layout: str | None = None,
+    setup=None,
+):
     case = OUT / name
     case.mkdir(parents=True)
     if setup is not None:
@@ -50,8 +59,7 @@ def write_case(name: str, what: str, error: str | None, words: list[str], layout
         (case / "layout.json").write_text(raw_layout)
     elif layout is not None:
         (case / "layout.json").write_text(json.dumps(layout, indent=2, allow_nan=True))
-    spec = dict(what=what, error=error, words=words, env_kwargs=env_kwargs or {},
-                validate=validate)
+    spec = dict(what=what, error=error, words=words, env_kwargs=env_kwargs or {}, validate=validate)
     (case / "case.json").write_text(json.dumps(spec, indent=2) + "\n")
 
 
@@ -62,8 +70,22 @@ def tiny_ply(names: list[str], n: int = 4, cut: int = 0) -> bytes:
     return ("\n".join(header) + "\n").encode() + body[: len(body) - cut]
 
 
-PLY_PROPS = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1",
-             "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+PLY_PROPS = [
+    "x",
+    "y",
+    "z",
+    "f_dc_0",
+    "f_dc_1",
+    "f_dc_2",
+    "opacity",
+    "scale_0",
+    "scale_1",
+    "scale_2",
+    "rot_0",
+    "rot_1",
+    "rot_2",
+    "rot_3",
+]
 
 
 def main() -> None:
@@ -77,32 +99,61 @@ def main() -> None:
         fn(d)
         return d
 
-    write_case("malformed_json", "a JSON syntax error", "LayoutError", ["layout.json", "JSON"],
-               raw_layout=json.dumps(b)[:-40] + ",,}")
+    write_case(
+        "malformed_json",
+        "a JSON syntax error",
+        "LayoutError",
+        ["layout.json", "JSON"],
+        raw_layout=json.dumps(b)[:-40] + ",,}",
+    )
     for field in ("tree", "relation", "objs_mapping", "assets", "position"):
-        write_case(f"missing_{field}", f"required field {field} missing", "LayoutError",
-                   ["layout.json", field], layout=mutated(lambda d, f=field: d.pop(f)))
-    write_case("pose_with_6_numbers", "a pose with 6 numbers", "LayoutError",
-               ['position["mug"]', "6 numbers", "expected 7"],
-               layout=mutated(lambda d: d["position"]["mug"].pop()))
+        write_case(
+            f"missing_{field}",
+            f"required field {field} missing",
+            "LayoutError",
+            ["layout.json", field],
+            layout=mutated(lambda d, f=field: d.pop(f)),
+        )
+    write_case(
+        "pose_with_6_numbers",
+        "a pose with 6 numbers",
+        "LayoutError",
+        ['position["mug"]', "6 numbers", "expected 7"],
+        layout=mutated(lambda d: d["position"]["mug"].pop()),
+    )
 
     def nan_pose(d):
         d["position"]["bowl"][1] = float("nan")
 
-    write_case("pose_with_nan", "NaN in a pose", "LayoutError", ['position["bowl"]', "finite"],
-               layout=mutated(nan_pose))
+    write_case(
+        "pose_with_nan",
+        "NaN in a pose",
+        "LayoutError",
+        ['position["bowl"]', "finite"],
+        layout=mutated(nan_pose),
+    )
 
     def zero_quat(d):
         d["position"]["can"][3:] = [0.0, 0.0, 0.0, 0.0]
 
-    write_case("zero_quaternion", "a zero quaternion", "LayoutError",
-               ['position["can"]', "quaternion"], layout=mutated(zero_quat))
+    write_case(
+        "zero_quaternion",
+        "a zero quaternion",
+        "LayoutError",
+        ['position["can"]', "quaternion"],
+        layout=mutated(zero_quat),
+    )
 
     def missing_dir(d):
         d["assets"]["mug"] = SHIPPED + "no_such_mug"
 
-    write_case("asset_dir_missing", "an asset directory that does not exist", "LayoutError",
-               ["no_such_mug", "does not exist"], layout=mutated(missing_dir))
+    write_case(
+        "asset_dir_missing",
+        "an asset directory that does not exist",
+        "LayoutError",
+        ["no_such_mug", "does not exist"],
+        layout=mutated(missing_dir),
+    )
 
     def no_collision(case):
         dst = copy_asset(case, "can", "can_no_collision")
@@ -110,41 +161,67 @@ def main() -> None:
         start, end = urdf.index("<collision>"), urdf.index("</collision>") + len("</collision>")
         (dst / "can.urdf").write_text(urdf[:start] + urdf[end:])
 
-    write_case("urdf_without_collision", "a URDF without a collision mesh", "LayoutError",
-               ["can.urdf", "collision"], setup=no_collision,
-               layout=mutated(lambda d: d["assets"].update(can="can_no_collision")))
+    write_case(
+        "urdf_without_collision",
+        "a URDF without a collision mesh",
+        "LayoutError",
+        ["can.urdf", "collision"],
+        setup=no_collision,
+        layout=mutated(lambda d: d["assets"].update(can="can_no_collision")),
+    )
 
     def not_a_mesh(case):
         dst = copy_asset(case, "mug", "mug_not_a_mesh")
         (dst / "mesh" / "mug_collision.obj").write_bytes(b"\x00\x01PK\x03\x04 not a mesh\n")
 
-    write_case("mesh_not_a_mesh", "a collision mesh file that is not a mesh", "LayoutError",
-               ["mug_collision.obj", "mesh"], setup=not_a_mesh,
-               layout=mutated(lambda d: d["assets"].update(mug="mug_not_a_mesh")))
+    write_case(
+        "mesh_not_a_mesh",
+        "a collision mesh file that is not a mesh",
+        "LayoutError",
+        ["mug_collision.obj", "mesh"],
+        setup=not_a_mesh,
+        layout=mutated(lambda d: d["assets"].update(mug="mug_not_a_mesh")),
+    )
 
     def empty_collision(case):
         dst = copy_asset(case, "bowl", "bowl_empty_collision")
         (dst / "mesh" / "bowl_collision.obj").write_text("# no geometry\n")
 
-    write_case("empty_collision_mesh", "an empty collision mesh", "LayoutError",
-               ["bowl_collision.obj"], setup=empty_collision,
-               layout=mutated(lambda d: d["assets"].update(bowl="bowl_empty_collision")))
+    write_case(
+        "empty_collision_mesh",
+        "an empty collision mesh",
+        "LayoutError",
+        ["bowl_collision.obj"],
+        setup=empty_collision,
+        layout=mutated(lambda d: d["assets"].update(bowl="bowl_empty_collision")),
+    )
 
     def robot(d):
         d["relation"]["robot"] = "ur5e_magic"
         d["position"]["ur5e_magic"] = d["position"].pop("franka")
-        d["tree"]["background"] = [[c, r] if c != "franka" else ["ur5e_magic", r]
-                                   for c, r in d["tree"]["background"]]
+        d["tree"]["background"] = [
+            [c, r] if c != "franka" else ["ur5e_magic", r] for c, r in d["tree"]["background"]
+        ]
 
-    write_case("robot_not_registered", "a robot name that is not registered", "LayoutError",
-               ["ur5e_magic", "franka"], layout=mutated(robot))
+    write_case(
+        "robot_not_registered",
+        "a robot name that is not registered",
+        "LayoutError",
+        ["ur5e_magic", "franka"],
+        layout=mutated(robot),
+    )
 
     def off_table(d):
         d["tree"]["table"] = [e for e in d["tree"]["table"] if e[0] != "can"]
         d["tree"]["background"].append(["can", "ON"])
 
-    write_case("manipulated_not_on_table", "a manipulated object not on the table in the tree",
-               "LayoutError", ['"can"', "table"], layout=mutated(off_table))
+    write_case(
+        "manipulated_not_on_table",
+        "a manipulated object not on the table in the tree",
+        "LayoutError",
+        ['"can"', "table"],
+        layout=mutated(off_table),
+    )
 
     def background_with(ply: bytes):
         def setup(case):
@@ -153,25 +230,52 @@ def main() -> None:
 
         return setup
 
-    write_case("truncated_ply", "a truncated gs_model.ply", "SplatFileError",
-               ["gs_model.ply", "truncated"], env_kwargs=dict(render_mode="hybrid"),
-               setup=background_with(tiny_ply(PLY_PROPS, cut=10)),
-               layout=mutated(lambda d: d["assets"].update(background="background")))
-    write_case("ply_without_opacity", "a gs_model.ply without opacity", "SplatFileError",
-               ["gs_model.ply", "opacity"], env_kwargs=dict(render_mode="hybrid"),
-               setup=background_with(tiny_ply([p for p in PLY_PROPS if p != "opacity"])),
-               layout=mutated(lambda d: d["assets"].update(background="background")))
-    write_case("missing_ply_for_hybrid", "hybrid rendering without gs_model.ply",
-               "SplatFileError", ["gs_model.ply", 'render_mode="hybrid"'],
-               env_kwargs=dict(render_mode="hybrid"), validate=False,
-               setup=lambda case: (case / "background").mkdir(),
-               layout=mutated(lambda d: d["assets"].update(background="background")))
-    write_case("unsupported_render_mode", "an unsupported render mode", "ValueError",
-               ["render_mode='rgbd'", "hybrid"], env_kwargs=dict(render_mode="rgbd"),
-               validate=False, layout=b)
-    write_case("camera_zero_size", "a camera with zero size", "ValueError",
-               ["image_hw", "positive"], env_kwargs=dict(camera_cfg=dict(image_hw=[0, 256])),
-               validate=False, layout=b)
+    write_case(
+        "truncated_ply",
+        "a truncated gs_model.ply",
+        "SplatFileError",
+        ["gs_model.ply", "truncated"],
+        env_kwargs=dict(render_mode="hybrid"),
+        setup=background_with(tiny_ply(PLY_PROPS, cut=10)),
+        layout=mutated(lambda d: d["assets"].update(background="background")),
+    )
+    write_case(
+        "ply_without_opacity",
+        "a gs_model.ply without opacity",
+        "SplatFileError",
+        ["gs_model.ply", "opacity"],
+        env_kwargs=dict(render_mode="hybrid"),
+        setup=background_with(tiny_ply([p for p in PLY_PROPS if p != "opacity"])),
+        layout=mutated(lambda d: d["assets"].update(background="background")),
+    )
+    write_case(
+        "missing_ply_for_hybrid",
+        "hybrid rendering without gs_model.ply",
+        "SplatFileError",
+        ["gs_model.ply", 'render_mode="hybrid"'],
+        env_kwargs=dict(render_mode="hybrid"),
+        validate=False,
+        setup=lambda case: (case / "background").mkdir(),
+        layout=mutated(lambda d: d["assets"].update(background="background")),
+    )
+    write_case(
+        "unsupported_render_mode",
+        "an unsupported render mode",
+        "ValueError",
+        ["render_mode='rgbd'", "hybrid"],
+        env_kwargs=dict(render_mode="rgbd"),
+        validate=False,
+        layout=b,
+    )
+    write_case(
+        "camera_zero_size",
+        "a camera with zero size",
+        "ValueError",
+        ["image_hw", "positive"],
+        env_kwargs=dict(camera_cfg=dict(image_hw=[0, 256])),
+        validate=False,
+        layout=b,
+    )
 
     boxes = 3
 
@@ -191,17 +295,38 @@ def main() -> None:
             d["assets"][node] = "boxes"
             d["position"][node] = [*d["position"]["cracker_box"][:2], 1.2, 0, 0, 0, 1]
 
-    write_case("objects_cannot_be_placed", "more objects than the table holds",
-               "PlacementError", ["layout.json", "cannot place", "box"], setup=box_folder,
-               layout=mutated(crowded))
-    write_case("two_contexts", "two context nodes", "LayoutError", ["context"],
-               layout=mutated(lambda d: d["objs_mapping"].update(mug="context")))
-    write_case("quaternion_not_unit", "a quaternion of norm 2", "LayoutError",
-               ['position["mug"]', "quaternion"],
-               layout=mutated(lambda d: d["position"].update(
-                   mug=[*d["position"]["mug"][:3], 0.0, 0.0, 0.0, 2.0])))
-    write_case("read_only_folder", "a valid layout in a folder the test makes read-only: "
-               "everything works and nothing is written there", None, [], layout=b)
+    write_case(
+        "objects_cannot_be_placed",
+        "more objects than the table holds",
+        "PlacementError",
+        ["layout.json", "cannot place", "box"],
+        setup=box_folder,
+        layout=mutated(crowded),
+    )
+    write_case(
+        "two_contexts",
+        "two context nodes",
+        "LayoutError",
+        ["context"],
+        layout=mutated(lambda d: d["objs_mapping"].update(mug="context")),
+    )
+    write_case(
+        "quaternion_not_unit",
+        "a quaternion of norm 2",
+        "LayoutError",
+        ['position["mug"]', "quaternion"],
+        layout=mutated(
+            lambda d: d["position"].update(mug=[*d["position"]["mug"][:3], 0.0, 0.0, 0.0, 2.0])
+        ),
+    )
+    write_case(
+        "read_only_folder",
+        "a valid layout in a folder the test makes read-only: "
+        "everything works and nothing is written there",
+        None,
+        [],
+        layout=b,
+    )
     print(f"wrote {len(list(OUT.iterdir()))} cases to {OUT}")
 
 
