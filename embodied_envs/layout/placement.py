@@ -16,7 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from embodied_envs.layout.assets import AssetGeometry, asset_geometry, convex_hull_2d, parse_urdf
+from embodied_envs.layout.assets import (
+    AssetGeometry,
+    asset_geometry,
+    convex_hull_2d,
+    parse_urdf,
+    urdf_path_for,
+)
 from embodied_envs.layout.errors import PlacementError
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.layout.schema import LayoutInfo
@@ -54,10 +60,23 @@ def _geometry_for(urdf: Path, mtime: float) -> AssetGeometry:
     return asset_geometry(parse_urdf(urdf))
 
 
+@functools.lru_cache(maxsize=1024)
+def _urdf_for(root: Path, asset: str, node: str) -> Path:
+    return urdf_path_for((root / asset).resolve(), node)
+
+
+def asset_key(layout: LayoutInfo, node: str) -> tuple[Path, float]:
+    """(URDF path, modification time) of a node's asset: the key of every geometry cache, so
+    a changed file is re-read while an unchanged one is resolved without touching the disk
+    more than one ``stat``."""
+    root = layout.asset_root or (layout.source.parent if layout.source else Path.cwd())
+    urdf = _urdf_for(root, layout.assets[node], node)
+    return urdf, urdf.stat().st_mtime
+
+
 def node_geometry(layout: LayoutInfo, node: str) -> AssetGeometry:
     """Collision geometry of a node's asset (parsed once per file version)."""
-    urdf = layout.urdf_path(node)
-    return _geometry_for(urdf, urdf.stat().st_mtime)
+    return _geometry_for(*asset_key(layout, node))
 
 
 @functools.lru_cache(maxsize=256)
@@ -89,8 +108,11 @@ def node_top(
     Shrinking commutes with rotation and translation, so the shrunk hull is computed once per
     asset in its own frame.
     """
-    urdf = layout.urdf_path(node)
-    hull, top_z, shrunk = _top_cached(urdf, urdf.stat().st_mtime, band, margin)
+    return _surface_at(asset_key(layout, node), pose, band, margin)
+
+
+def _surface_at(key: tuple[Path, float], pose: LayoutPose, band: float, margin: float) -> Surface:
+    hull, top_z, shrunk = _top_cached(*key, band, margin)
     rot = rotation_2d(np.float64(pose.yaw)).T
     xy = np.asarray(pose.p[:2])
     return Surface(
@@ -100,8 +122,7 @@ def node_top(
 
 def node_footprint(layout: LayoutInfo, node: str) -> np.ndarray:
     """2D convex footprint ``(m, 2)`` of a node in its own actor frame (counter-clockwise)."""
-    urdf = layout.urdf_path(node)
-    return _footprint_cached(urdf, urdf.stat().st_mtime)
+    return _footprint_cached(*asset_key(layout, node))
 
 
 def polygon_area(poly: np.ndarray) -> float:
@@ -150,24 +171,34 @@ def shrink_polygon(poly: np.ndarray, margin: float) -> np.ndarray:
     return convex_hull_2d(pts[keep])
 
 
-def polygons_overlap(p: np.ndarray, q: np.ndarray, clearance: float) -> np.ndarray:
+def edge_normals(poly: np.ndarray) -> np.ndarray:
+    """Unit normals of the edges of (batched) polygons ``(..., m, 2)``."""
+    e = np.roll(poly, -1, axis=-2) - poly
+    nrm = np.stack([-e[..., 1], e[..., 0]], axis=-1)
+    return nrm / np.maximum(np.linalg.norm(nrm, axis=-1, keepdims=True), 1e-12)
+
+
+def polygons_overlap(
+    p: np.ndarray,
+    q: np.ndarray,
+    clearance: float,
+    p_normals: np.ndarray | None = None,
+    q_normals: np.ndarray | None = None,
+) -> np.ndarray:
     """Separating-axis test of batched convex polygons against one polygon.
 
     Args:
         p: ``(b, m, 2)`` candidate polygons.
         q: ``(k, 2)`` an obstacle polygon.
         clearance: polygons closer than this along every axis count as overlapping.
+        p_normals, q_normals: their :func:`edge_normals`, when already known.
 
     Returns:
         ``(b,)`` bool, True where a candidate overlaps (or is closer than ``clearance`` to) q.
     """
-
-    def normals(poly):
-        e = np.roll(poly, -1, axis=-2) - poly
-        nrm = np.stack([-e[..., 1], e[..., 0]], axis=-1)
-        return nrm / np.maximum(np.linalg.norm(nrm, axis=-1, keepdims=True), 1e-12)
-
-    axes = np.concatenate([normals(p), np.broadcast_to(normals(q), (p.shape[0], *q.shape))], 1)
+    p_normals = edge_normals(p) if p_normals is None else p_normals
+    q_normals = edge_normals(q) if q_normals is None else q_normals
+    axes = np.concatenate([p_normals, np.broadcast_to(q_normals, (p.shape[0], *q.shape))], 1)
     proj_p = np.einsum("bad,bmd->bam", axes, p)
     proj_q = np.einsum("bad,kd->bak", axes, q)
     separated = (proj_p.max(-1) + clearance <= proj_q.min(-1)) | (
@@ -235,10 +266,20 @@ class _Placer:
         self.limits = limits
         self.poses: dict[str, LayoutPose] = {}
         self.obstacles: dict[str, np.ndarray] = {}  # node -> world footprint polygon
+        self.obstacle_info: dict[str, tuple] = {}  # node -> (normals, centre, radius)
         self.regions: dict[str, tuple] = {}  # parent -> (shrunk hull, normals, offsets)
         # resolve each node's asset once per call (file lookups are the slow part)
-        self.foot = {n: node_footprint(layout, n) for n in layout.object_nodes()}
-        self.min_z = {n: node_geometry(layout, n).min_z for n in layout.object_nodes()}
+        self.keys = {n: asset_key(layout, n) for n in layout.object_nodes()}
+        self.foot = {n: _footprint_cached(*k) for n, k in self.keys.items()}
+        self.foot_normals = {n: edge_normals(f) for n, f in self.foot.items()}
+        self.min_z = {n: _geometry_for(*k).min_z for n, k in self.keys.items()}
+
+    def add_obstacle(self, node: str, poly: np.ndarray) -> None:
+        """Record a placed footprint with its edge normals and bounding circle."""
+        centre = poly.mean(0)
+        radius = float(np.linalg.norm(poly - centre, axis=1).max())
+        self.obstacles[node] = poly
+        self.obstacle_info[node] = (edge_normals(poly), centre, radius)
 
     def sample_object(
         self, node: str, parent: str, surface: Surface, ancestors: set[str]
@@ -261,15 +302,15 @@ class _Placer:
         manipulated = node in layout.manipulated_objs
         robot = self.poses[layout.robot]
         robot_xy = np.array(robot.p[:2])
-        obstacles = [q for n, q in self.obstacles.items() if n not in ancestors]
+        near_nodes = [n for n in self.obstacles if n not in ancestors]
+        obstacles = [self.obstacles[n] for n in near_nodes]
+        obstacle_normals = [self.obstacle_info[n][0] for n in near_nodes]
         fails = {"footprint inside parent top": 0, "no overlap with placed footprints": 0}
         if manipulated:
             fails[f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base"] = 0
             fails[f"within {lim.max_heading_deg:g} deg of the robot heading"] = 0
         foot_r = float(np.linalg.norm(foot, axis=1).max())
-        obstacle_circles = [
-            (q.mean(0), float(np.linalg.norm(q - q.mean(0), axis=1).max())) for q in obstacles
-        ]
+        obstacle_circles = [self.obstacle_info[n][1:] for n in near_nodes]
         keys = list(fails)
         tried = 0
         while tried < lim.max_attempts:
@@ -293,17 +334,25 @@ class _Placer:
                 ok = ok & reach & facing
             idx = np.flatnonzero(ok)
             free = np.ones(len(idx), bool)
-            for (centre, radius), q in zip(obstacle_circles, obstacles, strict=True):
+            cand_normals = None
+            for (centre, radius), q, qn in zip(
+                obstacle_circles, obstacles, obstacle_normals, strict=True
+            ):
                 near = np.linalg.norm(xy[idx] - centre, axis=1) < foot_r + radius + lim.clearance
                 cand = np.flatnonzero(near & free)
                 if len(cand):
-                    free[cand] = ~polygons_overlap(poly[idx[cand]], q, lim.clearance)
+                    if cand_normals is None:  # the rotated footprint's normals, once per batch
+                        rot = rotation_2d(yaw[idx])  # (c, 2, 2)
+                        cand_normals = np.einsum("cij,mj->cmi", rot, self.foot_normals[node])
+                    free[cand] = ~polygons_overlap(
+                        poly[idx[cand]], q, lim.clearance, cand_normals[cand], qn
+                    )
             fails[keys[1]] += int((~free).sum())
             hits = idx[free]
             if len(hits):
                 k = hits[0]
                 z = surface.z - self.min_z[node]
-                self.obstacles[node] = poly[k]
+                self.add_obstacle(node, poly[k])
                 return LayoutPose.from_xyz_yaw([xy[k, 0], xy[k, 1], z], float(yaw[k]))
         worst = max(fails, key=fails.get)
         raise PlacementError(node, worst, tried, f"rejections per constraint: {fails}")
@@ -331,7 +380,7 @@ class _Placer:
             hits = np.flatnonzero(free)
             if len(hits):
                 k = hits[0]
-                self.obstacles[node] = poly[k]
+                self.add_obstacle(node, poly[k])
                 return LayoutPose.from_xyz_yaw([xy[k, 0], xy[k, 1], -geom.min_z], float(yaw[k]))
         raise PlacementError(node, "no overlap with placed footprints", tried, str(fails))
 
@@ -343,18 +392,15 @@ class _Placer:
         )
         # 2. context: random yaw, centred, lowest point at z = 0
         ctx = layout.context
-        urdf = layout.urdf_path(ctx)
-        z0 = -_bottom_cached(urdf, urdf.stat().st_mtime, lim.bottom_percentile)
+        z0 = -_bottom_cached(*self.keys[ctx], lim.bottom_percentile)
         ctx_pose = LayoutPose.from_xyz_yaw([0, 0, z0], rng.uniform(-np.pi, np.pi))
         self.poses[ctx] = ctx_pose
-        self.context_footprint = (
-            node_footprint(layout, ctx) @ rotation_2d(np.float64(ctx_pose.yaw)).T
-        )
-        surfaces = {ctx: node_top(layout, ctx, ctx_pose, lim.top_band, lim.hull_margin)}
+        self.context_footprint = self.foot[ctx] @ rotation_2d(np.float64(ctx_pose.yaw)).T
+        surfaces = {ctx: _surface_at(self.keys[ctx], ctx_pose, lim.top_band, lim.hull_margin)}
         # 3. robot on the table's edge, facing its centre
         robot = robot_base_pose(surfaces[ctx], lim, rng.uniform(0, 1))
         self.poses[layout.robot] = robot
-        self.obstacles[layout.robot] = square(np.array(robot.p), lim.robot_footprint, robot.yaw)
+        self.add_obstacle(layout.robot, square(np.array(robot.p), lim.robot_footprint, robot.yaw))
         # 4. objects, breadth first from the table, larger footprints first
         queue, ancestors = [ctx], {ctx: {ctx}}
         while queue:
@@ -369,8 +415,8 @@ class _Placer:
                 self.poses[kid] = self.sample_object(
                     kid, parent, surfaces[parent], ancestors[parent]
                 )
-                surfaces[kid] = node_top(
-                    layout, kid, self.poses[kid], lim.top_band, lim.hull_margin
+                surfaces[kid] = _surface_at(
+                    self.keys[kid], self.poses[kid], lim.top_band, lim.hull_margin
                 )
                 ancestors[kid] = ancestors[parent] | {kid}
                 queue.append(kid)

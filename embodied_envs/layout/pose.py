@@ -85,8 +85,8 @@ class LayoutPose:
     @property
     def yaw(self) -> float:
         """Heading: angle of the frame's +X axis projected on the XY plane."""
-        x_axis = self.rotation_matrix()[:, 0]
-        return math.atan2(x_axis[1], x_axis[0])
+        x, y, z, w = self.q_xyzw  # first column of the rotation matrix, written out
+        return math.atan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z))
 
     def translated(self, dz: float) -> LayoutPose:
         return LayoutPose((self.p[0], self.p[1], self.p[2] + dz), self.q_xyzw)
