@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from embodied_envs.splat.ply import REQUIRED
+
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "tests" / "data" / "bad_inputs"
 SHIPPED = "../../../../assets/"  # from tests/data/bad_inputs/<case>/ to the repo's assets
@@ -70,22 +72,7 @@ def tiny_ply(names: list[str], n: int = 4, cut: int = 0) -> bytes:
     return ("\n".join(header) + "\n").encode() + body[: len(body) - cut]
 
 
-PLY_PROPS = [
-    "x",
-    "y",
-    "z",
-    "f_dc_0",
-    "f_dc_1",
-    "f_dc_2",
-    "opacity",
-    "scale_0",
-    "scale_1",
-    "scale_2",
-    "rot_0",
-    "rot_1",
-    "rot_2",
-    "rot_3",
-]
+PLY_PROPS = list(REQUIRED)
 
 
 def main() -> None:

@@ -150,8 +150,13 @@ class HybridRenderer:
         for env in range(n):
             camera = PinholeCamera.from_opengl(model[env], k[env], w, h)
             bg = self.background(camera_name, env, camera, background_poses[env])
-            ids = foreground_ids[env].to(segmentation.device, segmentation.dtype)
-            mask = torch.isin(segmentation[env, ..., 0], ids)
+            seg = segmentation[env, ..., 0].long()
+            ids = foreground_ids[env].to(seg.device, torch.long)
+            lookup = torch.zeros(
+                int(max(seg.max(), ids.max())) + 1, dtype=torch.bool, device=seg.device
+            )
+            lookup[ids] = True
+            mask = lookup[seg]
             if self.depth_test:
                 fg_depth = depth_mm[env, ..., 0].to(torch.float32) / 1000.0
                 mask &= fg_depth <= bg.depth.to(fg_depth.device)

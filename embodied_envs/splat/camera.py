@@ -12,6 +12,14 @@ import numpy as np
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
 
 
+def rigid_inverse(m: np.ndarray) -> np.ndarray:
+    """Inverse of a 4x4 rotation-plus-translation matrix."""
+    inv = np.eye(4)
+    inv[:3, :3] = m[:3, :3].T
+    inv[:3, 3] = -m[:3, :3].T @ m[:3, 3]
+    return inv
+
+
 @dataclass(frozen=True)
 class PinholeCamera:
     """A pinhole camera with square pixels.
@@ -78,7 +86,7 @@ class PinholeCamera:
         cam_to_world = np.eye(4)
         cam_to_world[:3, :3] = np.stack([right, down, forward], axis=1)
         cam_to_world[:3, 3] = eye
-        return cls.from_fovy(np.linalg.inv(cam_to_world), width, height, math.radians(fovy_deg))
+        return cls.from_fovy(rigid_inverse(cam_to_world), width, height, math.radians(fovy_deg))
 
     @classmethod
     def from_opengl(
@@ -88,7 +96,7 @@ class PinholeCamera:
         cam_to_world = np.asarray(cam_to_world_gl, dtype=np.float64) @ GL_TO_CV
         k = np.asarray(intrinsic, dtype=np.float64)
         return cls(
-            np.linalg.inv(cam_to_world),
+            rigid_inverse(cam_to_world),
             int(width),
             int(height),
             float(k[0, 0]),

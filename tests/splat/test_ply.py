@@ -4,23 +4,9 @@ import torch
 from conftest import random_splat
 
 from embodied_envs.splat import SplatFileError, read_ply, write_ply
+from embodied_envs.splat.ply import REQUIRED
 
-PROPS = [
-    "x",
-    "y",
-    "z",
-    "f_dc_0",
-    "f_dc_1",
-    "f_dc_2",
-    "opacity",
-    "scale_0",
-    "scale_1",
-    "scale_2",
-    "rot_0",
-    "rot_1",
-    "rot_2",
-    "rot_3",
-]
+PROPS = list(REQUIRED)  # x y z f_dc_0..2 opacity scale_0..2 rot_0..3 (SPEC 6)
 
 
 def write_raw(
@@ -55,26 +41,8 @@ def test_round_trip_is_lossless(tmp_path, degree, normals):
 def test_reads_inria_layout_with_sh_channel_major_and_other_types(tmp_path):
     # INRIA order: x y z nx ny nz f_dc_0..2 f_rest_0..44 opacity scale_* rot_*
     rest = [f"f_rest_{i}" for i in range(45)]
-    names = [
-        "x",
-        "y",
-        "z",
-        "nx",
-        "ny",
-        "nz",
-        "f_dc_0",
-        "f_dc_1",
-        "f_dc_2",
-        *rest,
-        "opacity",
-        "scale_0",
-        "scale_1",
-        "scale_2",
-        "rot_0",
-        "rot_1",
-        "rot_2",
-        "rot_3",
-    ]
+    names = ["x", "y", "z", "nx", "ny", "nz", *(f"f_dc_{i}" for i in range(3)), *rest]
+    names += ["opacity", *(f"scale_{i}" for i in range(3)), *(f"rot_{i}" for i in range(4))]
     rng = np.random.default_rng(0)
     rows = rng.normal(size=(7, len(names)))
     types = ["double" if n == "opacity" else "float" for n in names]
