@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 import torch
-from conftest import random_splat
+from splat_helpers import random_splat
 
 from embodied_envs.splat import SplatFileError, read_ply, write_ply
 from embodied_envs.splat.ply import REQUIRED

@@ -3,8 +3,8 @@ import math
 import numpy as np
 import pytest
 import torch
-from conftest import random_splat
 from reference import render_reference
+from splat_helpers import random_splat
 
 from embodied_envs.splat import PinholeCamera, pose_splat, render
 from embodied_envs.splat import rasterizer as rast

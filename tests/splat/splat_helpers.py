@@ -1,12 +1,9 @@
-import sys
-from pathlib import Path
+"""Random splats for the splat tests."""
 
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-from embodied_envs.splat.model import SH_C0, GaussianSplat  # noqa: E402
+from embodied_envs.splat.model import SH_C0, GaussianSplat
 
 
 def random_splat(
