@@ -90,3 +90,24 @@ def test_demo_writes_video_and_summary(tmp_path):
     assert meta["size"] == (96, 64)
     assert len(frames) == ep["frames"] == env0["steps"] // 5 + 2
     assert frames[-1].std() > 5  # a real picture, not a blank frame
+
+
+def test_splat_render_writes_colour_and_16_bit_depth(tmp_path, capsys):
+    from conftest import ROOT
+
+    ply = ROOT / "assets" / "background" / "gs_model.ply"
+    png, depth_png = tmp_path / "room.png", tmp_path / "room_depth.png"
+    # from the room's centre (Y-up file), looking at a wall 2.5 m away along +x
+    args = ["splat", "render", str(ply), "--eye", "0", "1.3", "0", "--target", "1", "1.3", "0"]
+    args += ["--up", "0", "1", "0", "--width", "64", "--height", "48", "--fovy", "40"]
+    assert main([*args, "--out", str(png), "--depth-out", str(depth_png)]) == 0
+    rgb = np.asarray(Image.open(png))
+    assert rgb.shape == (48, 64, 3) and rgb.mean() > 100, "a lit wall fills the view"
+    depth = np.asarray(Image.open(depth_png))
+    assert depth.dtype == np.uint16 and depth.shape == (48, 64)
+    # the +x wall's inner face is at x = 2.5 m: centre pixels read ~2500 mm
+    assert abs(int(np.median(depth[20:28, 28:36])) - 2500) < 30
+
+    capsys.readouterr()
+    assert main(["splat", "render", str(tmp_path / "nope.ply"), *args[3:], "--out", str(png)]) == 1
+    assert "nope.ply: file does not exist" in capsys.readouterr().err

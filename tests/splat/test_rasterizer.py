@@ -65,7 +65,7 @@ CAMERAS = [
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("cam_idx", range(len(CAMERAS)))
 def test_matches_brute_force_reference(seed, cam_idx):
-    splat = random_splat(seed, n=250, sh_degree=seed)  # SH degree 0..2
+    splat = random_splat(seed, n=250, sh_degree=seed + 1)  # SH degree 1..3
     cam = PinholeCamera.look_at(**CAMERAS[cam_idx])
     image = rast.rasterize_torch(splat, cam, background=(0.1, 0.2, 0.3))
     ref = reference(splat, cam, background=(0.1, 0.2, 0.3))
