@@ -217,6 +217,10 @@ def main() -> None:
 
         return setup
 
+    def background_without_splat(case):  # a file keeps the folder in git
+        (case / "background").mkdir()
+        (case / "background" / "README.txt").write_text("no gs_model.ply here, on purpose\n")
+
     write_case(
         "truncated_ply",
         "a truncated gs_model.ply",
@@ -242,7 +246,7 @@ def main() -> None:
         ["gs_model.ply", 'render_mode="hybrid"'],
         env_kwargs=dict(render_mode="hybrid"),
         validate=False,
-        setup=lambda case: (case / "background").mkdir(),
+        setup=background_without_splat,
         layout=mutated(lambda d: d["assets"].update(background="background")),
     )
     write_case(
