@@ -117,6 +117,36 @@ class HybridRenderer:
         self.render_seconds += time.perf_counter() - start
         return cached
 
+    def backgrounds(
+        self,
+        camera_name: str,
+        cam_to_world_gl: torch.Tensor,
+        intrinsic: torch.Tensor,
+        width: int,
+        height: int,
+        background_poses: list[LayoutPose],
+    ) -> list[CachedBackground]:
+        """Every env's background for one camera (rendered where missing or stale).
+
+        Args:
+            camera_name: cache key of the camera.
+            cam_to_world_gl: (n, 4, 4) SAPIEN model matrices (OpenGL convention).
+            intrinsic: (n, 3, 3) OpenCV intrinsics.
+            width, height: image size.
+            background_poses: per env, the layout pose of the background node.
+        """
+        model = cam_to_world_gl.detach().cpu().double().numpy()
+        k = intrinsic.detach().cpu().double().numpy()
+        return [
+            self.background(
+                camera_name,
+                env,
+                PinholeCamera.from_opengl(model[env], k[env], width, height),
+                pose,
+            )
+            for env, pose in enumerate(background_poses)
+        ]
+
     def composite(
         self,
         camera_name: str,
@@ -144,12 +174,11 @@ class HybridRenderer:
             (n, H, W, 3) uint8.
         """
         n, h, w = rgb.shape[:3]
-        model = cam_to_world_gl.detach().cpu().double().numpy()
-        k = intrinsic.detach().cpu().double().numpy()
+        backgrounds = self.backgrounds(
+            camera_name, cam_to_world_gl, intrinsic, w, h, background_poses
+        )
         out = torch.empty_like(rgb)
-        for env in range(n):
-            camera = PinholeCamera.from_opengl(model[env], k[env], w, h)
-            bg = self.background(camera_name, env, camera, background_poses[env])
+        for env, bg in enumerate(backgrounds):
             seg = segmentation[env, ..., 0].long()
             ids = foreground_ids[env].to(seg.device, torch.long)
             lookup = torch.zeros(

@@ -130,6 +130,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         self.enable_grasp = enable_grasp
         self.hybrid_depth_test = bool(hybrid_depth_test)
         self.hybrid: HybridRenderer | None = None
+        self._backgrounds_due = False  # set at (re)configuration, cleared by the pre-render
         if render_mode == "hybrid":
             self.hybrid = HybridRenderer(
                 self.base_layout.gs_model_path(),
@@ -244,7 +245,10 @@ class PickEmbodiedGenEnv(BaseEnv):
             # wrappers expect (ManiSkill only seeds its episode RNGs); nothing here draws from it
             first = np.asarray(seed).reshape(-1)[0]
             self._np_random, self._np_random_seed = seeding.np_random(int(first))
-        return super().reset(seed=seed, options=options)
+        result = super().reset(seed=seed, options=options)
+        if self.hybrid is not None and self._backgrounds_due:
+            self._prerender_backgrounds()  # SPEC 5.1: at (re)configuration, not at first frame
+        return result
 
     def step(self, action):
         self._check_action(action)
@@ -352,6 +356,24 @@ class PickEmbodiedGenEnv(BaseEnv):
         super()._after_reconfigure(options)
         if self.hybrid is not None:
             self._hybrid_ids = self._foreground_ids()
+            self._backgrounds_due = True
+
+    def _background_poses(self) -> list[LayoutPose]:
+        bg = self.base_layout.background
+        return [LayoutPose.from_layout(layout.position[bg]) for layout in self.layouts]
+
+    def _prerender_backgrounds(self) -> None:
+        """Render the human cameras' backgrounds of every env (sensors' come with their obs)."""
+        for name, camera in self.scene.human_render_cameras.items():
+            self.hybrid.backgrounds(
+                name,
+                camera.camera.get_model_matrix(),
+                camera.camera.get_intrinsic_matrix(),
+                camera.config.width,
+                camera.config.height,
+                self._background_poses(),
+            )
+        self._backgrounds_due = False
 
     def _foreground_ids(self) -> dict[bool, list[torch.Tensor]]:
         """Per env, the segmentation ids drawn over the background: robot links and layout
@@ -367,7 +389,6 @@ class PickEmbodiedGenEnv(BaseEnv):
 
     def _hybrid_composite(self, name: str, camera, data: dict, human: bool) -> torch.Tensor:
         extra = camera.get_obs(rgb=False, depth=True, position=False, segmentation=True)
-        bg = self.base_layout.background
         return self.hybrid.composite(
             name,
             data["rgb"],
@@ -376,7 +397,7 @@ class PickEmbodiedGenEnv(BaseEnv):
             camera.camera.get_model_matrix(),
             camera.camera.get_intrinsic_matrix(),
             self._hybrid_ids[human],
-            [LayoutPose.from_layout(layout.position[bg]) for layout in self.layouts],
+            self._background_poses(),
         )
 
     def get_sensor_params(self) -> dict[str, dict[str, torch.Tensor]]:

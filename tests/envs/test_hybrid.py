@@ -120,7 +120,10 @@ def _sensor_camera_and_pose(u, sensor):
 
 def test_background_is_rendered_once_per_camera_and_configuration(env):
     u = env.unwrapped
-    env.render()
+    env.reset(seed=4, options=dict(reconfigure=True))
+    # pre-rendered at (re)configuration, before any frame is asked for
+    cached = u.hybrid.cached("render_camera", 0)
+    assert cached is not None and cached.pose == u.layouts[0].pose(u.layouts[0].background)
     before = u.hybrid.renders
     for _ in range(3):
         env.step(env.action_space.sample())
