@@ -188,11 +188,13 @@ def read_ply(path: str | os.PathLike) -> GaussianSplat:
         sh=sh.contiguous(),
         normals=normals,
     )
-    bad = ~torch.isfinite(torch.cat([splat.means, splat.quats_wxyz, splat.log_scales], 1)).all(1)
+    values = [splat.means, splat.quats_wxyz, splat.log_scales, splat.opacity_logits[:, None]]
+    bad = ~torch.isfinite(torch.cat([*values, splat.sh.reshape(count, -1)], 1)).all(1)
     if bool(bad.any()):
         raise SplatFileError(
             path,
-            f"{int(bad.sum())} Gaussians have NaN or infinite position, rotation or scale",
+            f"{int(bad.sum())} Gaussians have a NaN or infinite value (first: vertex "
+            f"{int(bad.nonzero()[0])})",
             "remove them or re-export the splat",
         )
     return splat

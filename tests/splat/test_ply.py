@@ -75,7 +75,8 @@ def test_activations(tmp_path):
         ("bad_rest", ["f_rest", "0, 9, 24 or 45"]),
         ("not_ply", ["not a PLY"]),
         ("missing_file", ["does not exist"]),
-        ("nan", ["NaN"]),
+        ("nan", ["NaN", "vertex 3"]),
+        ("inf_opacity", ["infinite", "vertex 2"]),
     ],
 )
 def test_malformed_files_are_rejected_with_the_file_and_the_fix(tmp_path, case, words):
@@ -98,6 +99,9 @@ def test_malformed_files_are_rejected_with_the_file_and_the_fix(tmp_path, case, 
         path.write_text("solid cube\nendsolid\n")
     elif case == "nan":
         rows[3, 0] = np.nan
+        write_raw(path, PROPS, rows)
+    elif case == "inf_opacity":
+        rows[2, PROPS.index("opacity")] = np.inf
         write_raw(path, PROPS, rows)
     with pytest.raises(SplatFileError) as e:
         read_ply(path)
