@@ -217,3 +217,39 @@ def test_missing_background_splat_fails_at_construction(scene_copy):
     assert "gs_model.ply" in msg and 'render_mode="hybrid"' in msg and str(layout_file) in msg
     assert "mesh_to_splat" in msg
     assert snapshot(scene_copy) == before
+
+
+def test_compositing_is_per_env_with_its_own_ids_background_and_depth(tmp_path):
+    """Several envs at once (as on the GPU sim), without a simulator."""
+    from embodied_envs.envs.hybrid import HybridRenderer
+    from embodied_envs.splat.camera import GL_TO_CV
+
+    write_ply(occluder_splat(), tmp_path / "gs_model.ply")
+    hybrid = HybridRenderer(tmp_path / "gs_model.ply", (0.7071, 0.0, 0.0, 0.7071))
+    cam = PinholeCamera.look_at((0.9, 0.0, 1.05), (0.0, 0.0, 1.05), width=32, height=24)
+    model = torch.tensor(np.linalg.inv(cam.world_to_cam) @ GL_TO_CV).expand(2, 4, 4)
+    intrinsic = torch.tensor(cam.intrinsic).expand(2, 3, 3)
+    moved = LayoutPose.from_xyz_yaw((0.0, 5.0, 0.0), 0.0)  # env 1: the wall is out of view
+    poses = [LayoutPose.from_xyz_yaw((0.0, 0.0, 0.0), 0.0), moved]
+    rgb = torch.full((2, 24, 32, 3), 77, dtype=torch.uint8)
+    seg = torch.zeros((2, 24, 32, 1), dtype=torch.int16)
+    seg[:, :, :16] = 5  # left half: id 5, right half: id 7, in both envs
+    seg[:, :, 16:] = 7
+    depth_mm = torch.full((2, 24, 32, 1), 1500, dtype=torch.int16)  # 1.5 m: behind the wall
+    ids = [torch.tensor([5]), torch.tensor([7])]
+    out = hybrid.composite("cam", rgb, seg, depth_mm, model, intrinsic, ids, poses)
+    wall = hybrid.cached("cam", 0)
+    assert (wall.depth < 0.5).any() and torch.isinf(hybrid.cached("cam", 1).depth).all()
+    covered = torch.isfinite(wall.depth)
+    # env 0: only id 5 is foreground, and where the wall is nearer it hides it
+    left = torch.zeros((24, 32), dtype=torch.bool)
+    left[:, :16] = True
+    shown0 = left & ~covered
+    assert (out[0][shown0] == 77).all()
+    assert torch.equal(out[0][~shown0], wall.rgb[~shown0])
+    # env 1: only id 7 is foreground; its (empty) background is black
+    assert (out[1][~left] == 77).all() and (out[1][left] == 0).all()
+    # the depth test is what hides env 0's pixels behind the wall
+    hybrid.depth_test = False
+    out = hybrid.composite("cam", rgb, seg, depth_mm, model, intrinsic, ids, poses)
+    assert (out[0][left] == 77).all()
