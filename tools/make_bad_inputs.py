@@ -142,46 +142,34 @@ def main() -> None:
         layout=mutated(missing_dir),
     )
 
-    def no_collision(case):
-        dst = copy_asset(case, "can", "can_no_collision")
-        urdf = (dst / "can.urdf").read_text()
+    def drop_collision(asset: Path) -> None:
+        urdf = (asset / "can.urdf").read_text()
         start, end = urdf.index("<collision>"), urdf.index("</collision>") + len("</collision>")
-        (dst / "can.urdf").write_text(urdf[:start] + urdf[end:])
+        (asset / "can.urdf").write_text(urdf[:start] + urdf[end:])
 
-    write_case(
-        "urdf_without_collision",
-        "a URDF without a collision mesh",
-        "LayoutError",
-        ["can.urdf", "collision"],
-        setup=no_collision,
-        layout=mutated(lambda d: d["assets"].update(can="can_no_collision")),
-    )
-
-    def not_a_mesh(case):
-        dst = copy_asset(case, "mug", "mug_not_a_mesh")
-        (dst / "mesh" / "mug_collision.obj").write_bytes(b"\x00\x01PK\x03\x04 not a mesh\n")
-
-    write_case(
-        "mesh_not_a_mesh",
-        "a collision mesh file that is not a mesh",
-        "LayoutError",
-        ["mug_collision.obj", "mesh"],
-        setup=not_a_mesh,
-        layout=mutated(lambda d: d["assets"].update(mug="mug_not_a_mesh")),
-    )
-
-    def empty_collision(case):
-        dst = copy_asset(case, "bowl", "bowl_empty_collision")
-        (dst / "mesh" / "bowl_collision.obj").write_text("# no geometry\n")
-
-    write_case(
-        "empty_collision_mesh",
-        "an empty collision mesh",
-        "LayoutError",
-        ["bowl_collision.obj"],
-        setup=empty_collision,
-        layout=mutated(lambda d: d["assets"].update(bowl="bowl_empty_collision")),
-    )
+    broken_assets = [  # case, what, shipped asset, words, how its copy is broken
+        ("urdf_without_collision", "a URDF without a collision mesh", "can",
+         ["can.urdf", "collision"], drop_collision),
+        ("mesh_not_a_mesh", "a collision mesh file that is not a mesh", "mug",
+         ["mug_collision.obj", "mesh"],
+         lambda a: (a / "mesh" / "mug_collision.obj").write_bytes(b"\x00\x01PK not a mesh\n")),
+        ("empty_collision_mesh", "an empty collision mesh", "bowl", ["bowl_collision.obj"],
+         lambda a: (a / "mesh" / "bowl_collision.obj").write_text("# no geometry\n")),
+    ]  # fmt: skip
+    for name, what, asset, words, damage in broken_assets:
+        folder = f"{asset}_broken"
+        write_case(
+            name,
+            what,
+            "LayoutError",
+            words,
+            setup=lambda case, asset=asset, folder=folder, damage=damage: damage(
+                copy_asset(case, asset, folder)
+            ),
+            layout=mutated(
+                lambda d, asset=asset, folder=folder: d["assets"].update({asset: folder})
+            ),
+        )
 
     def robot(d):
         d["relation"]["robot"] = "ur5e_magic"

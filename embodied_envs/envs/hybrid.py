@@ -87,9 +87,6 @@ class HybridRenderer:
         self.renders = 0  # background renders so far
         self.render_seconds = 0.0  # time spent in them
 
-    def clear(self) -> None:
-        self._cache.clear()
-
     def cached(self, camera_name: str, env: int) -> CachedBackground | None:
         """The cached background of (camera, env), if any."""
         return self._cache.get((camera_name, env))

@@ -131,6 +131,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         self.hybrid_depth_test = bool(hybrid_depth_test)
         self.hybrid: HybridRenderer | None = None
         self._backgrounds_due = False  # set at (re)configuration, cleared by the pre-render
+        self._background_poses: list[LayoutPose] = []  # per env, set at (re)configuration
         if render_mode == "hybrid":
             self.hybrid = HybridRenderer(
                 self.base_layout.gs_model_path(),
@@ -356,11 +357,9 @@ class PickEmbodiedGenEnv(BaseEnv):
         super()._after_reconfigure(options)
         if self.hybrid is not None:
             self._hybrid_ids = self._foreground_ids()
+            bg = self.base_layout.background
+            self._background_poses = [LayoutPose.from_layout(x.position[bg]) for x in self.layouts]
             self._backgrounds_due = True
-
-    def _background_poses(self) -> list[LayoutPose]:
-        bg = self.base_layout.background
-        return [LayoutPose.from_layout(layout.position[bg]) for layout in self.layouts]
 
     def _prerender_backgrounds(self) -> None:
         """Render the human cameras' backgrounds of every env (sensors' come with their obs)."""
@@ -371,7 +370,7 @@ class PickEmbodiedGenEnv(BaseEnv):
                 camera.camera.get_intrinsic_matrix(),
                 camera.config.width,
                 camera.config.height,
-                self._background_poses(),
+                self._background_poses,
             )
         self._backgrounds_due = False
 
@@ -388,16 +387,18 @@ class PickEmbodiedGenEnv(BaseEnv):
         return ids
 
     def _hybrid_composite(self, name: str, camera, data: dict, human: bool) -> torch.Tensor:
-        extra = camera.get_obs(rgb=False, depth=True, position=False, segmentation=True)
+        """``data`` is the camera's obs dict; segmentation and depth are fetched if missing."""
+        if "segmentation" not in data or "depth" not in data:
+            data = data | camera.get_obs(rgb=False, depth=True, position=False, segmentation=True)
         return self.hybrid.composite(
             name,
             data["rgb"],
-            extra["segmentation"],
-            extra["depth"],
+            data["segmentation"],
+            data["depth"],
             camera.camera.get_model_matrix(),
             camera.camera.get_intrinsic_matrix(),
             self._hybrid_ids[human],
-            self._background_poses(),
+            self._background_poses,
         )
 
     def get_sensor_params(self) -> dict[str, dict[str, torch.Tensor]]:
@@ -426,7 +427,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         images = []
         for name, camera in self.scene.human_render_cameras.items():
             camera.capture()
-            data = camera.get_obs(rgb=True, depth=False, position=False, segmentation=False)
+            data = camera.get_obs(rgb=True, depth=True, position=False, segmentation=True)
             images.append(self._hybrid_composite(name, camera, data, human=True))
         for obj in self._hidden_objects:
             obj.hide_visual()

@@ -100,18 +100,12 @@ def _top_cached(urdf: Path, mtime: float, band: float, margin: float):
     return hull, geom.max_z, shrunk
 
 
-def node_top(
-    layout: LayoutInfo, node: str, pose: LayoutPose, band: float, margin: float
-) -> Surface:
-    """The top surface of a node standing upright at ``pose`` (yaw-only rotation).
+def _surface_at(key: tuple[Path, float], pose: LayoutPose, band: float, margin: float) -> Surface:
+    """The top surface of an asset (``asset_key``) standing upright at ``pose`` (yaw only).
 
     Shrinking commutes with rotation and translation, so the shrunk hull is computed once per
     asset in its own frame.
     """
-    return _surface_at(asset_key(layout, node), pose, band, margin)
-
-
-def _surface_at(key: tuple[Path, float], pose: LayoutPose, band: float, margin: float) -> Surface:
     hull, top_z, shrunk = _top_cached(*key, band, margin)
     rot = rotation_2d(np.float64(pose.yaw)).T
     xy = np.asarray(pose.p[:2])

@@ -8,14 +8,13 @@ from embodied_envs.splat.mesh import mesh_to_splat
 from embodied_envs.splat.model import GaussianSplat, pose_splat
 from embodied_envs.splat.ply import SplatFileError, read_ply, write_ply
 from embodied_envs.splat.rasterizer import SplatImage, rasterize_torch
-from embodied_envs.splat.render import available_backends, render
+from embodied_envs.splat.render import render
 
 __all__ = [
     "GaussianSplat",
     "PinholeCamera",
     "SplatFileError",
     "SplatImage",
-    "available_backends",
     "mesh_to_splat",
     "pose_splat",
     "rasterize_torch",

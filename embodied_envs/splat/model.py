@@ -111,18 +111,6 @@ class GaussianSplat:
             },
         )
 
-    def subset(self, index: torch.Tensor) -> GaussianSplat:
-        """The Gaussians selected by a boolean mask or an index tensor."""
-        return replace(
-            self,
-            means=self.means[index],
-            quats_wxyz=self.quats_wxyz[index],
-            log_scales=self.log_scales[index],
-            opacity_logits=self.opacity_logits[index],
-            sh=self.sh[index],
-            normals=None if self.normals is None else self.normals[index],
-        )
-
 
 def quat_wxyz_to_matrix(q: torch.Tensor) -> torch.Tensor:
     """(N, 4) unit quaternions (scalar first) to (N, 3, 3) rotation matrices."""

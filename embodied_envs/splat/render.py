@@ -28,10 +28,6 @@ def gsplat_available() -> bool:
     return importlib.util.find_spec("gsplat") is not None and torch.cuda.is_available()
 
 
-def available_backends() -> list[str]:
-    return ["torch", "gsplat"] if gsplat_available() else ["torch"]
-
-
 def resolve_backend(backend: str) -> str:
     """The concrete backend for a request; raises ValueError naming the fix when it can't run."""
     if backend not in BACKENDS:
