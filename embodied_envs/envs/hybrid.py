@@ -1,10 +1,16 @@
 """Hybrid rendering: simulated foreground composited over a Gaussian-splat background.
 
+:class:`HybridRenderer` owns all hybrid state of one env instance: the splat, the foreground
+ids of every env, every env's background pose, and per camera the stacked backgrounds of all
+envs on the env's device. The env calls it in three places: at (re)configuration
+(:meth:`HybridRenderer.configure`), for sensor observations
+(:meth:`HybridRenderer.composite_sensors`) and for ``render()`` (:meth:`HybridRenderer.render`).
+
 Per (camera, env) the background splat is rendered once, posed by that env's layout, and
-cached; it is re-rendered only when the camera or the background pose changes. Foreground
-pixels are those whose segmentation id is one of the env's foreground ids (robot links and
-layout actors, given explicitly); with the depth test on, a foreground pixel farther than the
-splat surface shows the background.
+re-rendered only when that env's camera or background pose changes. Compositing is one batched
+tensor operation over envs: a pixel is foreground when its segmentation id is one of its env's
+foreground ids (robot links and layout actors, given explicitly); with the depth test on, a
+foreground pixel farther than the splat surface shows the background.
 """
 
 from __future__ import annotations
@@ -14,7 +20,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from embodied_envs.layout.pose import LayoutPose, quat_multiply_xyzw
@@ -25,27 +30,19 @@ SPLAT_SURFACE_ALPHA = 0.5  # splat pixels at least this opaque have a surface fo
 CAMERA_TOLERANCE = 1e-6  # camera matrices closer than this reuse the cached background
 
 
-@dataclass(frozen=True)
-class CachedBackground:
-    """One camera's view of one env's background."""
+@dataclass
+class CameraBackgrounds:
+    """One camera's backgrounds of every env, stacked on the env's device."""
 
-    camera: PinholeCamera
-    pose: LayoutPose
-    rgb: torch.Tensor  # (H, W, 3) uint8
-    depth: torch.Tensor  # (H, W) float, metres along the camera axis; +inf where no surface
-
-    def matches(self, camera: PinholeCamera, pose: LayoutPose) -> bool:
-        c = self.camera
-        return (
-            pose == self.pose
-            and (c.width, c.height) == (camera.width, camera.height)
-            and np.allclose(c.intrinsic, camera.intrinsic, atol=CAMERA_TOLERANCE)
-            and np.allclose(c.world_to_cam, camera.world_to_cam, atol=CAMERA_TOLERANCE)
-        )
+    model: torch.Tensor  # (n, 4, 4) float64 camera-to-world (OpenGL) they were rendered for
+    intrinsic: torch.Tensor  # (n, 3, 3) float64
+    rgb: torch.Tensor  # (n, H, W, 3) uint8
+    depth: torch.Tensor  # (n, H, W) float32, metres along the camera axis; +inf: no surface
+    valid: torch.Tensor  # (n,) bool: False until rendered for the current configuration
 
 
 class HybridRenderer:
-    """Background cache and compositing for one env instance.
+    """Background cache and batched compositing for one env instance.
 
     Args:
         splat_path: the background's ``gs_model.ply`` (Y-up, as stored).
@@ -73,46 +70,65 @@ class HybridRenderer:
         if not splat_path.is_file():
             raise SplatFileError(
                 splat_path,
-                f'render_mode="hybrid" needs the background splat of {layout_file}, and this '
-                "file does not exist",
+                f'hybrid rendering (render_mode="hybrid" or hybrid_obs=True) needs the '
+                f"background splat of {layout_file}, and this file does not exist",
                 "put a 3DGS gs_model.ply in the background's asset folder (tools/mesh_to_splat.py"
-                ' makes one from a mesh) or use render_mode="rgb_array"',
+                ' makes one from a mesh), or use render_mode="rgb_array" and hybrid_obs=False',
             )
         self.backend = resolve_backend(backend)
         self.device = torch.device(device)
         self.splat = read_ply(splat_path).to(self.device)
         self.init_quat_xyzw = tuple(float(v) for v in init_quat_xyzw)
         self.depth_test = bool(depth_test)
-        self._cache: dict[tuple[str, int], CachedBackground] = {}
+        self.poses: list[LayoutPose] = []  # per env, the background node's layout pose
+        self._lut: dict[str, torch.Tensor] = {}  # "sensor" / "human" -> (n, max id + 1) bool
+        self._cameras: dict[str, CameraBackgrounds] = {}
         self.renders = 0  # background renders so far
         self.render_seconds = 0.0  # time spent in them
 
-    def cached(self, camera_name: str, env: int) -> CachedBackground | None:
-        """The cached background of (camera, env), if any."""
-        return self._cache.get((camera_name, env))
+    # --- configuration -------------------------------------------------------------------
+    def configure(
+        self,
+        foreground_ids: torch.Tensor,
+        hidden_ids: torch.Tensor,
+        background_poses: list[LayoutPose],
+    ) -> None:
+        """Set every env's foreground ids and background pose; cached backgrounds go stale.
 
-    def background(
-        self, camera_name: str, env: int, camera: PinholeCamera, pose: LayoutPose
-    ) -> CachedBackground:
-        """The cached background of (camera, env), rendered now if missing or stale."""
-        key = (camera_name, env)
-        cached = self._cache.get(key)
-        if cached is not None and cached.matches(camera, pose):
-            return cached
+        Args:
+            foreground_ids: ``(n, k)`` per-scene segmentation ids drawn over the background in
+                every camera (robot links, layout actors).
+            hidden_ids: ``(n, h)`` ids drawn only in human cameras (objects hidden from
+                sensors, such as the goal marker).
+            background_poses: per env, the layout pose of the background node.
+        """
+        n = foreground_ids.shape[0]
+        human = torch.cat([foreground_ids, hidden_ids], 1).to(self.device, torch.long)
+        size = int(human.max()) + 1
+        rows = torch.arange(n, device=self.device)[:, None]
+        for camera_kind, ids in (
+            ("sensor", foreground_ids.to(self.device, torch.long)),
+            ("human", human),
+        ):
+            lut = torch.zeros((n, size), dtype=torch.bool, device=self.device)
+            lut[rows.expand_as(ids), ids] = True
+            self._lut[camera_kind] = lut
+        self.poses = list(background_poses)
+        for cam in self._cameras.values():
+            cam.valid[:] = False
+
+    # --- backgrounds ---------------------------------------------------------------------
+    def render_one(self, camera: PinholeCamera, pose: LayoutPose) -> tuple[torch.Tensor, ...]:
+        """The splat posed by ``pose`` seen from ``camera``: uint8 RGB and surface depth."""
         start = time.perf_counter()
         q = quat_multiply_xyzw(pose.q_xyzw, self.init_quat_xyzw)  # init first, then layout
         posed = pose_splat(self.splat, torch.tensor(pose.p), torch.tensor(q[[3, 0, 1, 2]]))
         image = render(posed, camera, backend=self.backend)
-        cached = CachedBackground(
-            camera=camera,
-            pose=pose,
-            rgb=image.rgb_uint8().to(self.device),
-            depth=image.surface_depth(SPLAT_SURFACE_ALPHA).to(self.device),
-        )
-        self._cache[key] = cached
         self.renders += 1
         self.render_seconds += time.perf_counter() - start
-        return cached
+        return image.rgb_uint8().to(self.device), image.surface_depth(SPLAT_SURFACE_ALPHA).to(
+            self.device
+        )
 
     def backgrounds(
         self,
@@ -121,29 +137,46 @@ class HybridRenderer:
         intrinsic: torch.Tensor,
         width: int,
         height: int,
-        background_poses: list[LayoutPose],
-    ) -> list[CachedBackground]:
-        """Every env's background for one camera (rendered where missing or stale).
+    ) -> CameraBackgrounds:
+        """Every env's background for one camera, rendering only the envs whose camera moved
+        or whose configuration changed.
 
         Args:
             camera_name: cache key of the camera.
             cam_to_world_gl: (n, 4, 4) SAPIEN model matrices (OpenGL convention).
             intrinsic: (n, 3, 3) OpenCV intrinsics.
             width, height: image size.
-            background_poses: per env, the layout pose of the background node.
         """
-        model = cam_to_world_gl.detach().cpu().double().numpy()
-        k = intrinsic.detach().cpu().double().numpy()
-        return [
-            self.background(
-                camera_name,
-                env,
-                PinholeCamera.from_opengl(model[env], k[env], width, height),
-                pose,
+        model = cam_to_world_gl.detach().to(self.device, torch.float64)
+        k = intrinsic.detach().to(self.device, torch.float64)
+        n = len(self.poses)
+        cached = self._cameras.get(camera_name)
+        if cached is None or tuple(cached.rgb.shape[1:3]) != (height, width):
+            cached = self._cameras[camera_name] = CameraBackgrounds(
+                model=model.clone(),
+                intrinsic=k.clone(),
+                rgb=torch.zeros((n, height, width, 3), dtype=torch.uint8, device=self.device),
+                depth=torch.full((n, height, width), torch.inf, device=self.device),
+                valid=torch.zeros(n, dtype=torch.bool, device=self.device),
             )
-            for env, pose in enumerate(background_poses)
-        ]
+        moved = ((model - cached.model).abs().amax((1, 2)) > CAMERA_TOLERANCE) | (
+            (k - cached.intrinsic).abs().amax((1, 2)) > CAMERA_TOLERANCE
+        )
+        stale = (~cached.valid | moved).nonzero().reshape(-1).tolist()
+        if stale:  # only at (re)configuration or when a camera moves
+            model_np, k_np = model.cpu().numpy(), k.cpu().numpy()
+            for env in stale:
+                camera = PinholeCamera.from_opengl(model_np[env], k_np[env], width, height)
+                cached.rgb[env], cached.depth[env] = self.render_one(camera, self.poses[env])
+            cached.model[stale], cached.intrinsic[stale] = model[stale], k[stale]
+            cached.valid[stale] = True
+        return cached
 
+    def cached(self, camera_name: str) -> CameraBackgrounds | None:
+        """The stacked backgrounds of a camera, if any were rendered."""
+        return self._cameras.get(camera_name)
+
+    # --- compositing ---------------------------------------------------------------------
     def composite(
         self,
         camera_name: str,
@@ -152,10 +185,9 @@ class HybridRenderer:
         depth_mm: torch.Tensor,
         cam_to_world_gl: torch.Tensor,
         intrinsic: torch.Tensor,
-        foreground_ids: list[torch.Tensor],
-        background_poses: list[LayoutPose],
+        human: bool,
     ) -> torch.Tensor:
-        """Composite a batch of camera images over their backgrounds.
+        """Composite a batch of camera images over their backgrounds, all envs at once.
 
         Args:
             camera_name: cache key of the camera.
@@ -164,27 +196,78 @@ class HybridRenderer:
             depth_mm: (n, H, W, 1) depth in millimetres (ManiSkill's ``depth`` texture).
             cam_to_world_gl: (n, 4, 4) SAPIEN model matrices (OpenGL convention).
             intrinsic: (n, 3, 3) OpenCV intrinsics.
-            foreground_ids: per env, the ids that are foreground.
-            background_poses: per env, the layout pose of the background node.
+            human: a human render camera (hidden objects such as the goal are foreground).
 
         Returns:
             (n, H, W, 3) uint8.
         """
         n, h, w = rgb.shape[:3]
-        backgrounds = self.backgrounds(
-            camera_name, cam_to_world_gl, intrinsic, w, h, background_poses
+        bg = self.backgrounds(camera_name, cam_to_world_gl, intrinsic, w, h)
+        mask = self.foreground_mask(segmentation, human)
+        if self.depth_test:
+            fg_depth = depth_mm[..., 0].to(self.device, torch.float32) / 1000.0
+            mask &= fg_depth <= bg.depth
+        out = torch.where(mask[..., None], rgb.to(self.device), bg.rgb)
+        return out.to(rgb.device)
+
+    def foreground_mask(self, segmentation: torch.Tensor, human: bool) -> torch.Tensor:
+        """``(n, H, W)`` bool: pixels whose id is one of their env's foreground ids."""
+        lut = self._lut["human" if human else "sensor"]
+        seg = segmentation[..., 0].to(self.device, torch.long)
+        n, size = lut.shape
+        known = seg < size
+        flat = seg.clamp(max=size - 1).reshape(n, -1)
+        return lut.gather(1, flat).reshape(seg.shape) & known
+
+    # --- the env's cameras ---------------------------------------------------------------
+    def composite_camera(self, name: str, camera, data: dict, human: bool) -> torch.Tensor:
+        """Composite a ManiSkill camera's ``data`` (its obs dict; segmentation and depth are
+        fetched when missing)."""
+        if "segmentation" not in data or "depth" not in data:
+            data = data | camera.get_obs(rgb=False, depth=True, position=False, segmentation=True)
+        return self.composite(
+            name,
+            data["rgb"],
+            data["segmentation"],
+            data["depth"],
+            camera.camera.get_model_matrix(),
+            camera.camera.get_intrinsic_matrix(),
+            human,
         )
-        out = torch.empty_like(rgb)
-        for env, bg in enumerate(backgrounds):
-            seg = segmentation[env, ..., 0].long()
-            ids = foreground_ids[env].to(seg.device, torch.long)
-            lookup = torch.zeros(
-                int(max(seg.max(), ids.max())) + 1, dtype=torch.bool, device=seg.device
+
+    def composite_sensors(self, scene, obs: dict) -> dict:
+        """Sensor observations with every ``rgb`` composited (in place, and returned)."""
+        for name, data in obs.items():
+            if "rgb" in data:
+                data["rgb"] = self.composite_camera(name, scene.sensors[name], data, human=False)
+        return obs
+
+    def prerender(self, scene) -> None:
+        """Render the human cameras' backgrounds of every env now (at configuration)."""
+        for name, camera in scene.human_render_cameras.items():
+            self.backgrounds(
+                name,
+                camera.camera.get_model_matrix(),
+                camera.camera.get_intrinsic_matrix(),
+                camera.config.width,
+                camera.config.height,
             )
-            lookup[ids] = True
-            mask = lookup[seg]
-            if self.depth_test:
-                fg_depth = depth_mm[env, ..., 0].to(torch.float32) / 1000.0
-                mask &= fg_depth <= bg.depth.to(fg_depth.device)
-            out[env] = torch.where(mask[..., None], rgb[env], bg.rgb.to(rgb.device))
-        return out
+
+    def render(self, scene, hidden_objects: list) -> list[torch.Tensor]:
+        """Every human render camera's image composited over the splat, ``(n, H, W, 3)``."""
+        for obj in hidden_objects:
+            obj.show_visual()
+        scene.update_render(update_sensors=False, update_human_render_cameras=True)
+        images = []
+        for name, camera in scene.human_render_cameras.items():
+            camera.capture()
+            data = camera.get_obs(rgb=True, depth=True, position=False, segmentation=True)
+            images.append(self.composite_camera(name, camera, data, human=True))
+        for obj in hidden_objects:
+            obj.hide_visual()
+        return images
+
+
+def stacked_ids(actors: list) -> torch.Tensor:
+    """``(n, len(actors))`` per-scene segmentation ids of actors or links merged over envs."""
+    return torch.stack([a.per_scene_id.reshape(-1) for a in actors], 1)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
 from typing import Any
@@ -20,10 +21,9 @@ from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConf
 from mani_skill.utils.visualization.misc import tile_images
 
 from embodied_envs.envs.config import SUPPORTED_ROBOTS, CameraSpec, resolve_robot
-from embodied_envs.envs.hybrid import HybridRenderer
+from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
 from embodied_envs.layout import LayoutInfo, load_layout
-from embodied_envs.layout.placement import derive_seed, place
-from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.layout.placement import PlacementLimits, derive_seed, place
 from embodied_envs.paths import default_layout
 from embodied_envs.scene import GoalRegion, LayoutScene, load_layout_scene
 
@@ -34,20 +34,27 @@ point above the table (a green sphere in human renders, hidden from sensors). Di
 the table are obstacles. The scene comes from an EmbodiedGen layout file.
 
 **Randomizations:**
-- per env and reconfiguration (``replace_objs=True``): every pose of the layout is re-drawn by the
-  seeded BFS placement, except env 0 on the first configuration, which uses the file's poses
+- per configuration (construction, ``reconfiguration_freq``, ``reset(options=dict(reconfigure=
+  True))``), with ``replace_objs=True``: table yaw, robot spot and background yaw are re-drawn
+  per env by the seeded BFS placement, except env 0 on the first configuration, which keeps
+  the file's poses. Splat backgrounds are rendered then and cached.
+- per episode (every ``reset``, only the reset envs), with ``replace_objs=True``: every object on
+  the table is re-drawn on its env's table with the placement constraints (footprint inside the
+  shrunk top, no overlap, robot base clear, manipulated objects within reach and heading)
+- ``replace_objs=False``: the file's poses, always
 - arm joints: rest pose plus N(0, ``robot_init_qpos_noise``); fingers open at 0.04
-- goal: a point over the table top within the robot's reach, 0.05 to 0.25 m above the top
+- goal: uniform over the region above the table top within the robot's reach
+  (``goal_region``), 0.05 to 0.25 m above the top
 
 **Success Conditions:**
 - the object is within ``goal_thresh`` (0.025 m) of the goal, and
 - the robot is static (arm joint speeds below 0.2 rad/s)
 
-**Action Space:** the Panda controller's (default ``pd_joint_pos``).
+**Action Space:** the Panda controller's (default ``pd_joint_delta_pos``).
 
 **Observation Space:** ManiSkill's agent state plus ``extra``: ``tcp_pose``, ``goal_pos``,
 ``is_grasped``; in state modes also ``obj_pose``, ``tcp_to_obj_pos``, ``obj_to_goal_pos``.
-Visual modes add the 128x128 ``base_camera`` (hybrid-composited in ``hybrid`` render mode).
+Visual modes add the 128x128 ``base_camera`` (composited over the splat with ``hybrid_obs``).
 
 **Rewards:** see ``compute_dense_reward``; the normalised dense reward is in [0, 1].
 
@@ -56,8 +63,11 @@ Visual modes add the 128x128 ``base_camera`` (hybrid-composited in ``hybrid`` re
 **Arguments:** ``layout_file``, ``replace_objs``, ``robot_uids`` (default: from the layout's
 robot name), ``robot_init_qpos_noise``, ``init_3dgs_quat``, ``objs_z_offset``,
 ``robot_z_offset``, ``camera_cfg``, ``enable_grasp`` (accepted, unused),
-``hybrid_depth_test`` (hybrid mode: hide simulated pixels behind the splat surface),
-``splat_backend`` (hybrid mode: ``"auto"``, ``"torch"`` or ``"gsplat"``),
+``hybrid_obs`` (sensor RGB composited over the splat, whatever ``render_mode`` is; recorded in
+``env_kwargs``, so replays reproduce it), ``hybrid_depth_test`` (hide simulated pixels behind
+the splat surface), ``splat_backend`` (``"auto"``, ``"torch"`` or ``"gsplat"``),
+``placement_limits`` and ``goal_region`` (dicts of :class:`PlacementLimits` /
+:class:`GoalRegion` fields),
 plus ManiSkill's own (``num_envs``, ``obs_mode``, ``control_mode``, ``render_mode``, ...).
 """
 
@@ -87,7 +97,6 @@ class PickEmbodiedGenEnv(BaseEnv):
     goal_thresh = 0.025  # m, object-to-goal distance that counts as placed
     static_thresh = 0.2  # rad/s, arm joint speed under which the robot is static
     max_reward = 5.0  # dense reward on success; the normalised reward divides by it
-    goal_region = GoalRegion()  # where goals are drawn (reach, heading, height)
     base_camera_eye = (0.95, 0.0, 0.55)  # base_camera eye in the robot base frame, m
     base_camera_target = (0.30, 0.0, 0.0)  # base_camera target in the robot base frame, m
 
@@ -103,10 +112,12 @@ class PickEmbodiedGenEnv(BaseEnv):
         robot_z_offset: float = 0.002,
         camera_cfg: dict | None = None,
         enable_grasp: bool = False,
+        hybrid_obs: bool = False,
         hybrid_depth_test: bool = True,
         splat_backend: str = "auto",
+        placement_limits: dict | PlacementLimits | None = None,
+        goal_region: dict | GoalRegion | None = None,
         num_envs: int = 1,
-        reconfiguration_freq: int | None = None,
         render_mode: str | None = None,
         **kwargs,
     ):
@@ -120,19 +131,23 @@ class PickEmbodiedGenEnv(BaseEnv):
         self.layout_file = Path(layout_file) if layout_file is not None else default_layout()
         self.base_layout: LayoutInfo = load_layout(self.layout_file)
         robot = resolve_robot(self.base_layout.robot, robot_uids, str(self.layout_file))
+        self.placement_limits = _dataclass_arg(
+            PlacementLimits, placement_limits, "placement_limits"
+        )
+        self.goal_region = _dataclass_arg(GoalRegion, goal_region, "goal_region")
         self.replace_objs = bool(replace_objs)
-        if self.replace_objs:
-            place(self.base_layout, 0)  # an impossible layout fails here, not mid-simulation
+        if self.replace_objs:  # an impossible layout fails here, not mid-simulation
+            place(self.base_layout, 0, **_fields(self.placement_limits))
         self.robot_init_qpos_noise = float(robot_init_qpos_noise)
         self.init_3dgs_quat = tuple(float(v) for v in init_3dgs_quat)
         self.objs_z_offset = float(objs_z_offset)
         self.robot_z_offset = float(robot_z_offset)
         self.enable_grasp = enable_grasp
         self.hybrid_depth_test = bool(hybrid_depth_test)
+        self.hybrid_obs = bool(hybrid_obs)
         self.hybrid: HybridRenderer | None = None
         self._backgrounds_due = False  # set at (re)configuration, cleared by the pre-render
-        self._background_poses: list[LayoutPose] = []  # per env, set at (re)configuration
-        if render_mode == "hybrid":
+        if render_mode == "hybrid" or self.hybrid_obs:
             self.hybrid = HybridRenderer(
                 self.base_layout.gs_model_path(),
                 self.init_3dgs_quat,
@@ -141,8 +156,6 @@ class PickEmbodiedGenEnv(BaseEnv):
                 device=_sim_device(kwargs.get("sim_backend", "auto"), num_envs),
                 layout_file=self.layout_file,
             )
-        if reconfiguration_freq is None:
-            reconfiguration_freq = 1 if num_envs == 1 else 0
         self._num_configurations = 0
         self.layouts: list[LayoutInfo] = [self.base_layout] * num_envs
         self.env_actors: dict[str, dict[str, Any]] = {}
@@ -150,7 +163,6 @@ class PickEmbodiedGenEnv(BaseEnv):
             *args,
             robot_uids=robot,
             num_envs=num_envs,
-            reconfiguration_freq=reconfiguration_freq,
             render_mode=render_mode,
             **kwargs,
         )
@@ -191,7 +203,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         return [
             self.base_layout
             if (first and k == 0)
-            else place(self.base_layout, derive_seed(seeds[k], k))
+            else place(self.base_layout, derive_seed(seeds[k], k), **_fields(self.placement_limits))
             for k in range(self.num_envs)
         ]
 
@@ -205,6 +217,7 @@ class PickEmbodiedGenEnv(BaseEnv):
             self.layouts,
             objs_z_offset=self.objs_z_offset,
             robot_z_offset=self.robot_z_offset,
+            limits=self.placement_limits,
             goal_region=self.goal_region,
             device=self.device,
         )
@@ -248,7 +261,8 @@ class PickEmbodiedGenEnv(BaseEnv):
             self._np_random, self._np_random_seed = seeding.np_random(int(first))
         result = super().reset(seed=seed, options=options)
         if self.hybrid is not None and self._backgrounds_due:
-            self._prerender_backgrounds()  # SPEC 5.1: at (re)configuration, not at first frame
+            self.hybrid.prerender(self.scene)  # at (re)configuration, not at the first frame
+            self._backgrounds_due = False
         return result
 
     def step(self, action):
@@ -275,31 +289,34 @@ class PickEmbodiedGenEnv(BaseEnv):
                 "stepping, the simulation state would become NaN"
             )
 
+    def _set_episode_rng(self, seed, env_idx: torch.Tensor):
+        super()._set_episode_rng(seed, env_idx)
+        if getattr(self, "layout_scene", None) is not None:
+            if seed is not None:  # ManiSkill re-created every env's episode RNG
+                self.layout_scene.episodes.invalidate()
+            elif self._enhanced_determinism:  # ... or those of env_idx
+                self.layout_scene.episodes.invalidate(torch.as_tensor(env_idx, device=self.device))
+
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
+        b = len(env_idx)
+        ls = self.layout_scene
+        start = ls.episodes.draw(env_idx, self._batched_episode_rng[env_idx.cpu().numpy()])
         with torch.device(self.device):
-            b = len(env_idx)
-            idx = env_idx.cpu().numpy()
-            rng = self._batched_episode_rng[idx]
-            ls = self.layout_scene
             self.agent.robot.set_root_pose(Pose.create(ls.robot_poses[env_idx]))
-            noise = rng.normal(0.0, self.robot_init_qpos_noise, (len(REST_QPOS),)).reshape(b, -1)
-            qpos = REST_QPOS[None] + noise
-            qpos[:, -2:] = 0.04
-            self.agent.reset(torch.as_tensor(qpos, dtype=torch.float32))
+            qpos = torch.as_tensor(REST_QPOS, dtype=torch.float32).repeat(b, 1)
+            qpos[:, :-2] += self.robot_init_qpos_noise * start.joint_noise  # fingers stay 0.04
+            self.agent.reset(qpos)
             zeros = torch.zeros((b, 3))
             for node in ls.dynamic_nodes:
+                if self.replace_objs and node in start.objects:
+                    pose = start.objects[node]
+                else:  # the configuration's pose: replace_objs=False, or a floor object
+                    pose = ls.node_poses[node][env_idx]
                 actor = ls.node_actors[node]
-                actor.set_pose(Pose.create(ls.node_poses[node][env_idx]))
+                actor.set_pose(Pose.create(pose))
                 actor.set_linear_velocity(zeros)
                 actor.set_angular_velocity(zeros)
-            k = torch.as_tensor(rng.randint(0, ls.goal_xy.shape[1]).reshape(b), dtype=torch.long)
-            h = torch.as_tensor(
-                rng.uniform(*self.goal_region.height).reshape(b), dtype=torch.float32
-            )
-            goal = torch.zeros((b, 3))
-            goal[:, :2] = ls.goal_xy[env_idx, k]
-            goal[:, 2] = ls.top_z[env_idx] + h
-            self.goal_site.set_pose(Pose.create_from_pq(goal))
+            self.goal_site.set_pose(Pose.create_from_pq(start.goal))
 
     # --- task ----------------------------------------------------------------------------
     def evaluate(self):
@@ -356,50 +373,15 @@ class PickEmbodiedGenEnv(BaseEnv):
     def _after_reconfigure(self, options: dict):
         super()._after_reconfigure(options)
         if self.hybrid is not None:
-            self._hybrid_ids = self._foreground_ids()
-            bg = self.base_layout.background
-            self._background_poses = [LayoutPose.from_layout(x.position[bg]) for x in self.layouts]
-            self._backgrounds_due = True
-
-    def _prerender_backgrounds(self) -> None:
-        """Render the human cameras' backgrounds of every env (sensors' come with their obs)."""
-        for name, camera in self.scene.human_render_cameras.items():
-            self.hybrid.backgrounds(
-                name,
-                camera.camera.get_model_matrix(),
-                camera.camera.get_intrinsic_matrix(),
-                camera.config.width,
-                camera.config.height,
-                self._background_poses,
+            ls = self.layout_scene
+            self.hybrid.configure(
+                foreground_ids=stacked_ids(
+                    self.agent.robot.links + [ls.node_actors[n] for n in ls.node_actors]
+                ),
+                hidden_ids=stacked_ids(self._hidden_objects),
+                background_poses=[x.pose(self.base_layout.background) for x in self.layouts],
             )
-        self._backgrounds_due = False
-
-    def _foreground_ids(self) -> dict[bool, list[torch.Tensor]]:
-        """Per env, the segmentation ids drawn over the background: robot links and layout
-        actors, plus (in human cameras, where they are visible) the hidden objects."""
-        ids: dict[bool, list[torch.Tensor]] = {False: [], True: []}
-        for k in range(self.num_envs):
-            own = [link.per_scene_id[k] for link in self.agent.robot.links]
-            own += [a.per_scene_id[0] for a in self.env_actors[f"env{k}"].values()]
-            hidden = [obj.per_scene_id[k] for obj in self._hidden_objects]
-            ids[False].append(torch.stack(own).reshape(-1))
-            ids[True].append(torch.stack(own + hidden).reshape(-1))
-        return ids
-
-    def _hybrid_composite(self, name: str, camera, data: dict, human: bool) -> torch.Tensor:
-        """``data`` is the camera's obs dict; segmentation and depth are fetched if missing."""
-        if "segmentation" not in data or "depth" not in data:
-            data = data | camera.get_obs(rgb=False, depth=True, position=False, segmentation=True)
-        return self.hybrid.composite(
-            name,
-            data["rgb"],
-            data["segmentation"],
-            data["depth"],
-            camera.camera.get_model_matrix(),
-            camera.camera.get_intrinsic_matrix(),
-            self._hybrid_ids[human],
-            self._background_poses,
-        )
+            self._backgrounds_due = True
 
     def get_sensor_params(self) -> dict[str, dict[str, torch.Tensor]]:
         # new tensors on every call: SAPIEN returns its cached intrinsic matrix, and an
@@ -411,26 +393,13 @@ class PickEmbodiedGenEnv(BaseEnv):
 
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
         obs = super()._get_obs_sensor_data(apply_texture_transforms)
-        if self.hybrid is not None and apply_texture_transforms:
-            for name, data in obs.items():  # a policy sees what a person sees
-                if "rgb" in data:
-                    data["rgb"] = self._hybrid_composite(
-                        name, self.scene.sensors[name], data, human=False
-                    )
+        if self.hybrid_obs and apply_texture_transforms:  # a policy sees what a person sees
+            self.hybrid.composite_sensors(self.scene, obs)
         return obs
 
     def render_hybrid(self) -> torch.Tensor:
         """The human render cameras' images composited over the splat background."""
-        for obj in self._hidden_objects:
-            obj.show_visual()
-        self.scene.update_render(update_sensors=False, update_human_render_cameras=True)
-        images = []
-        for name, camera in self.scene.human_render_cameras.items():
-            camera.capture()
-            data = camera.get_obs(rgb=True, depth=True, position=False, segmentation=True)
-            images.append(self._hybrid_composite(name, camera, data, human=True))
-        for obj in self._hidden_objects:
-            obj.hide_visual()
+        images = self.hybrid.render(self.scene, self._hidden_objects)
         return images[0] if len(images) == 1 else tile_images(images)
 
     def render(self):
@@ -442,3 +411,22 @@ class PickEmbodiedGenEnv(BaseEnv):
         if _has_display():
             super().render_human()
         return self.render_rgb_array()
+
+
+def _dataclass_arg(cls, value, name: str):
+    """A dataclass keyword given as the dataclass, a dict of its fields, or None (defaults)."""
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, dict):
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(value) - known)
+        if unknown:
+            raise ValueError(f"{name}: unknown keys {unknown}; known: {sorted(known)}")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
+    raise ValueError(f"{name} must be a dict of {cls.__name__} fields, got {type(value).__name__}")
+
+
+def _fields(obj) -> dict:
+    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}

@@ -45,6 +45,7 @@ class PlacementLimits:
     floor_radius: float = 1.5  # m, FLOOR objects are placed within this distance of the origin
     max_attempts: int = 4096  # candidates per object before giving up
     batch: int = 96  # candidates drawn per vectorised batch
+    episode_candidates: int = 128  # per object and env in each per-episode draw (one batch)
 
     @classmethod
     def from_kwargs(cls, **kwargs) -> PlacementLimits:
@@ -98,6 +99,27 @@ def _top_cached(urdf: Path, mtime: float, band: float, margin: float):
     except ValueError:
         shrunk = None
     return hull, geom.max_z, shrunk
+
+
+def local_top(layout: LayoutInfo, node: str, band: float, margin: float):
+    """The top of a node's asset in its own actor frame: ``(hull, top_z, shrunk hull or None)``."""
+    return _top_cached(*asset_key(layout, node), band, margin)
+
+
+def support_order(layout: LayoutInfo) -> list[tuple[str, str]]:
+    """``(node, parent)`` of every object standing on the context or on another object, in
+    placement order: breadth first from the context, larger footprints first."""
+    order: list[tuple[str, str]] = []
+    queue = [layout.context]
+    while queue:
+        parent = queue.pop(0)
+        kids = [
+            c for c, r in layout.children(parent) if r in SUPPORT_RELATIONS and c != layout.robot
+        ]
+        kids.sort(key=lambda n: -polygon_area(node_footprint(layout, n)))
+        order += [(kid, parent) for kid in kids]
+        queue += kids
+    return order
 
 
 def _surface_at(key: tuple[Path, float], pose: LayoutPose, band: float, margin: float) -> Surface:
@@ -396,24 +418,13 @@ class _Placer:
         self.poses[layout.robot] = robot
         self.add_obstacle(layout.robot, square(np.array(robot.p), lim.robot_footprint, robot.yaw))
         # 4. objects, breadth first from the table, larger footprints first
-        queue, ancestors = [ctx], {ctx: {ctx}}
-        while queue:
-            parent = queue.pop(0)
-            kids = [
-                c
-                for c, r in layout.children(parent)
-                if r in SUPPORT_RELATIONS and c != layout.robot
-            ]
-            kids.sort(key=lambda n: -polygon_area(self.foot[n]))
-            for kid in kids:
-                self.poses[kid] = self.sample_object(
-                    kid, parent, surfaces[parent], ancestors[parent]
-                )
-                surfaces[kid] = _surface_at(
-                    self.keys[kid], self.poses[kid], lim.top_band, lim.hull_margin
-                )
-                ancestors[kid] = ancestors[parent] | {kid}
-                queue.append(kid)
+        ancestors = {ctx: {ctx}}
+        for kid, parent in support_order(layout):
+            self.poses[kid] = self.sample_object(kid, parent, surfaces[parent], ancestors[parent])
+            surfaces[kid] = _surface_at(
+                self.keys[kid], self.poses[kid], lim.top_band, lim.hull_margin
+            )
+            ancestors[kid] = ancestors[parent] | {kid}
         floor_kids = [
             c
             for c, r in layout.children(layout.background)

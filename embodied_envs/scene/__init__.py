@@ -1,18 +1,14 @@
-"""Turn layout assets into SAPIEN/ManiSkill actors."""
+"""Turn layout assets into SAPIEN/ManiSkill actors; per-episode randomisation of each env."""
 
 from embodied_envs.scene.builder import asset_density, build_asset_actor
-from embodied_envs.scene.layout_scene import (
-    GoalRegion,
-    LayoutScene,
-    goal_candidates,
-    load_layout_scene,
-)
+from embodied_envs.scene.episode import EpisodeSampler, GoalRegion
+from embodied_envs.scene.layout_scene import LayoutScene, load_layout_scene
 
 __all__ = [
+    "EpisodeSampler",
     "GoalRegion",
     "LayoutScene",
     "asset_density",
     "build_asset_actor",
-    "goal_candidates",
     "load_layout_scene",
 ]

@@ -28,12 +28,13 @@ MAGENTA = (1.0, 0.0, 1.0)
 
 def make(layout=DEFAULT_LAYOUT, **kw):
     kw.setdefault("obs_mode", "rgb")
-    return gym.make(ENV_ID, layout_file=str(layout), render_mode="hybrid", **kw)
+    kw.setdefault("render_mode", "hybrid")
+    return gym.make(ENV_ID, layout_file=str(layout), **kw)
 
 
 @pytest.fixture(scope="module")
 def env():
-    e = make()
+    e = make(hybrid_obs=True)
     e.reset(seed=0)
     yield e
     e.close()
@@ -93,23 +94,15 @@ def test_foreground_is_the_simulated_render_and_background_the_splat(env):
     assert hybrid[0][~fg].float().mean() > 60
 
 
-def test_sensor_rgb_is_composited_like_the_human_view(env):
-    u = env.unwrapped
-    obs = u.get_obs()
-    rgb = obs["sensor_data"]["base_camera"]["rgb"][0]
+def sensor_view(u):
+    """The base camera's observation rgb, its raw simulated rgb, its sensor foreground (robot
+    and layout actors nearer than the splat; sensors do not see the goal marker) and the
+    splat background rendered independently of the env's cache."""
+    rgb = u.get_obs()["sensor_data"]["base_camera"]["rgb"][0]
     sensor = u.scene.sensors["base_camera"]
     raw = sensor.get_obs(rgb=True, depth=True, segmentation=True, position=False)
     seg = raw["segmentation"][0, ..., 0]
-    # sensors do not see hidden objects (the goal marker)
     fg = torch.isin(seg, torch.tensor(foreground_ids(u, hidden=False), dtype=seg.dtype))
-    bg = u.hybrid.background("base_camera", 0, *_sensor_camera_and_pose(u, sensor))
-    fg &= raw["depth"][0, ..., 0].float() / 1000.0 <= bg.depth
-    assert 0.05 < fg.float().mean() < 0.95
-    assert torch.equal(rgb[fg], raw["rgb"][0][fg])
-    assert torch.equal(rgb[~fg], bg.rgb[~fg])
-
-
-def _sensor_camera_and_pose(u, sensor):
     cam = PinholeCamera.from_opengl(
         sensor.camera.get_model_matrix()[0].numpy(),
         sensor.camera.get_intrinsic_matrix()[0].numpy(),
@@ -117,19 +110,61 @@ def _sensor_camera_and_pose(u, sensor):
         128,
     )
     layout = u.layouts[0]
-    return cam, layout.pose(layout.background)
+    pose = layout.pose(layout.background)
+    q = quat_multiply_xyzw(pose.q_xyzw, (0.7071, 0.0, 0.0, 0.7071))
+    splat = pose_splat(
+        read_ply(layout.gs_model_path()), torch.tensor(pose.p), torch.tensor(q[[3, 0, 1, 2]])
+    )
+    bg = render(splat, cam, backend="torch")
+    fg &= raw["depth"][0, ..., 0].float() / 1000.0 <= bg.surface_depth(0.5)
+    return rgb, raw["rgb"][0], fg, bg.rgb_uint8()
+
+
+def test_sensor_rgb_is_composited_like_the_human_view(env):
+    rgb, raw, fg, bg = sensor_view(env.unwrapped)
+    assert 0.05 < fg.float().mean() < 0.95
+    assert torch.equal(rgb[fg], raw[fg])
+    assert torch.equal(rgb[~fg], bg[~fg])
+
+
+@pytest.mark.parametrize(
+    "render_mode, hybrid_obs", [(None, True), ("rgb_array", True), ("hybrid", False)]
+)
+def test_hybrid_obs_is_its_own_switch(render_mode, hybrid_obs):
+    """hybrid_obs composites the sensor observations whatever render_mode is; render_mode
+    "hybrid" alone composites render() only."""
+    e = make(render_mode=render_mode, hybrid_obs=hybrid_obs, replace_objs=False)
+    try:
+        e.reset(seed=0)
+        u = e.unwrapped
+        rgb, raw, fg, bg = sensor_view(u)
+        assert torch.equal(rgb[fg], raw[fg]), "foreground pixels are the simulator's"
+        if hybrid_obs:
+            assert torch.equal(rgb[~fg], bg[~fg])
+            assert (rgb[~fg] != raw[~fg]).any(-1).float().mean() > 0.5
+        else:
+            assert torch.equal(rgb, raw)
+        if render_mode == "hybrid":
+            frame = e.render()[0]
+            assert (frame != u.render_rgb_array()[0]).any(-1).float().mean() > 0.2
+    finally:
+        e.close()
 
 
 def test_background_is_rendered_once_per_camera_and_configuration(env):
     u = env.unwrapped
     env.reset(seed=4, options=dict(reconfigure=True))
     # pre-rendered at (re)configuration, before any frame is asked for
-    cached = u.hybrid.cached("render_camera", 0)
-    assert cached is not None and cached.pose == u.layouts[0].pose(u.layouts[0].background)
+    cached = u.hybrid.cached("render_camera")
+    assert cached is not None and cached.valid.all()
+    assert u.hybrid.poses[0] == u.layouts[0].pose(u.layouts[0].background)
     before = u.hybrid.renders
     for _ in range(3):
         env.step(env.action_space.sample())
         env.render()
+    assert u.hybrid.renders == before
+    env.reset()  # a new episode keeps the configuration and its backgrounds
+    env.render()
     assert u.hybrid.renders == before
 
 
@@ -196,14 +231,15 @@ def test_background_yaw_changes_the_background_image(scene_copy):
     e.reset(seed=0)
     e.render()
     hybrid = e.unwrapped.hybrid
-    turned = hybrid.cached("render_camera", 0)
-    assert turned.pose == LayoutPose.from_layout(data["position"]["background"])
-    # the same camera with the shipped yaw, through the same cache
-    original = hybrid.background(
-        "probe", 0, turned.camera, LayoutPose.from_layout([x, y, z, qx, qy, qz, qw])
+    turned = hybrid.cached("render_camera")
+    assert hybrid.poses[0] == LayoutPose.from_layout(data["position"]["background"])
+    # the same camera with the shipped yaw
+    camera = PinholeCamera.from_opengl(
+        turned.model[0].numpy(), turned.intrinsic[0].numpy(), 256, 256
     )
+    original, _ = hybrid.render_one(camera, LayoutPose.from_layout([x, y, z, qx, qy, qz, qw]))
     e.close()
-    diff = (turned.rgb.float() - original.rgb.float()).abs().mean()
+    diff = (turned.rgb[0].float() - original.float()).abs().mean()
     assert diff > 10, f"mean abs difference {diff:.1f} should show a turned room"
 
 
@@ -236,10 +272,11 @@ def test_compositing_is_per_env_with_its_own_ids_background_and_depth(tmp_path):
     seg[:, :, :16] = 5  # left half: id 5, right half: id 7, in both envs
     seg[:, :, 16:] = 7
     depth_mm = torch.full((2, 24, 32, 1), 1500, dtype=torch.int16)  # 1.5 m: behind the wall
-    ids = [torch.tensor([5]), torch.tensor([7])]
-    out = hybrid.composite("cam", rgb, seg, depth_mm, model, intrinsic, ids, poses)
-    wall = hybrid.cached("cam", 0)
-    assert (wall.depth < 0.5).any() and torch.isinf(hybrid.cached("cam", 1).depth).all()
+    hybrid.configure(torch.tensor([[5], [7]]), torch.zeros((2, 0), dtype=torch.long), poses)
+    out = hybrid.composite("cam", rgb, seg, depth_mm, model, intrinsic, human=False)
+    cached = hybrid.cached("cam")
+    wall = type(cached)(cached.model[0], cached.intrinsic[0], cached.rgb[0], cached.depth[0], None)
+    assert (wall.depth < 0.5).any() and torch.isinf(cached.depth[1]).all()
     covered = torch.isfinite(wall.depth)
     # env 0: only id 5 is foreground, and where the wall is nearer it hides it
     left = torch.zeros((24, 32), dtype=torch.bool)
@@ -251,5 +288,6 @@ def test_compositing_is_per_env_with_its_own_ids_background_and_depth(tmp_path):
     assert (out[1][~left] == 77).all() and (out[1][left] == 0).all()
     # the depth test is what hides env 0's pixels behind the wall
     hybrid.depth_test = False
-    out = hybrid.composite("cam", rgb, seg, depth_mm, model, intrinsic, ids, poses)
+    out = hybrid.composite("cam", rgb, seg, depth_mm, model, intrinsic, human=False)
     assert (out[0][left] == 77).all()
+    assert hybrid.renders == 2, "one background per env, rendered once"

@@ -3,10 +3,11 @@ import numpy as np
 import pytest
 import torch
 from conftest import LAYOUTS, ROOT, snapshot
+from placement_checks import check_constraints
 
 import embodied_envs  # noqa: F401
 from embodied_envs.envs.pick_embodiedgen import REST_QPOS
-from embodied_envs.layout import LayoutError
+from embodied_envs.layout import LayoutError, LayoutPose
 
 ENV_ID = "PickEmbodiedGen-v1"
 
@@ -31,15 +32,20 @@ def test_make_without_arguments_uses_default_layout():
 
 
 def test_reset_puts_everything_at_layout_poses_and_steps(env):
-    obs, info = env.reset(seed=3)
+    obs, info = env.reset(seed=3, options=dict(reconfigure=True))
     u = env.unwrapped
     layout = u.layouts[0]
-    for node, actor in u.env_actors["env0"].items():
-        dz = 0.0 if layout.objs_mapping[node] == "context" else u.objs_z_offset
-        expected = layout.pose(node).translated(dz).to_raw()
-        got = actor.pose.raw_pose[0].cpu().numpy()
-        np.testing.assert_allclose(got[:3], expected[:3], atol=1e-5, err_msg=node)
-        assert abs(abs(np.dot(got[3:], expected[3:])) - 1) < 1e-5, node
+    table = u.env_actors["env0"][layout.context].pose.raw_pose[0].cpu().numpy()
+    expected = layout.pose(layout.context).to_raw()
+    np.testing.assert_allclose(table[:3], expected[:3], atol=1e-5)
+    assert abs(abs(np.dot(table[3:], expected[3:])) - 1) < 1e-5
+    # the objects start where this episode drew them: every placement rule holds
+    poses = {}
+    for node in layout.object_nodes():
+        if node != layout.context:
+            x, y, z, qw, qx, qy, qz = u.env_actors["env0"][node].pose.raw_pose[0].tolist()
+            poses[node] = LayoutPose.from_layout([x, y, z - u.objs_z_offset, qx, qy, qz, qw])
+    assert check_constraints(layout.with_poses(poses)) == []
     robot = layout.pose(layout.robot).translated(u.robot_z_offset).to_raw()
     np.testing.assert_allclose(
         u.agent.robot.pose.raw_pose[0].cpu().numpy()[:3], robot[:3], atol=1e-5
@@ -124,15 +130,32 @@ def test_render_modes_and_visual_obs():
         # the base camera sees the table top and the target object
         u.render_mode = "all"
         seg = u.scene.sensors["base_camera"]
-        seg.camera.take_picture()
+        u._get_obs_sensor_data()  # as an observation: hidden objects hidden, then a picture
         ids = seg.get_obs(rgb=False, depth=False, segmentation=True)["segmentation"][0, ..., 0]
         layout = u.layouts[0]
         table_id = u.env_actors["env0"][layout.context].per_scene_id[0]
         obj_id = u.env_actors["env0"][layout.target].per_scene_id[0]
         assert (ids == table_id).float().mean() > 0.2
         assert (ids == obj_id).sum() > 10
-        # the goal is shown in human renders and hidden from sensors: green pixels
+        # the goal is shown in human renders and hidden from sensors
+        goal_id = u.goal_site.per_scene_id[0]
+        assert not (ids == goal_id).any()
         u.render_mode = "rgb_array"
+        # on the render camera's line of sight, a third of the way from eye to target
+        u.goal_site.set_pose(
+            type(u.goal_site.pose).create_from_pq(torch.tensor([[0.6, 0, 1.0333]]))
+        )
+        cam = u.scene.human_render_cameras["render_camera"]
+        for obj in u._hidden_objects:
+            obj.show_visual()
+        u.scene.update_render(update_sensors=False, update_human_render_cameras=True)
+        cam.capture()
+        human = cam.get_obs(rgb=True, segmentation=True, depth=False, position=False)
+        goal = human["segmentation"][0, ..., 0] == goal_id
+        assert goal.sum() > 20, "the goal sphere is in the render camera's view"
+        rgb = e.render()[0][goal].int()  # pure green (0, 255, 0) lit: green dominates
+        assert (rgb[:, 1] > rgb[:, 0] + 60).float().mean() > 0.9
+        assert (rgb[:, 1] > rgb[:, 2] + 60).float().mean() > 0.9
     finally:
         e.close()
 

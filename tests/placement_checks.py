@@ -1,0 +1,79 @@
+"""Placement constraints checked independently of the placement code (shapely, trimesh)."""
+
+import functools
+import math
+
+import numpy as np
+import trimesh
+from scipy.spatial.transform import Rotation
+from shapely.geometry import MultiPoint, Point
+
+from embodied_envs.layout import parse_urdf
+
+
+@functools.lru_cache(maxsize=64)
+def _collision_vertices(urdf) -> np.ndarray:
+    spec = parse_urdf(urdf)
+    mesh = trimesh.load(spec.collision.path, force="mesh", process=False)
+    v = np.asarray(mesh.vertices) @ Rotation.from_euler("xyz", spec.collision.rpy).as_matrix().T
+    return v + np.asarray(spec.collision.xyz)
+
+
+def world_points(layout, node):
+    """Collision vertices of a node in the world, computed without the placement helpers."""
+    v = _collision_vertices(layout.urdf_path(node))
+    x, y, z, qx, qy, qz, qw = layout.position[node]
+    return v @ Rotation.from_quat([qx, qy, qz, qw]).as_matrix().T + [x, y, z]
+
+
+def check_constraints(layout):
+    """Every placement constraint, checked with shapely; returns a list of violations."""
+    bad = []
+    table = world_points(layout, layout.context)
+    top_z = table[:, 2].max()
+    top = MultiPoint(table[table[:, 2] >= top_z - 0.05][:, :2].tolist()).convex_hull
+    inner = top.buffer(-0.02 + 1e-6)
+    if abs(np.percentile(table[:, 2], 1)) > 1e-6:
+        bad.append("table bottom not at z=0")
+    rx, ry, rz = layout.position[layout.robot][:3]
+    rq = layout.position[layout.robot][3:]
+    heading = Rotation.from_quat(rq).apply([1, 0, 0])
+    if not math.isclose(top.exterior.distance(Point(rx, ry)), 0.02, abs_tol=1e-4):
+        bad.append("robot not on the shrunk hull boundary")
+    if abs(rz - top_z) > 1e-6:
+        bad.append("robot not at table-top height")
+    to_centre = np.array(top.centroid.coords[0]) - [rx, ry]
+    cos = np.dot(heading[:2], to_centre) / np.linalg.norm(heading[:2]) / np.linalg.norm(to_centre)
+    if cos < math.cos(math.radians(5)):
+        bad.append("robot does not face the table centre")
+    half = 0.06
+    c, s = heading[0] / np.hypot(*heading[:2]), heading[1] / np.hypot(*heading[:2])
+    robot_sq = MultiPoint(
+        [(rx + c * a - s * b, ry + s * a + c * b) for a in (-half, half) for b in (-half, half)]
+    ).convex_hull
+    feet = {"robot": robot_sq}
+    for node in layout.object_nodes():
+        if node == layout.context:
+            continue
+        pts = world_points(layout, node)
+        foot = MultiPoint(pts[:, :2].tolist()).convex_hull
+        if not inner.buffer(1e-6).contains(foot):
+            bad.append(f"{node} footprint leaves the shrunk table top")
+        if abs(pts[:, 2].min() - top_z) > 1e-6:
+            bad.append(f"{node} does not rest on the table top ({pts[:, 2].min() - top_z:+.4f})")
+        for other, f in feet.items():
+            if foot.distance(f) < 0.01 - 1e-6:
+                bad.append(f"{node} overlaps {other}")
+        feet[node] = foot
+        if node in layout.manipulated_objs:
+            ox, oy = layout.position[node][:2]
+            d = math.hypot(ox - rx, oy - ry)
+            if not 0.2 < d < 0.85:
+                bad.append(f"{node} at {d:.3f} m from the robot")
+            ang = math.degrees(
+                abs(math.atan2(oy - ry, ox - rx) - math.atan2(heading[1], heading[0]))
+            )
+            ang = min(ang, 360 - ang)
+            if ang > 60 + 1e-6:
+                bad.append(f"{node} at {ang:.1f} deg off the robot heading")
+    return bad

@@ -1,0 +1,238 @@
+"""Per-episode randomisation (scene/episode.py), through the batched sampler directly: many
+envs at once on CPU, as the GPU simulation would call it, without a simulator."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from conftest import LAYOUTS
+from placement_checks import check_constraints
+from shapely.geometry import MultiPoint, Point, Polygon
+from shapely.ops import unary_union
+
+from embodied_envs.layout import LayoutPose, load_layout
+from embodied_envs.layout.placement import PlacementLimits, place
+from embodied_envs.scene.episode import (
+    EpisodeSampler,
+    GoalRegion,
+    Shapes,
+    overlap,
+    uniforms,
+)
+
+OFFSET = 0.002  # objs_z_offset of the sampler under test
+
+
+def configurations(path, n):
+    """n placed configurations of a shipped layout (table, robot, background re-drawn)."""
+    layout = load_layout(path)
+    return [place(layout, 1000 + k) for k in range(n)]
+
+
+def episode_layout(config, starts, row):
+    """The configuration with one env's drawn object poses (objs_z_offset removed)."""
+    poses = {}
+    for node, raw in starts.items():
+        x, y, z, qw, qx, qy, qz = raw[row].tolist()
+        poses[node] = LayoutPose.from_layout([x, y, z - OFFSET, qx, qy, qz, qw])
+    return config.with_poses(poses)
+
+
+def test_uniforms_are_splitmix64_of_key_stream_and_index():
+    mask = (1 << 64) - 1
+
+    def reference(key, stream, i):
+        z = (key * 0x9E3779B97F4A7C15 + (stream << 32) + i) & mask
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & mask
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
+        z ^= z >> 31
+        return (z >> 40) / 2**24
+
+    keys = torch.tensor([0, 1, 12345, 2**31 - 1])
+    got = uniforms(keys, 3, 50)
+    want = [[reference(int(k), 3, i) for i in range(50)] for k in keys]
+    assert torch.equal(got, torch.tensor(want, dtype=torch.float32))
+    big = uniforms(torch.arange(64), 0, 4096).flatten()
+    assert 0 <= float(big.min()) and float(big.max()) < 1
+    counts = torch.histc(big, bins=10, min=0, max=1)
+    assert (counts - big.numel() / 10).abs().max() < 5 * math.sqrt(big.numel() / 10)
+
+
+def test_torch_overlap_agrees_with_the_placement_rule():
+    from embodied_envs.layout.placement import polygons_overlap
+
+    rng = np.random.default_rng(0)
+    square = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 0.05
+    a = np.linspace(0, 2 * np.pi, 17)[:-1]
+    disc = 0.04 * np.stack([np.cos(a), np.sin(a)], 1)
+    shapes = Shapes.of([square, disc], torch.device("cpu"))
+    xy = rng.uniform(-0.12, 0.12, (2000, 2))
+    yaw = rng.uniform(-np.pi, np.pi, 2000)
+    c, s = np.cos(yaw), np.sin(yaw)
+    rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+    moved = disc @ rot.transpose(0, 2, 1) + xy[:, None]
+    want = polygons_overlap(moved, square, 0.01)
+    t = torch.as_tensor
+    p = t(moved, dtype=torch.float32)
+    q = t(square, dtype=torch.float32).expand(2000, 4, 2)
+    got = overlap(
+        p,
+        q,
+        0.01,
+        torch.einsum("bij,mj->bmi", t(rot, dtype=torch.float32), shapes.normals[1, :16]),
+        shapes.normals[0, :4].expand(2000, 4, 2),
+    )
+    assert 0.2 < want.mean() < 0.8
+    assert (got.numpy() == want).mean() > 0.999  # float32 vs float64 at the boundary
+
+
+def test_support_function_is_the_max_projection():
+    rng = np.random.default_rng(1)
+    pts = rng.normal(size=(40, 2))
+    hull = np.asarray(MultiPoint(pts.tolist()).convex_hull.exterior.coords)[:-1]
+    if Polygon(hull).exterior.is_ccw is False:
+        hull = hull[::-1]
+    tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.5]])
+    shapes = Shapes.of([hull, tri], torch.device("cpu"))
+    phi = torch.linspace(-7, 7, 1001, dtype=torch.float64).float()
+    for k, poly in enumerate((hull, tri)):
+        d = np.stack([np.cos(phi.numpy()), np.sin(phi.numpy())], 1)
+        want = (d @ poly.T).max(1)
+        got = shapes.support(torch.tensor([k]), phi[None])[0].numpy()
+        np.testing.assert_allclose(got, want, atol=1e-5)
+
+
+@pytest.mark.parametrize("path", LAYOUTS, ids=[p.stem for p in LAYOUTS])
+def test_every_start_satisfies_every_placement_constraint(path):
+    configs = configurations(path, 4)
+    sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
+    env_idx = torch.arange(4).repeat(40)  # 40 episodes of each of 4 envs in one call
+    starts = sampler.objects(env_idx, torch.arange(160) * 7919)
+    assert sampler.fallbacks == 0
+    for row, env in enumerate(env_idx.tolist()):
+        layout = episode_layout(configs[env], starts, row)
+        assert check_constraints(layout) == [], f"row {row}"
+        for node in starts:  # yaw only: upright as the asset stands
+            q = layout.position[node][3:]
+            assert abs(q[0]) < 1e-6 and abs(q[1]) < 1e-6
+
+
+def test_same_key_same_start_whatever_else_is_drawn():
+    configs = configurations(LAYOUTS[0], 4)
+    sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
+    keys = torch.tensor([11, 22, 33, 44])
+    everyone = sampler.objects(torch.arange(4), keys)
+    some = sampler.objects(torch.tensor([3, 1]), keys[[3, 1]])
+    again = sampler.objects(torch.arange(4), keys)
+    other = sampler.objects(torch.arange(4), keys + 1)
+    for node in everyone:
+        assert torch.equal(everyone[node], again[node])
+        assert torch.equal(some[node], everyone[node][[3, 1]])  # a partial reset's envs
+        assert not torch.equal(other[node], everyone[node])
+    goals = sampler.goals(torch.arange(4), keys)
+    assert torch.equal(sampler.goals(torch.tensor([2]), keys[[2]]), goals[[2]])
+
+
+def rng_states(rng):
+    return [r.get_state()[1].tobytes() + bytes([r.get_state()[2]]) for r in rng.rngs]
+
+
+def test_partial_draws_only_touch_env_idx():
+    from mani_skill.envs.utils.randomization.batched_rng import BatchedRNG
+
+    configs = configurations(LAYOUTS[0], 4)
+    sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
+    assert sampler.block == 8  # few envs: blocks of starts are prepared per env
+    rng = BatchedRNG.from_seeds([10, 11, 12, 13])
+    first = sampler.draw(torch.arange(4), rng[np.arange(4)])
+    before = rng_states(rng)
+    env_idx = torch.tensor([1, 3])
+    second = sampler.draw(env_idx, rng[env_idx.numpy()])
+    for node in first.objects:
+        assert not torch.equal(second.objects[node], first.objects[node][[1, 3]])
+    assert rng_states(rng) == before  # the next starts come from the prepared blocks
+    for _ in range(8):  # env 1 uses up its block and draws the next keys from its RNG only
+        sampler.draw(torch.tensor([1]), rng[np.array([1])])
+    after = rng_states(rng)
+    assert [a == b for a, b in zip(after, before, strict=True)] == [True, False, True, True]
+    # a reseeded env starts its block again: the same start as after the first seeding
+    sampler.invalidate(torch.tensor([1]))
+    rng[1] = np.random.RandomState(11)
+    again = sampler.draw(torch.tensor([1]), rng[np.array([1])])
+    for node in first.objects:
+        assert torch.equal(again.objects[node][0], first.objects[node][1])
+    assert torch.equal(again.goal[0], first.goal[1])
+    assert torch.equal(again.joint_noise[0], first.joint_noise[1])
+
+
+def goal_region_polygon(config, region: GoalRegion):
+    """The goal region of a configuration, built with shapely from the layout alone."""
+    from placement_checks import world_points
+
+    table = world_points(config, config.context)
+    top = table[table[:, 2] >= table[:, 2].max() - 0.05]
+    hull = MultiPoint(top[:, :2].tolist()).convex_hull.buffer(-region.margin)
+    robot = config.pose(config.robot)
+    x, y = robot.p[:2]
+    half = math.radians(region.max_heading_deg)
+    arc = np.linspace(robot.yaw - half, robot.yaw + half, 400)
+    outer = [(x + region.reach[1] * math.cos(a), y + region.reach[1] * math.sin(a)) for a in arc]
+    inner = [(x + region.reach[0] * math.cos(a), y + region.reach[0] * math.sin(a)) for a in arc]
+    sector = Polygon(outer + inner[::-1])
+    return hull.intersection(sector), robot, float(table[:, 2].max())
+
+
+@pytest.mark.parametrize("path", LAYOUTS, ids=[p.stem for p in LAYOUTS])
+def test_goals_cover_the_whole_region_uniformly(path):
+    """With the robot fixed, goals fall on both sides of its heading and across the reach
+    band in proportion to the areas (the first 256 grid points of the old sampler never
+    reached one side)."""
+    config = configurations(path, 1)[0]
+    region = GoalRegion()
+    sampler = EpisodeSampler([config], PlacementLimits(), region)
+    n = 6000
+    goals = sampler.goals(torch.zeros(n, dtype=torch.long), torch.arange(n)).numpy()
+    area, robot, top_z = goal_region_polygon(config, region)
+    rel = goals[:, :2] - np.array(robot.p[:2])
+    heading = np.array([math.cos(robot.yaw), math.sin(robot.yaw)])
+    left = heading[0] * rel[:, 1] - heading[1] * rel[:, 0] > 0
+    inside = np.array([area.buffer(1e-4).contains(Point(p)) for p in goals[:, :2]])
+    assert inside.all(), f"{(~inside).sum()} goals outside the region"
+    # expected fractions from areas (left of the heading; nearer than the middle of the band)
+    x, y = robot.p[:2]
+    far = 5.0
+    left_half = Polygon(
+        [
+            (x, y),
+            (x + far * heading[0], y + far * heading[1]),
+            (x + far * (heading[0] - heading[1]), y + far * (heading[1] + heading[0])),
+            (x - far * heading[1], y + far * heading[0]),
+        ]
+    )
+    mid = sum(region.reach) / 2
+    near = Point(x, y).buffer(mid, 256)
+    sigma = 4.5 / math.sqrt(n)  # 4.5 standard errors of a fraction near 1/2
+    for mask, part in ((left, left_half), (np.hypot(*rel.T) < mid, near)):
+        expected = unary_union([area.intersection(part)]).area / area.area
+        assert 0.1 < expected < 0.9
+        assert abs(mask.mean() - expected) < sigma, (mask.mean(), expected)
+    h = goals[:, 2] - top_z
+    assert region.height[0] - 1e-5 <= h.min() and h.max() <= region.height[1] + 1e-5
+    counts, _ = np.histogram(h, bins=4, range=region.height)
+    assert (np.abs(counts - n / 4) < 4.5 * math.sqrt(n / 4)).all()
+
+
+@pytest.mark.parametrize("path", LAYOUTS, ids=[p.stem for p in LAYOUTS])
+def test_targets_spread_over_both_sides_and_distractors_move(path):
+    config = configurations(path, 1)[0]
+    sampler = EpisodeSampler([config], PlacementLimits(), objs_z_offset=OFFSET)
+    n = 400
+    starts = sampler.objects(torch.zeros(n, dtype=torch.long), torch.arange(n))
+    robot = config.pose(config.robot)
+    heading = np.array([math.cos(robot.yaw), math.sin(robot.yaw)])
+    rel = starts[config.target][:, :2].numpy() - np.array(robot.p[:2])
+    left = (heading[0] * rel[:, 1] - heading[1] * rel[:, 0] > 0).mean()
+    assert 0.2 < left < 0.8
+    for node, raw in starts.items():
+        assert len(torch.unique(raw[:, :2], dim=0)) == n, f"{node} repeats its start"
