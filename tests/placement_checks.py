@@ -8,7 +8,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 from shapely.geometry import MultiPoint, Point
 
-from embodied_envs.layout import parse_urdf
+from embodied_envs.layout import LayoutPose, parse_urdf
 
 
 @functools.lru_cache(maxsize=64)
@@ -77,3 +77,21 @@ def check_constraints(layout):
             if ang > 60 + 1e-6:
                 bad.append(f"{node} at {ang:.1f} deg off the robot heading")
     return bad
+
+
+def object_poses(u, env=0) -> dict[str, np.ndarray]:
+    """Raw poses of env ``env``'s objects (everything but the table) now."""
+    layout = u.layouts[env]
+    return {
+        node: u.env_actors[f"env{env}"][node].pose.raw_pose[0].cpu().numpy()
+        for node in layout.object_nodes()
+        if node != layout.context
+    }
+
+
+def episode_layout(u, env=0):
+    """Env ``env``'s configuration with its objects where they stand now."""
+    poses = {}
+    for node, (x, y, z, qw, qx, qy, qz) in object_poses(u, env).items():
+        poses[node] = LayoutPose.from_layout([x, y, z - u.objs_z_offset, qx, qy, qz, qw])
+    return u.layouts[env].with_poses(poses)

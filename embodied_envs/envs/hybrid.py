@@ -87,6 +87,16 @@ class HybridRenderer:
         self.render_seconds = 0.0  # time spent in them
 
     # --- configuration -------------------------------------------------------------------
+    def to(self, device: torch.device | str) -> HybridRenderer:
+        """Keep the splat and every background on ``device`` (cached backgrounds are dropped)."""
+        device = torch.device(device)
+        if device != self.device:
+            self.device = device
+            self.splat = self.splat.to(device)
+            self._lut = {k: v.to(device) for k, v in self._lut.items()}
+            self._cameras.clear()
+        return self
+
     def configure(
         self,
         foreground_ids: torch.Tensor,
@@ -171,6 +181,10 @@ class HybridRenderer:
             cached.model[stale], cached.intrinsic[stale] = model[stale], k[stale]
             cached.valid[stale] = True
         return cached
+
+    def preload(self, camera_name: str, backgrounds: CameraBackgrounds) -> None:
+        """Use given backgrounds for a camera (rows marked valid are not rendered again)."""
+        self._cameras[camera_name] = backgrounds
 
     def cached(self, camera_name: str) -> CameraBackgrounds | None:
         """The stacked backgrounds of a camera, if any were rendered."""

@@ -76,12 +76,6 @@ REST_QPOS = np.array(
 )
 
 
-def _sim_device(sim_backend: str, num_envs: int) -> str:
-    """Where the env's tensors will live, known before the simulation exists."""
-    gpu = sim_backend in ("gpu", "physx_cuda") or (sim_backend == "auto" and num_envs > 1)
-    return "cuda" if gpu and torch.cuda.is_available() else "cpu"
-
-
 def _has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
@@ -153,9 +147,8 @@ class PickEmbodiedGenEnv(BaseEnv):
                 self.init_3dgs_quat,
                 depth_test=self.hybrid_depth_test,
                 backend=splat_backend,
-                device=_sim_device(kwargs.get("sim_backend", "auto"), num_envs),
                 layout_file=self.layout_file,
-            )
+            )  # on the CPU until the simulation's device is known (at configuration)
         self._num_configurations = 0
         self.layouts: list[LayoutInfo] = [self.base_layout] * num_envs
         self.env_actors: dict[str, dict[str, Any]] = {}
@@ -374,7 +367,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         super()._after_reconfigure(options)
         if self.hybrid is not None:
             ls = self.layout_scene
-            self.hybrid.configure(
+            self.hybrid.to(self.device).configure(
                 foreground_ids=stacked_ids(
                     self.agent.robot.links + [ls.node_actors[n] for n in ls.node_actors]
                 ),

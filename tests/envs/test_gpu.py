@@ -8,6 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from placement_checks import check_constraints, episode_layout
 
 import embodied_envs  # noqa: F401
 
@@ -70,8 +71,45 @@ def test_hybrid_renders_every_env(env):
     frames = env.render()
     assert frames.shape == (N, 256, 256, 3) and frames.dtype == torch.uint8
     assert frames.float().std() > 5
-    bg = [env.unwrapped.hybrid.cached("render_camera", k).rgb for k in range(N)]
-    assert not torch.equal(bg[0], bg[1]), "each env's background follows its own layout"
+    cached = env.unwrapped.hybrid.cached("render_camera")
+    assert cached.rgb.device.type == "cuda" and cached.valid.all()
+    assert not torch.equal(cached.rgb[0], cached.rgb[1]), "each env's background is its own"
+    renders = env.unwrapped.hybrid.renders
+    env.reset()
+    env.render()
+    assert env.unwrapped.hybrid.renders == renders, "episodes reuse the backgrounds"
+
+
+@pytest.mark.parametrize("n", [16, 256])
+def test_per_episode_placement_on_the_gpu(n):
+    e = gym.make(ENV_ID, num_envs=n, sim_backend="physx_cuda", obs_mode="state")
+    try:
+        u = e.unwrapped
+        nodes = [m for m in u.layout_scene.dynamic_nodes if m in u.layout_scene.episodes.fallback]
+
+        def starts():
+            return torch.stack([u.layout_scene.node_actors[m].pose.raw_pose for m in nodes], 1)
+
+        _, info = e.reset(seed=0)
+        assert not info["reconfigure"]
+        a = starts().clone()
+        assert a.device.type == "cuda"
+        e.reset()
+        b = starts().clone()
+        assert (a[..., :2] != b[..., :2]).any(-1).all(), "every object of every env moved"
+        for k in range(0, n, max(1, n // 8)):  # every rule holds, checked independently
+            assert check_constraints(episode_layout(u, k)) == [], f"env {k}"
+        e.reset(options=dict(env_idx=torch.tensor([1, 3], device=u.device)))
+        c = starts()
+        keep = torch.ones(n, dtype=torch.bool)
+        keep[[1, 3]] = False
+        assert torch.equal(c[keep.to(u.device)], b[keep.to(u.device)])
+        assert (c[[1, 3], :, :2] != b[[1, 3], :, :2]).any(-1).all()
+        e.reset(seed=0)
+        torch.testing.assert_close(starts(), a, atol=1e-5, rtol=0)  # same seed, same starts
+        assert u.layout_scene.episodes.fallbacks == 0
+    finally:
+        e.close()
 
 
 def test_cuda_backends_match_the_cpu_rasterizer():
