@@ -42,3 +42,19 @@ def snapshot(folder: Path) -> dict:
 
 def deep(d):
     return copy.deepcopy(d)
+
+
+def per_layout_env(**kwargs):
+    """A module-scoped fixture: one ``PickEmbodiedGen-v1`` env per shipped layout."""
+
+    @pytest.fixture(scope="module", params=LAYOUTS, ids=[p.stem for p in LAYOUTS])
+    def fixture(request):
+        import gymnasium as gym
+
+        import embodied_envs  # noqa: F401
+
+        env = gym.make("PickEmbodiedGen-v1", layout_file=str(request.param), **kwargs)
+        yield env
+        env.close()
+
+    return fixture

@@ -68,7 +68,7 @@ def check_constraints(layout):
         if node in layout.manipulated_objs:
             ox, oy = layout.position[node][:2]
             d = math.hypot(ox - rx, oy - ry)
-            if not 0.2 < d < 0.85:
+            if not 0.2 < d < 0.78:
                 bad.append(f"{node} at {d:.3f} m from the robot")
             ang = math.degrees(
                 abs(math.atan2(oy - ry, ox - rx) - math.atan2(heading[1], heading[0]))

@@ -21,8 +21,6 @@ from embodied_envs.layout import load_layout
 from embodied_envs.layout.placement import derive_seed, place
 from embodied_envs.paths import default_layout
 
-DEMO_MAX_STEPS = 600  # control steps an episode may take in the demo (the solver needs ~350)
-
 
 def add_parser(sub) -> None:
     p = sub.add_parser("demo", help="run the scripted pick-and-place and write videos")
@@ -75,7 +73,6 @@ def _run_env(job: dict) -> list[EnvEpisode]:
         render_mode=job["render_mode"],
         control_mode="pd_joint_pos",
         camera_cfg=job["camera_cfg"],
-        max_episode_steps=DEMO_MAX_STEPS,
     )
     out = []
     every = job["frame_every"]

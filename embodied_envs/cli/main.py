@@ -11,7 +11,7 @@ from embodied_envs.splat import SplatFileError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from embodied_envs.cli import demo, layout_cmds, splat_cmds
+    from embodied_envs.cli import collect, demo, layout_cmds, replay, splat_cmds
 
     parser = argparse.ArgumentParser(
         prog="embodied-envs", description="Layout-driven ManiSkill pick environments."
@@ -19,12 +19,19 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     layout_cmds.add_parser(sub)
     demo.add_parser(sub)
+    collect.add_parser(sub)
+    replay.add_parser(sub)
     splat_cmds.add_parser(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["replay"]:  # every option after it is ManiSkill's replay_trajectory's
+        from embodied_envs.cli.replay import cmd_replay
+
+        return cmd_replay(argparse.Namespace(options=argv[1:]))
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -58,7 +58,8 @@ Visual modes add the 128x128 ``base_camera`` (composited over the splat with ``h
 
 **Rewards:** see ``compute_dense_reward``; the normalised dense reward is in [0, 1].
 
-**Episode End:** truncation after 100 steps (registry); ``success`` is reported in ``info``.
+**Episode End:** truncation after ``MAX_EPISODE_STEPS`` = 300 control steps (6 s, registry):
+the scripted expert needs ~140 and at most ~245; ``success`` is reported in ``info``.
 
 **Arguments:** ``layout_file``, ``replace_objs``, ``robot_uids`` (default: from the layout's
 robot name), ``robot_init_qpos_noise``, ``init_3dgs_quat``, ``objs_z_offset``,
@@ -80,7 +81,13 @@ def _has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-@register_env("PickEmbodiedGen-v1", max_episode_steps=100)
+# 300 control steps = 6 s at 50 Hz: the scripted expert's longest successful episode over 50
+# seeded episodes per shipped layout was 245 steps (mean ~140; tools/bench_solver.py), so every
+# demonstration fits, and a policy gets the expert's horizon with ~20% slack
+MAX_EPISODE_STEPS = 300
+
+
+@register_env("PickEmbodiedGen-v1", max_episode_steps=MAX_EPISODE_STEPS)
 class PickEmbodiedGenEnv(BaseEnv):
     __doc__ = PICK_EMBODIEDGEN_DOC
 
@@ -159,6 +166,20 @@ class PickEmbodiedGenEnv(BaseEnv):
             render_mode=render_mode,
             **kwargs,
         )
+
+    @property
+    def spec(self):
+        return self.__dict__.get("_spec")
+
+    @spec.setter
+    def spec(self, spec) -> None:
+        # gymnasium sets the spec that RecordEpisode stores as env_kwargs: keep the layout file
+        # absolute there, so a recorded dataset re-creates the env from any working directory
+        layout = None if spec is None else spec.kwargs.get("layout_file")
+        if layout is not None:
+            absolute = str(Path(layout).resolve())
+            spec = dataclasses.replace(spec, kwargs={**spec.kwargs, "layout_file": absolute})
+        self.__dict__["_spec"] = spec
 
     # --- configuration -------------------------------------------------------------------
     @property

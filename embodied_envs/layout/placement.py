@@ -35,7 +35,7 @@ class PlacementLimits:
     """Tunable limits of :func:`place`."""
 
     reach_min: float = 0.20  # m, manipulated object centre to robot base, exclusive
-    reach_max: float = 0.85  # m, exclusive
+    reach_max: float = 0.78  # m, exclusive: the Panda's top-down grasps fail from ~0.80 m
     max_heading_deg: float = 60.0  # manipulated objects within this angle of the robot heading
     hull_margin: float = 0.02  # m, the parent's top hull is shrunk by this much
     clearance: float = 0.01  # m, minimum gap between footprints

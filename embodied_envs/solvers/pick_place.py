@@ -29,12 +29,14 @@ class SolverConfig:
     approach_offset: float = 0.08  # m, pre-grasp distance above the grasp along the approach
     grasp_depth: float = 0.035  # m, grasp centre below the object's top
     min_tcp_height: float = 0.015  # m, lowest grasp centre above the support surface
-    lift_height: float = 0.10  # m, lift after grasping
-    gripper_steps: int = 12  # control steps to close the gripper
-    hold_steps: int = 15  # control steps holding still at the goal
-    joint_vel_scale: float = 1.0  # fraction of the Panda's joint velocity limits
-    joint_acc_scale: float = 1.0  # fraction of the Panda's joint acceleration limits
-    rrt_planning_time: float = 1.0  # s, per RRTConnect call
+    lift_heights: tuple[float, ...] = (0.10, 0.05)  # m, lifts after grasping, tried in order
+    gripper_steps: int = 8  # control steps to close the gripper
+    hold_steps: int = 10  # control steps holding still at the goal
+    joint_vel_scale: float = 2.0  # times mplib's default joint velocity limit (1 rad/s)
+    joint_acc_scale: float = 5.0  # times mplib's default joint acceleration limit (1 rad/s^2)
+    rrt_planning_time: float = 1.5  # s, per RRTConnect call
+    rrt_attempts: int = 3  # RRTConnect calls per stage before giving up (it is randomised)
+    max_path_steps: int = 120  # a longer plan (a wrist flip, a detour) is refused as "long"
     obstacle_points: int = 3000  # surface samples per obstacle actor
     obstacle_radius: float = 0.01  # m, radius of each obstacle point
     base_clearance: float = 0.15  # m, obstacle points this close to the base (in XY) and
@@ -157,6 +159,7 @@ class PickPlaceSolver:
             self.planners.append(planner)
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
         self.steps = 0
+        self.ended = False  # the episode was truncated (or terminated) in every env
         self.last_info: dict = {}
         self._batched_actions = len(self.env.action_space.shape) == 2
         self.gripper = np.full(self.num_envs, GRIPPER_OPEN)
@@ -197,7 +200,8 @@ class PickPlaceSolver:
         target = np.concatenate([pose.p, pose.q])
         dt = self.base.control_timestep
         statuses = []
-        attempts = ("screw", "rrt") if screw_first else ("rrt", "screw")
+        rrt = ("rrt",) * self.cfg.rrt_attempts
+        attempts = ("screw", *rrt) if screw_first else (*rrt, "screw")
         for how in attempts:
             if how == "screw":
                 res = planner.plan_screw(
@@ -212,6 +216,9 @@ class PickPlaceSolver:
                     planning_time=self.cfg.rrt_planning_time,
                     wrt_world=True,
                 )
+            if res["status"] == "Success" and len(res["position"]) > self.cfg.max_path_steps:
+                statuses.append(f"{how}: {len(res['position'])} steps, over max_path_steps")
+                continue
             if res["status"] == "Success" and len(res["position"]):
                 return res["position"]
             statuses.append(f"{how}: {res['status']}")
@@ -224,6 +231,8 @@ class PickPlaceSolver:
         lengths = [len(p) if p is not None else 0 for p in paths]
         n = max(lengths, default=0) + extra_steps
         for t in range(n):
+            if self.ended:  # no step past the end of the episode
+                return
             action = np.zeros((self.num_envs, 8), np.float32)
             for i, path in enumerate(paths):
                 if path is not None and len(path):
@@ -235,28 +244,49 @@ class PickPlaceSolver:
 
     def _step(self, action: np.ndarray) -> None:
         a = action if self._batched_actions else action[0]
-        _, _, _, _, info = self.env.step(a)
+        _, _, terminated, truncated, info = self.env.step(a)
         self.last_info = info
         self.steps += 1
+        self.ended = bool(np.all(np.asarray(torch.as_tensor(terminated | truncated).cpu())))
 
     def _gripper(self, value: float) -> None:
         self.gripper[:] = value
         self._execute([None] * self.num_envs, extra_steps=self.cfg.gripper_steps)
 
     def _per_env(
-        self, stage: str, targets: list[sapien.Pose | None], screw_first=True, obstacles=True
-    ):
+        self, stage: str, targets: list, screw_first: bool = True, obstacles: bool = True
+    ) -> list[sapien.Pose | None]:
+        """Plan and execute one stage in every env that has not failed yet.
+
+        Args:
+            stage: named in failure reports.
+            targets: per env a pose, a list of poses to try in order, or None (hold still).
+
+        Returns:
+            Per env the pose that was planned to (None where none could be).
+        """
         qpos = self._qpos()
-        paths = []
+        paths, chosen = [], []
         for i, target in enumerate(targets):
-            if target is None or self.reports[i].plan_failures:
-                paths.append(None)
-                continue
-            paths.append(self._plan(i, target, qpos[i], stage, screw_first, obstacles))
+            options = target if isinstance(target, list) else [target]
+            path, pose = None, None
+            if target is not None and not self.reports[i].plan_failures:
+                for k, pose in enumerate(options):
+                    name = stage if len(options) == 1 else f"{stage} (option {k})"
+                    path = self._plan(i, pose, qpos[i], name, screw_first, obstacles)
+                    if path is not None:  # the options tried before are not failures
+                        self.reports[i].plan_failures.clear()
+                        break
+            paths.append(path)
+            chosen.append(pose if path is not None else None)
         self._execute(paths)
+        return chosen
 
     # --- the policy ----------------------------------------------------------------------
-    def grasp_poses(self) -> list[sapien.Pose]:
+    def grasp_poses(self) -> list[list[sapien.Pose]]:
+        """Per env, the top-down grasps to try: the narrow-side grasp with the closing axis
+        nearer the gripper's current one first, then the same grasp turned by 180 degrees
+        (the same for a parallel gripper, but another wrist angle for IK and joint limits)."""
         agent = self.base.agent
         tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
         poses = []
@@ -267,32 +297,44 @@ class PickPlaceSolver:
             verts = pose.transform_points(geom.vertices)
             support = float(self.base.layout_scene.top_z[i])
             centre, closing, _ = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
-            poses.append(agent.build_grasp_pose(np.array([0, 0, -1.0]), closing, centre))
+            down = np.array([0, 0, -1.0])
+            poses.append([agent.build_grasp_pose(down, c, centre) for c in (closing, -closing)])
         return poses
 
     def solve(self) -> SolveResult:
         """Run the whole pick-and-place in every env; returns per-env reports and the last info."""
         cfg = self.cfg
-        grasps = self.grasp_poses()
-        self._per_env(
-            "approach", [g * sapien.Pose([0, 0, -cfg.approach_offset]) for g in grasps], False
-        )
+        up = sapien.Pose([0, 0, -cfg.approach_offset])
+        candidates = self.grasp_poses()
+        pre = self._per_env("approach", [[g * up for g in c] for c in candidates], False)
+        grasps = [
+            None if p is None else p * up.inv() for p in pre
+        ]  # the grasp whose pre-grasp was reached
         self._per_env("grasp", grasps, obstacles=False)
         self._gripper(GRIPPER_CLOSED)
-        lifts = [sapien.Pose(g.p + np.array([0, 0, cfg.lift_height]), g.q) for g in grasps]
-        self._per_env("lift", lifts, obstacles=False)
+        lifts = [
+            None
+            if g is None
+            else [sapien.Pose(g.p + np.array([0, 0, h]), g.q) for h in cfg.lift_heights]
+            for g in grasps
+        ]
+        lifts = self._per_env("lift", lifts, obstacles=False)
         # carry: keep the object's offset from the TCP as it is in the hand now
         tcp = self.base.agent.tcp.pose.p.cpu().numpy()
         obj = self.base.obj.pose.p.cpu().numpy()
         goal = self.base.goal_site.pose.p.cpu().numpy()
         carries = [
-            sapien.Pose(goal[i] + (tcp[i] - obj[i]), lifts[i].q) for i in range(self.num_envs)
+            None if lifts[i] is None else sapien.Pose(goal[i] + (tcp[i] - obj[i]), lifts[i].q)
+            for i in range(self.num_envs)
         ]
         self._per_env("carry", carries, screw_first=False)
         # fine correction: re-measure the in-hand offset and move the last few millimetres
         tcp = self.base.agent.tcp.pose.p.cpu().numpy()
         obj = self.base.obj.pose.p.cpu().numpy()
-        fine = [sapien.Pose(goal[i] + (tcp[i] - obj[i]), lifts[i].q) for i in range(self.num_envs)]
+        fine = [
+            None if lifts[i] is None else sapien.Pose(goal[i] + (tcp[i] - obj[i]), lifts[i].q)
+            for i in range(self.num_envs)
+        ]
         self._per_env("settle", fine, obstacles=False)
         self._execute([None] * self.num_envs, extra_steps=cfg.hold_steps)
         return SolveResult(self.reports, self.steps, self.last_info)

@@ -4,9 +4,8 @@ regimes, and hybrid observations that survive ManiSkill's record-and-replay tool
 import gymnasium as gym
 import h5py
 import numpy as np
-import pytest
 import torch
-from conftest import LAYOUTS
+from conftest import per_layout_env
 from placement_checks import check_constraints, episode_layout, object_poses
 
 import embodied_envs  # noqa: F401
@@ -14,11 +13,7 @@ import embodied_envs  # noqa: F401
 ENV_ID = "PickEmbodiedGen-v1"
 
 
-@pytest.fixture(scope="module", params=LAYOUTS, ids=[p.stem for p in LAYOUTS])
-def env(request):
-    e = gym.make(ENV_ID, layout_file=str(request.param), obs_mode="state")
-    yield e
-    e.close()
+env = per_layout_env(obs_mode="state")
 
 
 def test_default_resets_keep_the_scene_and_draw_valid_new_starts(env):

@@ -26,7 +26,7 @@ def test_make_without_arguments_uses_default_layout():
         assert e.unwrapped.layouts[0].target == "can"
         from mani_skill.utils.registration import REGISTERED_ENVS
 
-        assert REGISTERED_ENVS[ENV_ID].max_episode_steps == 100
+        assert REGISTERED_ENVS[ENV_ID].max_episode_steps == 300
     finally:
         e.close()
 

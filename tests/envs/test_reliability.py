@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import LAYOUTS
+from conftest import LAYOUTS, per_layout_env
 from gymnasium.utils.env_checker import check_env
 from gymnasium.utils.passive_env_checker import env_render_passive_checker
 
@@ -76,11 +76,7 @@ def assert_identical(a, b):
         assert np.array_equal(a, b, equal_nan=False), "values differ"
 
 
-@pytest.fixture(scope="module", params=LAYOUTS, ids=[p.stem for p in LAYOUTS])
-def state_env(request):
-    env = gym.make(ENV_ID, layout_file=str(request.param), obs_mode="state_dict")
-    yield env
-    env.close()
+state_env = per_layout_env(obs_mode="state_dict")
 
 
 def test_same_seed_is_bit_identical_over_50_steps_including_reconfigure(state_env):

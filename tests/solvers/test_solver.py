@@ -9,7 +9,7 @@ from embodied_envs.solvers import PickPlaceSolver
 
 @pytest.fixture(scope="module")
 def env():
-    e = gym.make("PickEmbodiedGen-v1", control_mode="pd_joint_pos", max_episode_steps=600)
+    e = gym.make("PickEmbodiedGen-v1", control_mode="pd_joint_pos")
     yield e
     e.close()
 

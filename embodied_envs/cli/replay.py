@@ -1,0 +1,36 @@
+"""``embodied-envs replay``: ManiSkill's ``replay_trajectory`` with this package's env registered.
+
+Every option is ManiSkill's (``--traj-path``, ``-o``, ``-c``, ``--use-env-states``,
+``--save-traj``, ``--save-video``, ``-n``, ...). Observations with ``hybrid_obs`` are composited
+over the splat whatever ``--render-mode`` says: ``hybrid_obs`` is recorded in ``env_kwargs``.
+Conversions from ``pd_joint_pos`` to end-effector control modes (``-c pd_ee_delta_pose`` ...)
+use :func:`embodied_envs.solvers.ee_actions.joint_pos_to_ee`, which works in the robot's root
+frame (ManiSkill's own converter assumes an unrotated robot base).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "replay",
+        help="ManiSkill's replay_trajectory (obs / control-mode conversion) for these datasets",
+        add_help=False,
+    )
+    p.add_argument("options", nargs=argparse.REMAINDER, help="replay_trajectory's options")
+    p.set_defaults(func=cmd_replay)
+
+
+def cmd_replay(args) -> int:
+    from mani_skill.trajectory import replay_trajectory
+    from mani_skill.trajectory.utils.actions import conversion
+
+    import embodied_envs  # noqa: F401  (registers PickEmbodiedGen-v1 for gym.make)
+    from embodied_envs.solvers.ee_actions import joint_pos_to_ee
+
+    conversion.from_pd_joint_pos_to_ee = joint_pos_to_ee  # root-frame end-effector actions
+
+    replay_trajectory.main(replay_trajectory.parse_args(args.options or ["--help"]))
+    return 0

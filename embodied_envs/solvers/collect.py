@@ -1,0 +1,269 @@
+"""Demonstration datasets: the scripted solver recorded in ManiSkill's trajectory format.
+
+One dataset per layout: ``<out>/<layout stem>/trajectory.h5`` + ``trajectory.json`` exactly as
+ManiSkill's ``RecordEpisode`` writes them (``env_info`` with ``env_kwargs`` that re-create the
+env from any working directory, per-episode seed, success and length, ``source_type``
+``"motionplanning"``), readable by ``ManiSkillTrajectoryDataset`` and replayable by
+``replay_trajectory``; plus ``summary.json``. On CPU each worker is one process with one env; it
+collects a disjoint block of seeds into its own file, and the blocks are merged with ManiSkill's
+``merge_trajectories``. Everything is written under a temporary name and renamed when complete.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing as mp
+import os
+import shutil
+import tempfile
+import time
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+ENV_ID = "PickEmbodiedGen-v1"
+SOURCE_DESC = (
+    "embodied_envs PickPlaceSolver (embodied_envs/solvers/pick_place.py): mplib screw and "
+    "RRTConnect joint plans, top-down grasp across the target's narrow side, carry to the goal, "
+    "hold still; pd_joint_pos actions"
+)
+OBS_MODES = ("none", "state", "rgb", "rgbd")
+
+
+class CollectError(RuntimeError):
+    """A collection that cannot give what was asked (names the numbers and the fix)."""
+
+
+@dataclass(frozen=True)
+class CollectPlan:
+    """What to collect for one layout.
+
+    Attributes:
+        layout: the layout file (absolute).
+        num: demonstrations wanted.
+        seed: first episode seed; worker k uses the block ``seed + k * block`` onwards.
+        obs_mode: recorded observations (``none``: replay re-renders them).
+        hybrid_obs: sensor RGB over the splat background (recorded in ``env_kwargs``).
+        only_success: keep only successful episodes, trying up to ``max_attempts`` seeds.
+        max_attempts: the bound on seeds tried for ``only_success``.
+        workers: processes.
+        video: also write one MP4 per kept episode.
+    """
+
+    layout: str
+    num: int
+    seed: int = 0
+    obs_mode: str = "none"
+    hybrid_obs: bool = False
+    only_success: bool = False
+    max_attempts: int | None = None
+    workers: int = 1
+    video: bool = False
+
+    def attempts(self) -> int:
+        return (self.max_attempts or 2 * self.num) if self.only_success else self.num
+
+    def blocks(self) -> list[tuple[list[int], int]]:
+        """Per worker: its seeds and how many demonstrations it must keep."""
+        w = max(1, min(self.workers, self.num))
+        quota = [self.num // w + (k < self.num % w) for k in range(w)]
+        tries = [math.ceil(self.attempts() * q / self.num) for q in quota]
+        starts = [self.seed + sum(tries[:k]) for k in range(w)]
+        return [(list(range(s, s + t)), q) for s, t, q in zip(starts, tries, quota, strict=True)]
+
+
+@dataclass
+class EpisodeRecord:
+    seed: int
+    success: bool
+    kept: bool
+    steps: int
+    failure: str | None  # the stage that failed first ("execution" when all plans ran)
+    wall_time_s: float
+
+
+@dataclass
+class LayoutSummary:
+    layout: str
+    env_id: str
+    attempted: int
+    kept: int
+    successes: int
+    success_rate: float
+    failures_by_stage: dict[str, int]
+    steps_mean: float
+    steps_max: int
+    wall_time_s: float
+    seeds: list[int]
+    files: list[str] = field(default_factory=list)
+
+
+def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name: str, queue):
+    """One process: one env recorded by ManiSkill's RecordEpisode; a record per episode goes
+    to ``queue`` (the parent's progress bar); ends when its parent has ended."""
+    os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+    import gymnasium as gym
+    from mani_skill.utils.wrappers.record import RecordEpisode
+
+    import embodied_envs  # noqa: F401
+    from embodied_envs.solvers.pick_place import PickPlaceSolver
+
+    parent = os.getppid()
+    env = gym.make(
+        ENV_ID,
+        layout_file=plan.layout,
+        obs_mode=plan.obs_mode,
+        hybrid_obs=plan.hybrid_obs,
+        control_mode="pd_joint_pos",
+        render_mode="rgb_array" if plan.video else None,
+        sim_backend="physx_cpu",
+    )
+    env = RecordEpisode(
+        env,
+        output_dir=out_dir,
+        trajectory_name=name,
+        save_video=plan.video,
+        save_on_reset=False,
+        record_reward=True,
+        source_type="motionplanning",
+        source_desc=SOURCE_DESC,
+        video_fps=int(round(1 / env.unwrapped.control_timestep)),
+    )
+    kept = 0
+    try:
+        for seed in seeds:
+            if os.getppid() != parent:  # the parent is gone: write nothing more
+                return
+            t0 = time.perf_counter()
+            env.reset(seed=seed)
+            result = PickPlaceSolver(env, seed=seed).solve()
+            success = bool(env.unwrapped.evaluate()["success"][0])
+            keep = success or not plan.only_success
+            env.flush_trajectory(save=keep)
+            if plan.video:
+                env.flush_video(name=f"seed_{seed:06d}", save=keep)
+            kept += keep
+            failures = result.reports[0].plan_failures
+            failure = None if success else (failures[0].split(":")[0] if failures else "execution")
+            queue.put(
+                asdict(
+                    EpisodeRecord(
+                        seed, success, keep, result.steps, failure, time.perf_counter() - t0
+                    )
+                )
+            )
+            if kept >= quota:
+                break
+    finally:
+        env.close()
+        queue.put(None)  # this worker is done
+
+
+def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
+    """Collect one layout's dataset into ``out/<layout stem>/``.
+
+    Args:
+        plan: what to collect.
+        out: the output folder.
+        progress: optional callable taking each episode's record (for a progress bar).
+
+    Returns:
+        The summary (also written as ``summary.json``).
+
+    Raises:
+        CollectError: with ``only_success``, when the attempts run out before ``num``
+            successes (nothing is written then).
+    """
+    from mani_skill.trajectory.merge_trajectory import merge_trajectories
+
+    layout = Path(plan.layout).resolve()
+    target = out / layout.stem
+    out.mkdir(parents=True, exist_ok=True)
+    if (target / "trajectory.json").exists():
+        info = json.loads((target / "trajectory.json").read_text())["env_info"]
+        if info["env_kwargs"].get("layout_file") != str(layout):
+            raise CollectError(
+                f"{target} holds a dataset of {info['env_kwargs'].get('layout_file')}, not of "
+                f"{layout}. Fix: choose another --out, or remove that folder."
+            )
+    work = Path(tempfile.mkdtemp(prefix=f".{layout.stem}.", dir=out))
+    t0 = time.perf_counter()
+    try:
+        ctx = mp.get_context("forkserver")
+        queue = ctx.Queue()
+        blocks = plan.blocks()
+        procs = []
+        for k, (seeds, quota) in enumerate(blocks):
+            p = ctx.Process(
+                target=_worker,
+                args=(CollectPlan(**{**asdict(plan), "layout": str(layout)}), seeds, quota,
+                      str(work), f"part{k:03d}", queue),
+                daemon=True,
+            )  # fmt: skip
+            p.start()
+            procs.append(p)
+        records, running = [], len(procs)
+        while running:
+            rec = queue.get()
+            if rec is None:
+                running -= 1
+                continue
+            records.append(EpisodeRecord(**rec))
+            if progress is not None:
+                progress(records[-1])
+        for p in procs:
+            p.join()
+            if p.exitcode != 0:
+                raise CollectError(f"a collection worker failed (exit code {p.exitcode})")
+        records.sort(key=lambda r: r.seed)
+        kept = [r for r in records if r.kept]
+        successes = sum(r.success for r in records)
+        if plan.only_success and len(kept) < plan.num:
+            raise CollectError(
+                f"{layout}: {len(kept)} of {plan.num} successful demonstrations after "
+                f"{len(records)} attempts (success rate {successes / max(len(records), 1):.0%})."
+                " Fix: raise --max-attempts, or check the layout with `embodied-envs demo`."
+            )
+        parts = sorted(work.glob("part*.h5"))
+        staged = work / "trajectory.h5"
+        merge_trajectories(str(staged), [str(p) for p in parts])
+        _finish_json(work / "trajectory.json")
+        steps = [r.steps for r in kept] or [0]
+        summary = LayoutSummary(
+            layout=str(layout),
+            env_id=ENV_ID,
+            attempted=len(records),
+            kept=len(kept),
+            successes=successes,
+            success_rate=successes / max(len(records), 1),
+            failures_by_stage=dict(Counter(r.failure for r in records if r.failure)),
+            steps_mean=sum(steps) / len(steps),
+            steps_max=max(steps),
+            wall_time_s=round(time.perf_counter() - t0, 2),
+            seeds=[r.seed for r in kept],
+            files=["trajectory.h5", "trajectory.json", "summary.json"],
+        )
+        (work / "summary.json").write_text(json.dumps(asdict(summary), indent=2))
+        staging = work / "dataset"
+        staging.mkdir()
+        for name in summary.files:
+            (work / name).replace(staging / name)
+        for video in sorted(work.glob("seed_*.mp4")):
+            video.replace(staging / video.name)
+        if target.exists():  # the same layout's earlier dataset: replaced whole
+            shutil.rmtree(target)
+        staging.replace(target)
+        return summary
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _finish_json(path: Path) -> None:
+    """ManiSkill's merge keeps the first part's metadata; the episodes keep their seeds."""
+    data = json.loads(path.read_text())
+    data.setdefault("source_type", "motionplanning")
+    data.setdefault("source_desc", SOURCE_DESC)
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=2))
+    tmp.replace(path)

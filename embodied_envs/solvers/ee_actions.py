@@ -1,0 +1,112 @@
+"""Joint-target actions (``pd_joint_pos``) as end-effector actions, in the robot's root frame.
+
+ManiSkill's end-effector controllers (``pd_ee_pose``, ``pd_ee_delta_pose``, ``pd_ee_delta_pos``)
+take poses in the robot's root frame. ManiSkill 3.0.1's trajectory converter
+(``mani_skill.trajectory.utils.actions.conversion.from_pd_joint_pos_to_ee``) subtracts world
+positions and takes world orientations, which is the root frame only when the robot base is not
+rotated; every layout here yaws the base to face the table, so its conversions drift and clip.
+:func:`joint_pos_to_ee` computes the same actions in the root frame: forward kinematics of each
+joint target gives the wanted end-effector pose relative to the root, and the action moves the
+controller's current end-effector pose there. ``embodied-envs replay -c pd_ee_*`` uses it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+
+def _root_pose_of_target(pin_model, qpos: np.ndarray, ee_index: int):
+    """The end-effector pose relative to the robot root for joint positions ``qpos``."""
+    pin_model.compute_forward_kinematics(qpos)
+    return pin_model.get_link_pose(ee_index)  # sapien.Pose in the root frame
+
+
+def ee_action(arm, target_p: np.ndarray, target_q: np.ndarray) -> tuple[torch.Tensor, bool]:
+    """The arm action of an end-effector controller that moves toward a root-frame pose.
+
+    Args:
+        arm: the env's ``PDEEPoseController`` / ``PDEEPosController`` (root-frame config).
+        target_p, target_q: the wanted pose relative to the root (wxyz quaternion).
+
+    Returns:
+        The action ``(1, d)`` and whether it had to be clipped (the target is farther than one
+        step of the controller allows).
+    """
+    from mani_skill.utils.geometry.rotation_conversions import (
+        matrix_to_euler_angles,
+        quaternion_invert,
+        quaternion_multiply,
+        quaternion_to_matrix,
+    )
+
+    device = arm.device
+    p = torch.as_tensor(target_p, dtype=torch.float32, device=device)[None]
+    q = torch.as_tensor(target_q, dtype=torch.float32, device=device)[None]
+    cfg = arm.config
+    pos_only = not hasattr(cfg, "rot_lower")
+    if not cfg.use_delta:  # absolute pose: position and XYZ euler angles of the root frame
+        return torch.cat([p, matrix_to_euler_angles(quaternion_to_matrix(q), "XYZ")], 1), False
+    current = arm._target_pose if cfg.use_target else arm.ee_pose_at_base
+    action = (p - current.p) / torch.as_tensor(cfg.pos_upper, device=device)
+    clipped = bool((action.abs() > 1).any())
+    action = action.clamp(-1, 1)
+    if not pos_only:  # the controller applies delta * current; its rotation scale is rot_lower
+        delta = quaternion_multiply(q, quaternion_invert(current.q))
+        rot = matrix_to_euler_angles(quaternion_to_matrix(delta), "XYZ") / cfg.rot_lower
+        norm = torch.linalg.vector_norm(rot, dim=1, keepdim=True)
+        clipped |= bool((norm > 1).any())
+        action = torch.cat([action, rot / norm.clamp_min(1.0)], 1)
+    return action, clipped
+
+
+def joint_pos_to_ee(
+    output_mode: str,
+    ori_actions,
+    ori_env,
+    env,
+    render: bool = False,
+    pbar=None,
+    verbose: bool = False,
+    substeps: int = 4,
+) -> dict:
+    """Replay ``pd_joint_pos`` actions in ``env`` with an end-effector controller.
+
+    The signature is ManiSkill's converter's; ``ori_env`` (the original control mode) is not
+    needed: a ``pd_joint_pos`` action holds the joint targets themselves. When a target is
+    farther than one controller step, up to ``substeps`` steps are taken toward it.
+
+    Returns:
+        The last step's info.
+    """
+    from mani_skill.utils import common
+
+    controller = env.unwrapped.agent.controller
+    arm = controller.controllers["arm"]
+    robot = env.unwrapped.agent.robot
+    pin_model = robot.create_pinocchio_model()
+    arm_joints = arm.active_joint_indices.cpu().numpy()
+    ori_controller = ori_env.unwrapped.agent.controller
+    info: dict = {}
+    if pbar is not None:
+        pbar.reset(total=len(ori_actions))
+    for t in range(len(ori_actions)):
+        if pbar is not None:
+            pbar.update()
+        ori = ori_controller.to_action_dict(
+            common.to_tensor(ori_actions[t], device=env.unwrapped.device)
+        )
+        qpos = robot.get_qpos()[0].cpu().numpy().astype(np.float64)
+        qpos[arm_joints] = common.to_numpy(ori["arm"]).reshape(-1)
+        target = _root_pose_of_target(pin_model, qpos, arm.ee_link.index)
+        for _ in range(substeps):
+            arm_action, clipped = ee_action(arm, target.p, target.q)
+            action = controller.from_action_dict(
+                {"arm": arm_action[0], "gripper": common.to_tensor(ori["gripper"]).reshape(-1)}
+            )
+            _, _, _, _, info = env.step(action)
+            if render:
+                env.render_human()
+            if not clipped:
+                break
+    return info

@@ -1,0 +1,111 @@
+"""`embodied-envs collect` and `replay`: datasets that ManiSkill's own tools read and replay."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+from conftest import DEFAULT_LAYOUT
+
+CLI = [sys.executable, "-m", "embodied_envs.cli.main"]
+ENV = {**os.environ, "MS_SKIP_ASSET_DOWNLOAD_PROMPT": "1"}
+
+
+def run(args, cwd, check=True):
+    return subprocess.run(
+        CLI + args, cwd=cwd, env=ENV, capture_output=True, text=True, timeout=600, check=check
+    )
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    """Three seeded demonstrations of the default layout, collected from another folder with
+    a relative layout path, then moved."""
+    work = tmp_path_factory.mktemp("collect")
+    layout = os.path.relpath(DEFAULT_LAYOUT, work)
+    res = run(["collect", "--layout", layout, "--num", "3", "--seed", "5", "--out", "out"], work)
+    assert "default.json: 3 demonstrations" in res.stdout, res.stdout + res.stderr
+    moved = work / "moved"
+    shutil.move(work / "out" / "default", moved)
+    assert not any(p.name.startswith(".") for p in (work / "out").iterdir()), "no leftovers"
+    return moved
+
+
+def test_dataset_is_maniskill_trajectory_format(dataset):
+    meta = json.loads((dataset / "trajectory.json").read_text())
+    info = meta["env_info"]
+    assert info["env_id"] == "PickEmbodiedGen-v1"
+    assert info["env_kwargs"]["layout_file"] == str(DEFAULT_LAYOUT)  # absolute: any cwd
+    assert info["env_kwargs"]["control_mode"] == "pd_joint_pos"
+    assert info["max_episode_steps"] == 300
+    assert meta["source_type"] == "motionplanning" and "PickPlaceSolver" in meta["source_desc"]
+    episodes = meta["episodes"]
+    assert [e["episode_seed"] for e in episodes] == [5, 6, 7]
+    assert [e["episode_id"] for e in episodes] == [0, 1, 2]
+    summary = json.loads((dataset / "summary.json").read_text())
+    assert summary["attempted"] == 3 and summary["kept"] == 3
+    assert summary["successes"] == sum(e["success"] for e in episodes)
+    with h5py.File(dataset / "trajectory.h5") as f:
+        for e in episodes:
+            g = f[f"traj_{e['episode_id']}"]
+            n = e["elapsed_steps"]
+            assert g["actions"].shape == (n, 8) and np.isfinite(g["actions"][:]).all()
+            assert not g["truncated"][:-1].any(), "no step before the last is truncated"
+            assert bool(g["success"][-1]) == e["success"]
+            assert n <= 300
+            assert g["env_states/actors/goal_site"].shape[0] == n + 1
+
+
+def test_maniskill_loader_and_replay_from_another_folder(dataset, tmp_path):
+    """ManiSkill's replay_trajectory converts to rgb observations from any working folder;
+    the replayed states are the recorded ones; ManiSkillTrajectoryDataset reads the result."""
+    from mani_skill.trajectory.dataset import ManiSkillTrajectoryDataset
+
+    traj = dataset / "trajectory.h5"
+    res = run(
+        ["replay", "--traj-path", str(traj), "-o", "rgb", "--save-traj", "--allow-failure"],
+        tmp_path,
+    )
+    out = dataset / "trajectory.rgb.pd_joint_pos.physx_cpu.h5"
+    assert out.is_file(), res.stdout + res.stderr
+    with h5py.File(traj) as a, h5py.File(out) as b:
+        for key in a:
+            rec, rep = a[key]["env_states/actors"], b[key]["env_states/actors"]
+            for actor in rec:
+                np.testing.assert_allclose(rep[actor][:], rec[actor][:], atol=1e-4)
+            rgb = b[key]["obs/sensor_data/base_camera/rgb"]
+            assert rgb.shape == (len(a[key]["actions"]) + 1, 128, 128, 3)
+    data = ManiSkillTrajectoryDataset(str(out), load_count=-1, success_only=False)
+    episodes = json.loads((dataset / "trajectory.json").read_text())["episodes"]
+    assert len(data) == sum(e["elapsed_steps"] for e in episodes)
+    item = data[0]
+    assert item["obs"]["sensor_data"]["base_camera"]["rgb"].shape == (128, 128, 3)
+    assert item["action"].shape == (8,)
+
+
+def test_impossible_only_success_target_ends_with_a_clear_error(tmp_path):
+    res = run(
+        ["collect", "--num", "3", "--only-success", "--max-attempts", "1", "--out", "out"],
+        tmp_path,
+        check=False,
+    )
+    assert res.returncode == 1
+    assert "of 3 successful demonstrations after 1 attempts (success rate" in res.stdout
+    assert "Fix: raise --max-attempts" in res.stdout
+    assert list((tmp_path / "out").iterdir()) == [], "nothing is left behind"
+
+
+def test_bad_arguments_fail_in_one_line_before_simulation(tmp_path):
+    for args, words in (
+        (["collect", "--num", "0"], "0 is not a positive integer"),
+        (["collect", "--seed", "-5"], "seed -5 is outside [0, 2**63)"),
+        (["collect", "--layout", "missing.json"], "missing.json"),
+    ):
+        res = run(args + ["--out", "out"], tmp_path, check=False)
+        assert res.returncode != 0 and words in res.stderr + res.stdout, args
+        assert "Traceback" not in res.stderr, args
+        assert not (tmp_path / "out").exists()
