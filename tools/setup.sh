@@ -28,8 +28,8 @@ fi
 STAMP=$VENV/.embodied_envs.stamp
 HASH=$(sha256sum pyproject.toml | cut -d' ' -f1)
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$HASH" ] || ! "$VPY" -c "import embodied_envs" 2>/dev/null; then
-    log "installing embodied-envs[dev] (editable)"
-    "$VPY" -m pip install -q -e ".[dev]"
+    log "installing embodied-envs[dev,lerobot] (editable)"
+    "$VPY" -m pip install -q -e ".[dev,lerobot]"
     echo "$HASH" >"$STAMP"
 fi
 

@@ -109,3 +109,70 @@ def test_bad_arguments_fail_in_one_line_before_simulation(tmp_path):
         assert res.returncode != 0 and words in res.stderr + res.stdout, args
         assert "Traceback" not in res.stderr, args
         assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("mode", ["pd_ee_delta_pose", "pd_ee_pose"])
+def test_end_effector_conversion_on_a_yawed_robot_base(dataset, tmp_path, mode):
+    """The shipped layouts yaw the robot base to face the table; `replay -c` converts every
+    successful demo (ManiSkill 3.0.1's own converter saved 4/10 and 0/10 of such demos)."""
+    meta = json.loads((dataset / "trajectory.json").read_text())
+    robot = json.loads(DEFAULT_LAYOUT.read_text())["position"]["franka"]
+    assert abs(robot[5]) > 0.1, "the robot base is yawed in this layout"
+    work = tmp_path / "data"
+    shutil.copytree(dataset, work)
+    res = run(
+        ["replay", "--traj-path", str(work / "trajectory.h5"), "-c", mode, "--save-traj"], tmp_path
+    )
+    successes = sum(e["success"] for e in meta["episodes"])
+    assert f"{successes}/{len(meta['episodes'])}=" in res.stdout, res.stdout[-2000:]
+    out = json.loads(next(work.glob(f"trajectory.none.{mode}.*.json")).read_text())
+    assert {e["control_mode"] for e in out["episodes"]} == {mode}
+
+
+def test_lerobot_conversion_with_maniskill_converter(dataset, tmp_path):
+    """rgb observations by replay, then ManiSkill's convert_to_lerobot (the lerobot extra)."""
+    import pandas as pd
+
+    work = tmp_path / "data"
+    shutil.copytree(dataset, work, ignore=shutil.ignore_patterns("trajectory.*.*"))
+    run(
+        ["replay", "--traj-path", str(work / "trajectory.h5"), "-o", "rgb", "--save-traj",
+         "--count", "1", "--allow-failure"],
+        tmp_path,
+    )  # fmt: skip
+    rgb = next(work.glob("trajectory.rgb.*.h5"))
+    subprocess.run(
+        [sys.executable, "-m", "mani_skill.trajectory.convert_to_lerobot", "--traj-path",
+         str(rgb), "--output-dir", str(tmp_path / "lerobot"), "--task-name", "pick the can",
+         "--image-size", "128"],
+        env=ENV, check=True, capture_output=True, timeout=300,
+    )  # fmt: skip
+    info = json.loads((tmp_path / "lerobot" / "meta" / "info.json").read_text())
+    steps = json.loads((dataset / "trajectory.json").read_text())["episodes"][0]["elapsed_steps"]
+    assert info["total_episodes"] == 1 and info["total_frames"] == steps
+    frames = pd.read_parquet(next((tmp_path / "lerobot" / "data").rglob("*.parquet")))
+    assert len(frames) == steps and len(frames["action"].iloc[0]) == 8
+    assert len(frames["observation.state"].iloc[0]) == 9  # Panda qpos
+    assert next((tmp_path / "lerobot" / "videos").rglob("*.mp4")).stat().st_size > 1000
+
+
+def test_shards_on_disjoint_seeds_merge_with_maniskill(dataset, tmp_path):
+    """Two machines collect disjoint seed ranges; ManiSkill's merge_trajectory joins them."""
+    from mani_skill.trajectory.dataset import ManiSkillTrajectoryDataset
+
+    shutil.copytree(
+        dataset, tmp_path / "shard0" / "default", ignore=shutil.ignore_patterns("*.*.*")
+    )
+    run(["collect", "--num", "1", "--seed", "100", "--out", "shard1"], tmp_path)
+    subprocess.run(
+        [sys.executable, "-m", "mani_skill.trajectory.merge_trajectory", "-i", "shard0", "shard1",
+         "-o", "all/trajectory.h5"],
+        cwd=tmp_path, env=ENV, check=True, capture_output=True, timeout=300,
+    )  # fmt: skip
+    merged = json.loads((tmp_path / "all" / "trajectory.json").read_text())
+    assert [e["episode_seed"] for e in merged["episodes"]] == [5, 6, 7, 100]
+    assert merged["env_info"]["env_kwargs"]["layout_file"] == str(DEFAULT_LAYOUT)
+    data = ManiSkillTrajectoryDataset(
+        str(tmp_path / "all" / "trajectory.h5"), load_count=-1, success_only=False
+    )
+    assert len(data) == sum(e["elapsed_steps"] for e in merged["episodes"])
