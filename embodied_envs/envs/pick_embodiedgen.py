@@ -20,6 +20,14 @@ from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 from mani_skill.utils.visualization.misc import tile_images
 
+from embodied_envs.envs.arguments import (
+    check_action,
+    check_env_idx,
+    check_num_envs,
+    check_seed,
+    dataclass_arg,
+    fields_of,
+)
 from embodied_envs.envs.config import SUPPORTED_ROBOTS, CameraSpec, resolve_robot
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
 from embodied_envs.layout import LayoutInfo, load_layout
@@ -128,17 +136,16 @@ class PickEmbodiedGenEnv(BaseEnv):
                 f"render_mode={render_mode!r} is not supported; use one of "
                 f"{list(self.SUPPORTED_RENDER_MODES)} or None"
             )
+        check_num_envs(num_envs, kwargs.get("sim_backend", "auto"))
         self.camera_spec = CameraSpec.from_cfg(camera_cfg)
         self.layout_file = Path(layout_file) if layout_file is not None else default_layout()
         self.base_layout: LayoutInfo = load_layout(self.layout_file)
         robot = resolve_robot(self.base_layout.robot, robot_uids, str(self.layout_file))
-        self.placement_limits = _dataclass_arg(
-            PlacementLimits, placement_limits, "placement_limits"
-        )
-        self.goal_region = _dataclass_arg(GoalRegion, goal_region, "goal_region")
+        self.placement_limits = dataclass_arg(PlacementLimits, placement_limits, "placement_limits")
+        self.goal_region = dataclass_arg(GoalRegion, goal_region, "goal_region")
         self.replace_objs = bool(replace_objs)
         if self.replace_objs:  # an impossible layout fails here, not mid-simulation
-            place(self.base_layout, 0, **_fields(self.placement_limits))
+            place(self.base_layout, 0, **fields_of(self.placement_limits))
         self.robot_init_qpos_noise = float(robot_init_qpos_noise)
         self.init_3dgs_quat = tuple(float(v) for v in init_3dgs_quat)
         self.objs_z_offset = float(objs_z_offset)
@@ -217,7 +224,9 @@ class PickEmbodiedGenEnv(BaseEnv):
         return [
             self.base_layout
             if (first and k == 0)
-            else place(self.base_layout, derive_seed(seeds[k], k), **_fields(self.placement_limits))
+            else place(
+                self.base_layout, derive_seed(seeds[k], k), **fields_of(self.placement_limits)
+            )
             for k in range(self.num_envs)
         ]
 
@@ -268,6 +277,9 @@ class PickEmbodiedGenEnv(BaseEnv):
 
     # --- episodes ------------------------------------------------------------------------
     def reset(self, seed: int | list[int] | None = None, options: dict | None = None):
+        self._check_open("reset")
+        check_seed(seed, self.num_envs)
+        options = check_env_idx(options, self.num_envs, self.device)
         if seed is not None:
             # gymnasium's own generator follows the reset seed too, as gymnasium's checker and
             # wrappers expect (ManiSkill only seeds its episode RNGs); nothing here draws from it
@@ -280,28 +292,20 @@ class PickEmbodiedGenEnv(BaseEnv):
         return result
 
     def step(self, action):
-        self._check_action(action)
+        self._check_open("step")
+        what = f"PickEmbodiedGen-v1 with control_mode={self.control_mode!r}"
+        action = check_action(action, tuple(self.single_action_space.shape), self.num_envs, what)
+        if isinstance(action, torch.Tensor):
+            action = action.to(self.device)
         return super().step(action)
 
-    def _check_action(self, action) -> None:
-        """Reject actions the simulator would silently turn into NaN states or broadcast."""
-        if action is None or isinstance(action, dict):
-            return  # ManiSkill's own meanings (no-op, multi-agent)
-        a = torch.as_tensor(action)
-        single = tuple(self.single_action_space.shape)
-        if tuple(a.shape) not in (single, (self.num_envs, *single)):
-            raise ValueError(
-                f"action has shape {tuple(a.shape)}; {self.spec.id if self.spec else 'the env'}"
-                f" with control_mode={self.control_mode!r} takes {single} or "
-                f"({self.num_envs}, {single[0]})"
-            )
-        finite = torch.isfinite(a.reshape(-1, *single).float()).all(dim=1)
-        if not bool(finite.all()):
-            bad = (~finite).nonzero().reshape(-1).tolist()
-            raise ValueError(
-                f"action contains NaN or inf (env {bad}); check the policy's output before "
-                "stepping, the simulation state would become NaN"
-            )
+    def close(self):
+        self._closed = True
+        super().close()
+
+    def _check_open(self, call: str) -> None:
+        if self.__dict__.get("_closed"):
+            raise RuntimeError(f"{call}() on a closed PickEmbodiedGen-v1 env; make a new env")
 
     def _set_episode_rng(self, seed, env_idx: torch.Tensor):
         super()._set_episode_rng(seed, env_idx)
@@ -425,22 +429,3 @@ class PickEmbodiedGenEnv(BaseEnv):
         if _has_display():
             super().render_human()
         return self.render_rgb_array()
-
-
-def _dataclass_arg(cls, value, name: str):
-    """A dataclass keyword given as the dataclass, a dict of its fields, or None (defaults)."""
-    if value is None:
-        return cls()
-    if isinstance(value, cls):
-        return value
-    if isinstance(value, dict):
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(value) - known)
-        if unknown:
-            raise ValueError(f"{name}: unknown keys {unknown}; known: {sorted(known)}")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
-    raise ValueError(f"{name} must be a dict of {cls.__name__} fields, got {type(value).__name__}")
-
-
-def _fields(obj) -> dict:
-    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}

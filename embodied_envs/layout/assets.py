@@ -134,7 +134,8 @@ def parse_urdf(urdf: Path | str) -> AssetSpec:
         urdf: path of the ``.urdf`` file.
 
     Returns:
-        The asset's meshes, origins, friction (clipped per SPEC 2.1) and optional mass.
+        The asset's meshes, origins, friction (mu1/mu2 clipped to the ranges above) and
+        optional mass.
 
     Raises:
         LayoutError: when the file is missing or not valid URDF, or a mesh is missing.

@@ -1,4 +1,4 @@
-"""Seeded, strict BFS placement of a layout's nodes (SPEC section 3).
+"""Seeded, strict BFS placement of a layout's nodes.
 
 ``place(layout, seed)`` re-draws the poses of the background, the context (table), the robot and
 every object, breadth first from the table and larger footprints first. Every draw comes from
@@ -444,7 +444,7 @@ class _Placer:
 
 
 def place(layout: LayoutInfo, seed: int | np.random.Generator, **limits) -> LayoutInfo:
-    """Re-draw every pose of a layout (SPEC section 3).
+    """Re-draw every pose of a layout: background yaw, table yaw, robot spot, objects.
 
     Args:
         layout: a validated layout (its asset folders must exist).

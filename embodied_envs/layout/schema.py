@@ -230,7 +230,10 @@ def _check_structure(data, f: str) -> list[str]:
     types = {"tree": dict, "relation": dict, "objs_mapping": dict, "assets": dict, "position": dict}
     for key in REQUIRED_FIELDS:
         if key not in data:
-            problems.append(f'{f}: required field "{key}" is missing. Fix: add it (see SPEC 2).')
+            problems.append(
+                f'{f}: required field "{key}" is missing. Fix: add it (a layout has tree, '
+                "relation, objs_mapping, assets and position)."
+            )
         elif not isinstance(data[key], types[key]):
             problems.append(f'{f}: field "{key}" must be a JSON object.')
     for key in ("objs_desc", "quality"):

@@ -1,4 +1,5 @@
-"""Build EmbodiedGen assets as ManiSkill actors (SPEC 2.1 physics)."""
+"""Build EmbodiedGen assets as ManiSkill actors: the context static, everything else dynamic;
+friction from the URDF (clipped), restitution 0.05, mass from the URDF or 1000 kg/m^3."""
 
 from __future__ import annotations
 

@@ -306,7 +306,9 @@ class PickPlaceSolver:
         cfg = self.cfg
         up = sapien.Pose([0, 0, -cfg.approach_offset])
         candidates = self.grasp_poses()
-        pre = self._per_env("approach", [[g * up for g in c] for c in candidates], False)
+        pre = self._per_env(
+            "approach", [[g * up for g in c] for c in candidates], screw_first=False
+        )
         grasps = [
             None if p is None else p * up.inv() for p in pre
         ]  # the grasp whose pre-grasp was reached

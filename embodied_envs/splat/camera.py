@@ -52,7 +52,7 @@ class PinholeCamera:
     def from_fovy(
         cls, world_to_cam: np.ndarray, width: int, height: int, fovy_rad: float
     ) -> PinholeCamera:
-        """SPEC camera: fy = H / (2 tan(fovy / 2)), fx = fy, principal point at the centre."""
+        """Pinhole: fy = H / (2 tan(fovy / 2)), fx = fy, principal point at the centre."""
         if not 0.0 < fovy_rad < math.pi:
             raise ValueError(f"fovy must be in (0, 180) degrees, got {math.degrees(fovy_rad)}")
         f = height / (2.0 * math.tan(fovy_rad / 2.0))

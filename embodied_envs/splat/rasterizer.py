@@ -1,6 +1,6 @@
 """EWA splatting of 3D Gaussians in PyTorch (CPU or CUDA), and the backend switch.
 
-The rules (SPEC section 6, as in 3DGS): Gaussians with camera z <= ``NEAR_Z`` are dropped and
+The rules (as in 3DGS): Gaussians with camera z <= ``NEAR_Z`` are dropped and
 centres outside ``FRUSTUM_MARGIN`` times the view frustum are culled; the 3D covariance is
 projected with the perspective Jacobian (x/z and y/z clamped to the same margin) plus a
 ``LOW_PASS`` px^2 filter; a Gaussian covers the pixels whose centres lie within its

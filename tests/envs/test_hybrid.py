@@ -1,4 +1,5 @@
-"""Hybrid rendering: simulated foreground over the splat background (SPEC 5)."""
+"""Hybrid rendering: simulated foreground over the splat background (foreground ids, depth
+test, cached backgrounds)."""
 
 import json
 import math

@@ -1,7 +1,7 @@
 """Brute-force splat renderer for tests: per pixel, all Gaussians, sorted, no tiles.
 
 Written independently of ``embodied_envs.splat.rasterizer`` (numpy, float64, one Gaussian at a
-time) and applying the rules of SPEC section 6 literally.
+time) and applying the 3DGS rasterization rules literally.
 """
 
 from __future__ import annotations

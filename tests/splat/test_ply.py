@@ -6,7 +6,7 @@ from splat_helpers import random_splat
 from embodied_envs.splat import SplatFileError, read_ply, write_ply
 from embodied_envs.splat.ply import REQUIRED
 
-PROPS = list(REQUIRED)  # x y z f_dc_0..2 opacity scale_0..2 rot_0..3 (SPEC 6)
+PROPS = list(REQUIRED)  # x y z f_dc_0..2 opacity scale_0..2 rot_0..3 (INRIA layout)
 
 
 def write_raw(

@@ -1,0 +1,124 @@
+"""Checks of the env's arguments: constructor keywords, ``reset`` seeds and options, actions.
+
+Each check raises ``ValueError`` (or ``RuntimeError`` for a closed env) naming the argument,
+what it got and what is accepted, before the simulator sees the value.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import numbers
+
+import numpy as np
+import torch
+
+MAX_SEED = 2**32 - 1  # ManiSkill seeds numpy RandomStates, which take seeds in [0, 2**32)
+
+
+def dataclass_arg(cls, value, name: str):
+    """A dataclass keyword given as the dataclass, a dict of its fields, or None (defaults)."""
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, dict):
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(value) - known)
+        if unknown:
+            raise ValueError(f"{name}: unknown keys {unknown}; known: {sorted(known)}")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
+    raise ValueError(f"{name} must be a dict of {cls.__name__} fields, got {type(value).__name__}")
+
+
+def fields_of(obj) -> dict:
+    """A dataclass instance's fields as keyword arguments."""
+    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+
+
+def check_num_envs(num_envs, sim_backend: str) -> None:
+    """Several envs in one process need ManiSkill's GPU simulation, hence CUDA."""
+    if isinstance(num_envs, bool) or not isinstance(num_envs, numbers.Integral) or num_envs < 1:
+        raise ValueError(f"num_envs={num_envs!r} must be a positive integer")
+    cpu = sim_backend in ("cpu", "physx_cpu")
+    if num_envs > 1 and (cpu or not torch.cuda.is_available()):
+        why = f"sim_backend={sim_backend!r}" if cpu else "this machine has no CUDA device"
+        raise ValueError(
+            f"num_envs={num_envs} needs ManiSkill's GPU simulation, and {why}. Fix: one env per "
+            "process, vectorised with gym.make_vec('PickEmbodiedGen-v1', num_envs=N, "
+            "vectorization_mode='async', wrappers=[embodied_envs.envs.CPUGymWrapper], "
+            "vector_kwargs=dict(context='forkserver'))"
+        )
+
+
+def check_seed(seed, num_envs: int) -> None:
+    """``reset(seed=...)``: None, an int in [0, 2**32), or one such int per env."""
+    if seed is None:
+        return
+    values = seed.tolist() if isinstance(seed, np.ndarray | torch.Tensor) else seed
+    many = isinstance(values, list | tuple)
+    for v in values if many else [values]:
+        if isinstance(v, bool) or not isinstance(v, numbers.Integral) or not 0 <= v <= MAX_SEED:
+            raise ValueError(
+                f"reset(seed={seed!r}): a seed is an int in [0, {MAX_SEED}] (ManiSkill seeds "
+                f"numpy RandomStates), or a list of {num_envs} such ints; got {v!r}"
+            )
+    if many and len(values) not in (1, num_envs):
+        raise ValueError(
+            f"reset(seed=...): {len(values)} seeds for {num_envs} envs; give one, or one per env"
+        )
+
+
+def check_env_idx(options: dict | None, num_envs: int, device) -> dict | None:
+    """``reset(options=dict(env_idx=...))``: distinct env indices in [0, num_envs), as a tensor
+    on the env's device (ManiSkill indexes with it)."""
+    if not options or "env_idx" not in options:
+        return options
+    idx = options["env_idx"]
+    try:
+        t = torch.as_tensor(idx)
+    except (TypeError, ValueError, RuntimeError):
+        t = None
+    ok = (
+        t is not None
+        and t.dim() == 1
+        and len(t) > 0
+        and not t.is_floating_point()
+        and t.dtype != torch.bool
+        and bool(((t >= 0) & (t < num_envs)).all())
+        and len(torch.unique(t)) == len(t)
+    )
+    if not ok:
+        raise ValueError(
+            f"reset(options=dict(env_idx={idx!r})): env_idx is a non-empty 1-D list or tensor "
+            f"of distinct integer env indices in [0, {num_envs - 1}]"
+        )
+    return {**options, "env_idx": t.to(device=device, dtype=torch.long)}
+
+
+def check_action(action, single_shape: tuple, num_envs: int, what: str):
+    """The action as a tensor (lists and arrays are converted), or ``None`` / a dict as given.
+
+    Raises:
+        ValueError: for a wrong shape or NaN/inf values, naming both.
+    """
+    if action is None or isinstance(action, dict):
+        return action  # ManiSkill's own meanings (no-op, multi-agent)
+    try:
+        a = torch.as_tensor(np.asarray(action) if isinstance(action, list | tuple) else action)
+    except (TypeError, ValueError, RuntimeError) as e:
+        raise ValueError(f"action must be numbers of shape {single_shape}: {e}") from None
+    if tuple(a.shape) not in (single_shape, (num_envs, *single_shape)):
+        raise ValueError(
+            f"action has shape {tuple(a.shape)}; {what} takes {single_shape} or "
+            f"({num_envs}, {single_shape[0]})"
+        )
+    if not a.is_floating_point():
+        a = a.float()
+    finite = torch.isfinite(a.reshape(-1, *single_shape)).all(dim=1)
+    if not bool(finite.all()):
+        bad = (~finite).nonzero().reshape(-1).tolist()
+        raise ValueError(
+            f"action contains NaN or inf (env {bad}); check the policy's output before "
+            "stepping, the simulation state would become NaN"
+        )
+    return a

@@ -1,0 +1,91 @@
+"""Runtime arguments (seeds, env_idx, actions, num_envs, a closed env) fail with messages that
+name the argument and what is accepted, before the simulator sees them."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import embodied_envs  # noqa: F401
+
+ENV_ID = "PickEmbodiedGen-v1"
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = gym.make(ENV_ID, obs_mode="state")
+    yield e
+    e.close()
+
+
+@pytest.mark.parametrize(
+    "seed, words",
+    [
+        (2**40, "a seed is an int in [0, 4294967295]"),
+        (-1, "got -1"),
+        (1.5, "got 1.5"),
+        (True, "got True"),
+        ("3", "got '3'"),
+        ([1, 2], "2 seeds for 1 envs"),
+    ],
+)
+def test_bad_seeds_are_refused_naming_the_range(env, seed, words):
+    obs_before = env.reset(seed=0)[0]
+    with pytest.raises(ValueError, match="reset\\(seed=") as e:
+        env.reset(seed=seed)
+    assert words in str(e.value)
+    assert torch.equal(env.unwrapped.get_obs(), obs_before), "nothing was reset"
+
+
+def test_good_seeds_of_every_integer_kind_are_equal(env):
+    a = env.reset(seed=7)[0]
+    for seed in (np.int64(7), [7], np.array([7]), torch.tensor([7])):
+        assert torch.equal(env.reset(seed=seed)[0], a)
+
+
+@pytest.mark.parametrize("env_idx", [[1], [-1], [0.0], [], [0, 0], [[0]], "0"])
+def test_bad_env_idx_is_refused(env, env_idx):
+    with pytest.raises(ValueError, match=r"env_idx is a non-empty 1-D list or tensor .* \[0, 0\]"):
+        env.reset(options=dict(env_idx=env_idx))
+
+
+def test_env_idx_as_a_list_resets_like_a_tensor(env):
+    env.reset(seed=3)
+    a = env.reset(seed=3, options=dict(env_idx=[0]))[0]
+    b = env.reset(seed=3, options=dict(env_idx=torch.tensor([0])))[0]
+    assert torch.equal(a, b)
+
+
+def test_list_actions_step_like_tensors(env):
+    env.reset(seed=1)
+    action = [0.1, -0.1, 0.0, 0.05, 0.0, 0.0, 0.0, 1.0]
+    obs_list = env.step(action)[0]
+    env.reset(seed=1)
+    obs_tensor = env.step(torch.tensor(action))[0]
+    assert torch.equal(obs_list, obs_tensor)
+    with pytest.raises(ValueError, match=r"action has shape \(3,\); .* takes \(8,\) or \(1, 8\)"):
+        env.step([0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="action must be numbers of shape"):
+        env.step(["a"] * 8)
+
+
+def test_step_and_reset_after_close_say_so():
+    e = gym.make(ENV_ID, obs_mode="state")
+    e.reset(seed=0)
+    e.close()
+    for call in (lambda: e.step(np.zeros(8)), lambda: e.reset(seed=0)):
+        with pytest.raises(RuntimeError, match="on a closed PickEmbodiedGen-v1 env"):
+            call()
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="the message is for machines without CUDA")
+def test_several_envs_without_cuda_point_to_the_async_vector_env():
+    with pytest.raises(ValueError) as e:
+        gym.make(ENV_ID, num_envs=4)
+    msg = str(e.value)
+    assert "num_envs=4 needs ManiSkill's GPU simulation" in msg and "no CUDA device" in msg
+    assert "vectorization_mode='async'" in msg and "CPUGymWrapper" in msg
+    with pytest.raises(ValueError, match="sim_backend='physx_cpu'"):
+        gym.make(ENV_ID, num_envs=2, sim_backend="physx_cpu")
+    with pytest.raises(ValueError, match="num_envs=0 must be a positive integer"):
+        gym.make(ENV_ID, num_envs=0)
