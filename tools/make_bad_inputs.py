@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import copy
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -275,13 +276,128 @@ def main() -> None:
             d["position"][node] = [*d["position"]["cracker_box"][:2], 1.2, 0, 0, 0, 1]
 
     write_case(
-        "objects_cannot_be_placed",
-        "more objects than the table holds",
-        "PlacementError",
-        ["layout.json", "cannot place", "box"],
+        "objects_stacked_at_one_pose",
+        "table-sized boxes floating at one pose: the file's poses cannot be simulated",
+        "LayoutError",
+        ['position["box 0"]', "not on the top", "overlap", "replace_objs=True"],
         setup=box_folder,
         layout=mutated(crowded),
     )
+    write_case(
+        "objects_cannot_be_placed",
+        "the target cannot be placed within an empty reach band",
+        "PlacementError",
+        ["layout.json", "cannot place", "can", "m of the robot base"],
+        env_kwargs={"placement_limits": {"reach_min": 0.3, "reach_max": 0.3}},
+        validate=False,
+        layout=b,
+    )
+    # JSON that would silently lose data
+    text = json.dumps(b, indent=2)
+    mug = json.dumps(b["position"]["mug"])
+    write_case(
+        "duplicate_key",
+        'a duplicate key in "position" (a JSON reader keeps the last)',
+        "LayoutError",
+        ["layout.json", '"mug" appears twice', "Fix: keep one"],
+        raw_layout=text.replace('"position": {', f'"position": {{\n    "mug": {mug},', 1),
+    )
+
+    def twice_in_tree(d):
+        d["tree"]["table"].append(["mug", "ON"])
+
+    write_case(
+        "node_twice_in_tree",
+        "a node listed twice in the tree",
+        "LayoutError",
+        ['tree lists "mug" twice', "one parent"],
+        layout=mutated(twice_in_tree),
+    )
+    write_case(
+        "node_twice_in_relation",
+        "a node listed twice in relation",
+        "LayoutError",
+        ['relation lists "mug" 2 times', "list each object once"],
+        layout=mutated(lambda d: d["relation"]["distractor_objs"].append("mug")),
+    )
+
+    def cycle(d):
+        d["tree"]["table"] = [e for e in d["tree"]["table"] if e[0] not in ("mug", "bowl")]
+        d["tree"]["mug"] = [["bowl", "ON"]]
+        d["tree"]["bowl"] = [["mug", "ON"]]
+
+    write_case(
+        "tree_cycle",
+        "a cycle in the tree",
+        "LayoutError",
+        ["tree has a cycle", "mug", "bowl"],
+        layout=mutated(cycle),
+    )
+
+    # node names become file names
+    def renamed(new):
+        def fn(d):
+            for table in (d["objs_mapping"], d["assets"], d["position"]):
+                table[new] = table.pop("mug")
+            d["relation"]["distractor_objs"] = [
+                new if n == "mug" else n for n in d["relation"]["distractor_objs"]
+            ]
+            d["tree"]["table"] = [[new if c == "mug" else c, r] for c, r in d["tree"]["table"]]
+
+        return fn
+
+    for name, node in (("node_name_with_path", "../../../x/x"), ("node_name_300_chars", "m" * 300)):
+        write_case(
+            name,
+            f"a node name that cannot name a file ({node[:20]})",
+            "LayoutError",
+            ["cannot name a URDF file", "Fix: rename the node"],
+            layout=mutated(renamed(node)),
+        )
+
+    # poses that validate as numbers but cannot be simulated as written
+    def moved(node, index, value):
+        def fn(d):
+            d["position"][node][index] = value
+
+        return fn
+
+    for name, index, value, words in (
+        ("pose_at_1e308", 0, 1e308, ['position["can"]', "more than 20 m from the origin"]),
+        ("pose_1e6_up", 2, 1e6, ['position["can"]', "more than 20 m from the origin"]),
+        ("pose_below_the_table", 2, -5.0, ['position["can"]', 'not on the top of "table"']),
+        ("pose_off_the_table", 0, 3.0, ['position["can"]', 'stands off the top of "table"']),
+    ):
+        write_case(
+            name,
+            f"the can at position[{index}] = {value:g}",
+            "LayoutError",
+            [*words, "Fix"],
+            layout=mutated(moved("can", index, value)),
+            env_kwargs={"replace_objs": False},
+        )
+    for name, mass in (("mass_1e-12_kg", "1e-12"), ("mass_1e12_kg", "1e12")):
+
+        def heavy(case, mass=mass):
+            dst = copy_asset(case, "mug", "mug")
+            urdf = dst / "mug.urdf"
+            text = urdf.read_text()
+            if "<mass" in text:
+                text = re.sub(r'<mass value="[^"]*"', f'<mass value="{mass}"', text)
+            else:
+                text = text.replace(
+                    "<visual>", f'<inertial><mass value="{mass}"/></inertial><visual>', 1
+                )
+            urdf.write_text(text)
+
+        write_case(
+            name,
+            f"a URDF mass of {mass} kg",
+            "LayoutError",
+            ["mug.urdf", "inertial/mass", "outside the plausible", "Fix"],
+            setup=heavy,
+            layout=mutated(lambda d: d["assets"].update(mug="mug")),
+        )
     write_case(
         "two_contexts",
         "two context nodes",

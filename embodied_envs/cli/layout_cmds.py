@@ -60,7 +60,7 @@ def cmd_generate(args) -> int:
     if args.num < 1 or args.workers < 1:
         print("error: --num and --workers must be at least 1", file=sys.stderr)
         return 2
-    load_layout(args.layout)  # validate once, up front
+    load_layout(args.layout, check_poses=False)  # validate once, up front (poses re-drawn)
     args.out.mkdir(parents=True, exist_ok=True)
     jobs = [(str(args.layout), args.seed + i, str(args.out)) for i in range(args.num)]
     bar = tqdm(total=args.num, desc="placing", unit="layout")

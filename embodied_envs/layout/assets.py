@@ -24,6 +24,7 @@ DEFAULT_STATIC_FRICTION = 0.5  # when the URDF has no mu1
 DEFAULT_DYNAMIC_FRICTION = 0.4  # when the URDF has no mu2
 RESTITUTION = 0.05
 DEFAULT_DENSITY = 1000.0  # kg/m^3, when the URDF gives no mass
+MASS_RANGE = (1e-3, 1e3)  # kg: a graspable or supporting object (a paper clip to a table)
 
 
 def node_stem(node: str) -> str:
@@ -159,8 +160,12 @@ def parse_urdf(urdf: Path | str) -> AssetSpec:
     mu1 = _float_text(link.find("collision/gazebo/mu1"), urdf, "collision/gazebo/mu1")
     mu2 = _float_text(link.find("collision/gazebo/mu2"), urdf, "collision/gazebo/mu2")
     mass = _float_text(link.find("inertial/mass"), urdf, "inertial/mass")
-    if mass is not None and mass <= 0:
-        raise LayoutError(f"{urdf}: inertial/mass must be positive, got {mass}")
+    if mass is not None and not MASS_RANGE[0] <= mass <= MASS_RANGE[1]:
+        raise LayoutError(
+            f"{urdf}: inertial/mass is {mass:g} kg, outside the plausible {MASS_RANGE[0]:g} to "
+            f"{MASS_RANGE[1]:g} kg. Fix: give the mass in kilograms, or remove <mass> to use "
+            f"{DEFAULT_DENSITY:g} kg/m^3 over the collision volume."
+        )
     return AssetSpec(
         name=root.get("name", urdf.stem),
         urdf_path=urdf,

@@ -443,6 +443,67 @@ class _Placer:
         return self.poses
 
 
+def check_file_poses(layout: LayoutInfo) -> list[str]:
+    """Problems of a layout's own poses that the simulator would act out badly.
+
+    - an object ``ON`` a parent has its lowest point within ``REST_TOLERANCE`` of the parent's
+      top, its origin over the parent's top hull (grown by the tolerance); ``IN`` / ``INSIDE``
+      between the parent's bottom and top; a ``FLOOR`` object on z = 0;
+    - footprints of objects on the same parent overlap at most ``MAX_INTERPENETRATION`` deep.
+    """
+    from embodied_envs.layout.schema import MAX_INTERPENETRATION, REST_TOLERANCE
+
+    f = layout.source or "<layout>"
+    tol = REST_TOLERANCE
+    problems = []
+    objects = set(layout.object_nodes())
+    world = {n: world_vertices(node_geometry(layout, n), layout.pose(n)) for n in objects}
+    for parent in [*layout.tree]:
+        kids = [(c, r) for c, r in layout.children(parent) if c in objects and c != parent]
+        for child, relation in kids:
+            low = float(world[child][:, 2].min())
+            where = f'{f}: position["{child}"]'
+            if relation == "FLOOR" or parent not in objects:
+                if abs(low) > tol and relation == "FLOOR":
+                    problems.append(
+                        f"{where}: its lowest point is at z = {low:.3f} m, not on the floor "
+                        f"(z = 0 within {tol} m). Fix: set z so that it stands on the floor."
+                    )
+                continue
+            top = top_surface(world[parent], PlacementLimits().top_band)
+            bottom = float(world[parent][:, 2].min())
+            if relation == "ON":
+                ok, want = abs(low - top.z) <= tol, f'the top of "{parent}" (z = {top.z:.3f})'
+            else:
+                ok = bottom - tol <= low <= top.z + tol
+                want = f'inside "{parent}" (z {bottom:.3f} to {top.z:.3f})'
+            if not ok:
+                problems.append(
+                    f"{where}: its lowest point is at z = {low:.3f} m, not on {want} within "
+                    f"{tol} m. Fix: set its z so that it rests on its parent, or pass "
+                    "replace_objs=True and let the placement re-draw it."
+                )
+            normals, offsets = half_planes(top.hull)
+            xy = np.asarray(layout.pose(child).p[:2])
+            if len(top.hull) >= 3 and not np.all(normals @ xy >= offsets - tol):
+                problems.append(
+                    f'{where}: it stands off the top of "{parent}" (x, y = {xy.round(3).tolist()}).'
+                    " Fix: move it over its parent, or pass replace_objs=True."
+                )
+        feet = {c: convex_hull_2d(world[c][:, :2]) for c, r in kids if r == "ON"}
+        names = sorted(feet)
+        for i, a in enumerate(names):
+            for b in names[i + 1 :]:
+                if len(feet[a]) >= 3 and len(feet[b]) >= 3:
+                    if polygons_overlap(feet[a][None], feet[b], -MAX_INTERPENETRATION)[0]:
+                        problems.append(
+                            f'{f}: position["{a}"] and position["{b}"]: their footprints '
+                            f"overlap by more than {MAX_INTERPENETRATION} m. Fix: move them "
+                            "apart, or pass replace_objs=True."
+                        )
+    return problems
+
+
 def place(layout: LayoutInfo, seed: int | np.random.Generator, **limits) -> LayoutInfo:
     """Re-draw every pose of a layout: background yaw, table yaw, robot spot, objects.
 

@@ -10,6 +10,7 @@ import copy
 import dataclasses
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,10 @@ RELATIONS = ("ON", "IN", "INSIDE", "FLOOR")
 REQUIRED_FIELDS = ("tree", "relation", "objs_mapping", "assets", "position")
 KNOWN_FIELDS = (*REQUIRED_FIELDS, "objs_desc", "quality")
 POSE_DECIMALS = 4  # poses are rounded to this many decimals when written (as EmbodiedGen does)
+WORLD_BOUND = 20.0  # m: every position coordinate lies within +-WORLD_BOUND of the origin
+MAX_NODE_NAME = 128  # characters: a node name names its URDF file
+REST_TOLERANCE = 0.05  # m: a file's object rests this close to its parent's top (in height)
+MAX_INTERPENETRATION = 0.01  # m: sibling footprints in a file may overlap at most this deep
 
 
 @dataclass
@@ -182,7 +187,14 @@ class LayoutInfo:
             data["assets"] = {
                 n: _relpath((Path(root) / d).resolve(), path.parent) for n, d in self.assets.items()
             }
-        path.write_text(json.dumps(data, indent=4) + "\n")
+        # a temporary name in the same folder, renamed when complete: a crash or a full disk
+        # never leaves a truncated file under the final name
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        try:
+            tmp.write_text(json.dumps(data, indent=4) + "\n")
+            os.replace(tmp, path)
+        finally:
+            tmp.unlink(missing_ok=True)
         return path
 
 
@@ -213,11 +225,35 @@ def _check_pose(f: str, node: str, values) -> str | None:
         return f"{where} holds a non-number. Fix: use 7 numbers."
     if not all(math.isfinite(v) for v in values):
         return f"{where} holds NaN or infinity. Fix: use 7 finite numbers."
+    if max(abs(v) for v in values[:3]) > WORLD_BOUND:
+        return (
+            f"{where} position {list(values[:3])} lies more than {WORLD_BOUND:g} m from the "
+            "origin. Fix: use metres, with the table at the origin."
+        )
     norm = float(np.linalg.norm(values[3:]))
     if abs(norm - 1.0) > QUAT_NORM_TOLERANCE:
         return (
             f"{where} quaternion has norm {norm:.4g}, expected 1 (within {QUAT_NORM_TOLERANCE}). "
             "Fix: write a unit quaternion [qx, qy, qz, qw], e.g. [0, 0, 0, 1]."
+        )
+    return None
+
+
+def _check_node_name(f: str, node: str) -> str | None:
+    """A node name becomes a file name (its URDF): no paths, no hidden names, not too long."""
+    bad = (
+        not node
+        or len(node) > MAX_NODE_NAME
+        or any(c in node for c in "/\\\0")
+        or node.startswith(".")
+        or not node.isprintable()
+    )
+    if bad:
+        shown = node if len(node) <= 60 else node[:57] + "..."
+        return (
+            f'{f}: node name "{shown}" cannot name a URDF file: it must be 1-{MAX_NODE_NAME} '
+            "printable characters without '/', '\\' or a leading '.'. Fix: rename the node "
+            "(and its URDF file)."
         )
     return None
 
@@ -286,6 +322,16 @@ def _check_structure(data, f: str) -> list[str]:
                     f'{mapping.get(node)!r}. Fix: set objs_mapping["{node}"] to "{cat}".'
                 )
     robot = rel["robot"]
+    for node in [*mapping, robot]:
+        msg = _check_node_name(f, node)
+        if msg:
+            problems.append(msg)
+    listed = rel["manipulated_objs"] + rel["distractor_objs"]
+    for node in sorted({n for n in listed if listed.count(n) > 1}):
+        problems.append(
+            f'{f}: relation lists "{node}" {listed.count(node)} times (manipulated_objs and '
+            "distractor_objs together). Fix: list each object once."
+        )
     if robot in mapping:
         problems.append(f'{f}: the robot "{robot}" must not appear in objs_mapping.')
     for node in mapping:
@@ -325,16 +371,33 @@ def _check_structure(data, f: str) -> list[str]:
                 )
             if child not in known:
                 problems.append(f'{f}: tree["{parent}"] has unknown child node "{child}".')
+            if child in parent_of:
+                problems.append(
+                    f'{f}: tree lists "{child}" twice (under "{parent_of[child]}" and '
+                    f'"{parent}"). Fix: give each node one parent.'
+                )
+                continue
             parent_of[child] = parent
     if tree and next(iter(tree)) != rel["background"]:
         problems.append(
             f'{f}: the first key of "tree" must be the background "{rel["background"]}".'
         )
+    cycles = set()
     for node in rel["manipulated_objs"] + rel["distractor_objs"]:
         chain, cur = [], node
         while cur in parent_of and cur not in chain:
             chain.append(cur)
             cur = parent_of[cur]
+        if cur in chain:  # the walk came back: a cycle
+            loop = chain[chain.index(cur) :]
+            key = frozenset(loop)
+            if key not in cycles:
+                cycles.add(key)
+                problems.append(
+                    f"{f}: tree has a cycle: {' -> '.join(loop + [cur])}. Fix: every node has "
+                    "one parent and the chain ends at the background."
+                )
+            continue
         if rel["context"] not in chain[1:] + [cur] or node == rel["context"]:
             problems.append(
                 f'{f}: tree: "{node}" does not rest on the context "{rel["context"]}". Fix: add'
@@ -374,12 +437,29 @@ def check_asset_files(info: LayoutInfo) -> list[str]:
     return problems
 
 
-def load_layout(path: Path | str, check_files: bool = True) -> LayoutInfo:
+class DuplicateKeyError(ValueError):
+    def __init__(self, key: str, values: tuple):
+        super().__init__(key)
+        self.key, self.values = key, values
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict:
+    out: dict = {}
+    for key, value in pairs:
+        if key in out:
+            raise DuplicateKeyError(key, (out[key], value))
+        out[key] = value
+    return out
+
+
+def load_layout(path: Path | str, check_files: bool = True, check_poses: bool = True) -> LayoutInfo:
     """Read, parse and validate a layout file.
 
     Args:
         path: the ``layout.json``.
         check_files: also check every asset folder and its URDF and meshes.
+        check_poses: with ``check_files``, also check that the file's own poses can be
+            simulated (``placement.check_file_poses``); off where every pose is re-drawn.
 
     Returns:
         The validated layout; its ``source`` and ``asset_root`` point at the file.
@@ -391,7 +471,13 @@ def load_layout(path: Path | str, check_files: bool = True) -> LayoutInfo:
     if not path.is_file():
         raise LayoutError(f"{path}: layout file does not exist. Fix: check the path.")
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(), object_pairs_hook=_unique_keys)
+    except DuplicateKeyError as e:
+        raise LayoutError(
+            f'{path}: the key "{e.key}" appears twice in one JSON object (with values '
+            f"{e.values[0]!r} and {e.values[1]!r}); a JSON reader would silently keep the last."
+            " Fix: keep one."
+        ) from None
     except json.JSONDecodeError as e:
         raise LayoutError(
             f"{path}: not valid JSON ({e.msg} at line {e.lineno}, column {e.colno})."
@@ -413,7 +499,11 @@ def load_layout(path: Path | str, check_files: bool = True) -> LayoutInfo:
             raise LayoutError(e.problems) from None
         raise
     if check_files:
+        from embodied_envs.layout.placement import check_file_poses
+
         problems = check_asset_files(info)
+        if not problems and check_poses:
+            problems = check_file_poses(info)
         if problems:
             raise LayoutError(problems)
     return info
