@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 
 
 def positive_int(text: str) -> int:
@@ -25,3 +26,45 @@ def seed_int(text: str) -> int:
     if not 0 <= value < 2**63:
         raise argparse.ArgumentTypeError(f"seed {value} is outside [0, 2**63)")
     return value
+
+
+MAX_IMAGE_SIDE = 8192  # pixels: larger images are refused (memory), not attempted
+
+
+def image_side(text: str) -> int:
+    """An image side in pixels, 1..MAX_IMAGE_SIDE."""
+    value = positive_int(text)
+    if value > MAX_IMAGE_SIDE:
+        raise argparse.ArgumentTypeError(f"{value} pixels is over the {MAX_IMAGE_SIDE} limit")
+    return value
+
+
+def unit_float(text: str) -> float:
+    """A finite number in [0, 1] (a colour channel)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 <= value <= 1.0:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"{text} is not in [0, 1]")
+    return value
+
+
+def writable_dir(path):
+    """An output folder that exists or can be made, and can be written: checked before any
+    long work, so a bad ``--out`` costs one line, not a traceback after minutes."""
+    from pathlib import Path
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise SystemExit(f"error: --out {path} is a file, not a folder. Fix: choose a folder.")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".write-test-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise SystemExit(
+            f"error: --out {path} cannot be written ({e.strerror}). Fix: choose a writable folder."
+        ) from None
+    return path

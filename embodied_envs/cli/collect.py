@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from embodied_envs.cli.args import positive_int, seed_int
+from embodied_envs.cli.args import positive_int, seed_int, writable_dir
 
 
 def add_parser(sub) -> None:
@@ -52,6 +52,7 @@ def cmd_collect(args) -> int:
     layouts = [p.resolve() for p in (args.layout or [default_layout()])]
     for path in layouts:
         load_layout(path)  # bad input fails here, before any simulation
+    writable_dir(args.out)
     workers = args.workers or 1
     if workers > (os.cpu_count() or 1):
         print(f"note: --workers {workers} is more than this machine's {os.cpu_count()} cores")

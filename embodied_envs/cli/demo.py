@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from embodied_envs.cli.args import image_side, positive_int, seed_int
 from embodied_envs.layout import load_layout
 from embodied_envs.layout.placement import derive_seed, place
 from embodied_envs.paths import default_layout
@@ -25,9 +26,9 @@ from embodied_envs.paths import default_layout
 def add_parser(sub) -> None:
     p = sub.add_parser("demo", help="run the scripted pick-and-place and write videos")
     p.add_argument("--layout", type=Path, default=None, help="layout file (default: shipped)")
-    p.add_argument("--num-envs", type=int, default=1)
-    p.add_argument("--episodes", type=int, default=1)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--num-envs", type=positive_int, default=1)
+    p.add_argument("--episodes", type=positive_int, default=1)
+    p.add_argument("--seed", type=seed_int, default=0)
     p.add_argument(
         "--render-mode",
         choices=["hybrid", "rgb_array"],
@@ -36,12 +37,14 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--camera-eye", type=float, nargs=3, default=[0.9, 0.0, 1.1])
     p.add_argument("--camera-target", type=float, nargs=3, default=[0.0, 0.0, 0.9])
-    p.add_argument("--image-hw", type=int, nargs=2, default=[256, 256])
+    p.add_argument("--image-hw", type=image_side, nargs=2, default=[256, 256])
     p.add_argument("--fovy-deg", type=float, default=75.0)
-    p.add_argument("--frame-every", type=int, default=2, help="record every k-th control step")
+    p.add_argument(
+        "--frame-every", type=positive_int, default=2, help="record every k-th control step"
+    )
     p.add_argument("--out", type=Path, default=Path("outputs/demo"))
     p.add_argument(
-        "--workers", type=int, default=None, help="processes (default: min(envs, cores))"
+        "--workers", type=positive_int, default=None, help="processes (default: min(envs, cores))"
     )
     p.set_defaults(func=cmd_demo)
 

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
-import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from embodied_envs.cli.args import image_side, positive_int, seed_int, writable_dir
 from embodied_envs.layout import LayoutError, LayoutInfo, PlacementError, load_layout
 from embodied_envs.layout.placement import (
     PlacementLimits,
@@ -30,10 +30,10 @@ def add_parser(sub) -> None:
 
     g = lsub.add_parser("generate", help="write N placed variants of a layout")
     g.add_argument("layout", type=Path)
-    g.add_argument("--num", type=int, required=True, help="number of variants")
-    g.add_argument("--seed", type=int, default=0, help="variant i uses seed + i")
+    g.add_argument("--num", type=positive_int, required=True, help="number of variants")
+    g.add_argument("--seed", type=seed_int, default=0, help="variant i uses seed + i")
     g.add_argument("--out", type=Path, required=True, help="output folder (created)")
-    g.add_argument("--workers", type=int, default=1, help="parallel processes")
+    g.add_argument("--workers", type=positive_int, default=1, help="parallel processes")
     g.set_defaults(func=cmd_generate)
 
     v = lsub.add_parser("validate", help="check layouts and their asset folders")
@@ -45,7 +45,7 @@ def add_parser(sub) -> None:
     pr.add_argument("layout", type=Path)
     pr.add_argument("--out", type=Path, required=True)
     pr.add_argument("--render", action="store_true", help="add a SAPIEN render beside it")
-    pr.add_argument("--size", type=int, default=640, help="image side in pixels")
+    pr.add_argument("--size", type=image_side, default=640, help="image side in pixels")
     pr.set_defaults(func=cmd_preview)
 
 
@@ -57,11 +57,8 @@ def _generate_one(args: tuple[str, int, str]) -> str:
 
 
 def cmd_generate(args) -> int:
-    if args.num < 1 or args.workers < 1:
-        print("error: --num and --workers must be at least 1", file=sys.stderr)
-        return 2
     load_layout(args.layout, check_poses=False)  # validate once, up front (poses re-drawn)
-    args.out.mkdir(parents=True, exist_ok=True)
+    writable_dir(args.out)
     jobs = [(str(args.layout), args.seed + i, str(args.out)) for i in range(args.num)]
     bar = tqdm(total=args.num, desc="placing", unit="layout")
     if args.workers == 1:

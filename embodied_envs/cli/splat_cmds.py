@@ -8,6 +8,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
+from embodied_envs.cli.args import image_side, unit_float
 from embodied_envs.splat import PinholeCamera, read_ply, render
 from embodied_envs.splat.render import BACKENDS
 
@@ -28,13 +29,13 @@ def add_parser(sub) -> None:
     r.add_argument("--eye", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"))
     r.add_argument("--target", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"))
     r.add_argument("--up", type=float, nargs=3, default=(0.0, 0.0, 1.0), metavar=("X", "Y", "Z"))
-    r.add_argument("--width", type=int, default=256)
-    r.add_argument("--height", type=int, default=256)
+    r.add_argument("--width", type=image_side, default=256)
+    r.add_argument("--height", type=image_side, default=256)
     r.add_argument("--fovy", type=float, default=60.0, help="vertical field of view, degrees")
     r.add_argument("--backend", choices=[b for b in BACKENDS], default="auto")
     r.add_argument(
         "--background",
-        type=float,
+        type=unit_float,
         nargs=3,
         default=(0.0, 0.0, 0.0),
         metavar=("R", "G", "B"),

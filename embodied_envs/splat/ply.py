@@ -8,6 +8,7 @@ as long as their properties are scalars.
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -78,6 +79,12 @@ def _read_header(path: Path, data: bytes) -> tuple[list[tuple[str, int, list]], 
         if words[0] == "format":
             fmt = words[1] if len(words) > 1 else ""
         elif words[0] == "element" and len(words) == 3:
+            if not words[2].isdigit():
+                raise SplatFileError(
+                    path,
+                    f"element {words[1]!r} has count {words[2]!r}, not a non-negative integer",
+                    "re-export the splat",
+                )
             elements.append((words[1], int(words[2]), []))
         elif words[0] == "property" and elements:
             if words[1] == "list":
@@ -95,6 +102,9 @@ def _read_header(path: Path, data: bytes) -> tuple[list[tuple[str, int, list]], 
                 path, f"malformed PLY header line {raw!r}", "re-export the file as a standard PLY"
             )
     return elements, end + len(b"end_header\n"), fmt
+
+
+MAX_SCALE = 1e3  # m: a Gaussian larger than this is a corrupt value, not a scene part
 
 
 def read_ply(path: str | os.PathLike) -> GaussianSplat:
@@ -140,6 +150,8 @@ def read_ply(path: str | os.PathLike) -> GaussianSplat:
             path, "no 'vertex' element", "give a 3DGS PLY whose Gaussians are the 'vertex' element"
         )
     count, dtype, offset = vertex
+    if count == 0:
+        raise SplatFileError(path, "it holds 0 Gaussians", "export a splat with Gaussians in it")
     names = set(dtype.names)
     missing = [p for p in REQUIRED if p not in names]
     if missing:
@@ -196,6 +208,22 @@ def read_ply(path: str | os.PathLike) -> GaussianSplat:
             f"{int(bad.sum())} Gaussians have a NaN or infinite value (first: vertex "
             f"{int(bad.nonzero()[0])})",
             "remove them or re-export the splat",
+        )
+    huge = splat.log_scales.amax(1) > math.log(MAX_SCALE)
+    if bool(huge.any()):
+        raise SplatFileError(
+            path,
+            f"{int(huge.sum())} Gaussians have a scale over {MAX_SCALE:g} m (first: vertex "
+            f"{int(huge.nonzero()[0])}, scale exp({float(splat.log_scales[huge][0].max()):.3g}))",
+            "scale_* are natural logs of metres in a 3DGS PLY; remove those Gaussians",
+        )
+    flat = torch.linalg.vector_norm(splat.quats_wxyz, dim=1) < 1e-8
+    if bool(flat.any()):
+        raise SplatFileError(
+            path,
+            f"{int(flat.sum())} Gaussians have an all-zero rotation quaternion (first: vertex "
+            f"{int(flat.nonzero()[0])})",
+            "write unit quaternions rot_0..3 (w x y z)",
         )
     return splat
 

@@ -4,7 +4,8 @@ import sys
 
 import imageio_ffmpeg
 import numpy as np
-from conftest import LAYOUTS, snapshot
+import pytest
+from conftest import DEFAULT_LAYOUT, LAYOUTS, ROOT, snapshot
 from PIL import Image
 
 from embodied_envs.cli.main import main
@@ -111,3 +112,36 @@ def test_splat_render_writes_colour_and_16_bit_depth(tmp_path, capsys):
     capsys.readouterr()
     assert main(["splat", "render", str(tmp_path / "nope.ply"), *args[3:], "--out", str(png)]) == 1
     assert "nope.ply: file does not exist" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["demo", "--frame-every", "0"], "0 is not a positive integer"),
+        (["demo", "--episodes", "-1"], "-1 is not a positive integer"),
+        (["layout", "generate", "LAYOUT", "--num", "2", "--seed", "-5", "--out", "o"], "seed -5"),
+        (["layout", "preview", "LAYOUT", "--out", "p.png", "--size", "0"], "positive integer"),
+        (["splat", "render", "PLY", "--eye", "0", "1", "0", "--target", "1", "1", "0",
+          "--background", "nan", "2", "-1", "--out", "x.png"], "nan is not in [0, 1]"),
+        (["splat", "render", "PLY", "--eye", "0", "1", "0", "--target", "1", "1", "0",
+          "--width", "100000", "--out", "x.png"], "over the 8192 limit"),
+    ],
+)  # fmt: skip
+def test_bad_arguments_are_one_line_before_any_work(tmp_path, capsys, args, words):
+    ply = ROOT / "assets" / "background" / "gs_model.ply"
+    args = [str(DEFAULT_LAYOUT) if a == "LAYOUT" else str(ply) if a == "PLY" else a for a in args]
+    with pytest.raises(SystemExit) as e:
+        main(args)
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unwritable_out_is_one_line(tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    with pytest.raises(SystemExit) as e:
+        main(["layout", "generate", str(DEFAULT_LAYOUT), "--num", "1", "--out", str(blocker)])
+    assert "is a file, not a folder" in str(e.value.code)
+    assert blocker.read_text() == "x"

@@ -19,7 +19,8 @@ def write_raw(
     table = np.zeros(len(rows), dtype=dtype)
     for i, n in enumerate(names):
         table[n] = rows[:, i]
-    header = ["ply", f"format {fmt} 1.0", f"element {element} {count or len(rows)}"]
+    n = len(rows) if count is None else count
+    header = ["ply", f"format {fmt} 1.0", f"element {element} {n}"]
     header += [f"property {t} {n}" for n, t in zip(names, types, strict=True)]
     path.write_bytes(("\n".join([*header, "end_header"]) + "\n").encode() + table.tobytes())
     return path
@@ -185,3 +186,36 @@ def test_an_inria_file_renders_like_the_reference_from_its_raw_values(tmp_path):
     assert alpha.mean() > 0.2
     assert (np.abs(image.rgb.numpy() - rgb) > 2 / 255).mean() <= 0.01
     assert (np.abs(image.alpha.numpy() - alpha) > 2 / 255).mean() <= 0.01
+
+
+def _rows(n):
+    rows = np.zeros((n, len(PROPS)), np.float32)
+    rows[:, PROPS.index("rot_0")] = 1.0
+    return rows
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        ("empty", "it holds 0 Gaussians"),
+        ("bad_count", "has count '-3', not a non-negative integer"),
+        ("huge_scale", "have a scale over 1000 m (first: vertex 2"),
+        ("zero_quaternion", "all-zero rotation quaternion (first: vertex 1"),
+    ],
+)
+def test_splats_that_parse_but_cannot_render_are_refused(tmp_path, change, words):
+    rows = _rows(4)
+    kw = {}
+    if change == "empty":
+        rows = rows[:0]
+        kw["count"] = "0"
+    elif change == "bad_count":
+        kw["count"] = "-3"
+    elif change == "huge_scale":
+        rows[2, PROPS.index("scale_1")] = 50.0  # exp(50) m
+    elif change == "zero_quaternion":
+        rows[1, PROPS.index("rot_0")] = 0.0
+    path = write_raw(tmp_path / "bad.ply", PROPS, rows, **kw)
+    with pytest.raises(SplatFileError) as e:
+        read_ply(path)
+    assert words in str(e.value) and str(path) in str(e.value)
