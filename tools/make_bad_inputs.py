@@ -398,6 +398,51 @@ def main() -> None:
             setup=heavy,
             layout=mutated(lambda d: d["assets"].update(mug="mug")),
         )
+
+    def broken_mug(edit):
+        def setup(case):
+            edit(copy_asset(case, "mug", "mug"))
+
+        return setup
+
+    def nan_vertex(name):
+        def edit(asset):
+            obj = asset / "mesh" / name
+            lines = obj.read_text().splitlines()
+            i = next(k for k, line in enumerate(lines) if line.startswith("v "))
+            lines[i] = "v nan 0.0 0.0"
+            obj.write_text("\n".join(lines) + "\n")
+
+        return edit
+
+    def flat_collision(asset):
+        (asset / "mesh" / "mug_collision.obj").write_text(
+            "v -0.04 0 -0.04\nv 0.04 0 -0.04\nv 0.04 0 0.04\nv -0.04 0 0.04\nf 1 2 3\nf 1 3 4\n"
+        )
+
+    def with_joint(asset):
+        urdf = asset / "mug.urdf"
+        joint = '<joint name="handle_hinge" type="revolute"><parent link="x"/><child link="y"/>'
+        urdf.write_text(urdf.read_text().replace("</robot>", joint + "</joint></robot>"))
+
+    for name, what, edit, words in (
+        ("collision_nan_vertex", "NaN in the collision mesh", nan_vertex("mug_collision.obj"),
+         ["mug_collision.obj", "NaN or infinity", "vertex 0"]),
+        ("visual_nan_vertex", "NaN in the visual mesh", nan_vertex("mug.obj"),
+         ["mug.obj", "NaN or infinity"]),
+        ("collision_flat", "a flat collision mesh (the mug would sink)", flat_collision,
+         ["mug_collision.obj", "collision mesh is flat", "sink"]),
+        ("urdf_with_joint", "a URDF joint that would be ignored", with_joint,
+         ["mug.urdf", "handle_hinge", "ignored"]),
+    ):  # fmt: skip
+        write_case(
+            name,
+            what,
+            "LayoutError",
+            [*words, "Fix"],
+            setup=broken_mug(edit),
+            layout=mutated(lambda d: d["assets"].update(mug="mug")),
+        )
     write_case(
         "two_contexts",
         "two context nodes",

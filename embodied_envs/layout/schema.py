@@ -408,7 +408,7 @@ def _check_structure(data, f: str) -> list[str]:
 
 def check_asset_files(info: LayoutInfo) -> list[str]:
     """File checks: every asset folder exists and holds a loadable URDF with its meshes."""
-    from embodied_envs.layout.assets import asset_geometry
+    from embodied_envs.layout.assets import asset_geometry, check_visual_mesh
 
     f = _label(info.source)
     problems = []
@@ -431,7 +431,9 @@ def check_asset_files(info: LayoutInfo) -> list[str]:
             )
             continue
         try:
-            asset_geometry(parse_urdf(urdf))
+            spec = parse_urdf(urdf)
+            asset_geometry(spec)
+            check_visual_mesh(spec)
         except LayoutError as e:
             problems.extend(f'{f}: assets["{node}"]: {p}' for p in e.problems)
     return problems

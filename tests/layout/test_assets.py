@@ -75,3 +75,25 @@ def test_invalid_xml(tmp_path):
     p.write_text("<robot><link>")
     with pytest.raises(LayoutError, match="not valid XML"):
         parse_urdf(p)
+
+
+def test_heavy_collision_mesh_is_warned_about_once_with_its_cost(tmp_path):
+    import shutil
+    import warnings
+
+    import trimesh
+
+    from embodied_envs.layout import asset_geometry
+    from embodied_envs.layout.assets import HEAVY_COLLISION_FACES
+
+    asset = tmp_path / "mug"
+    shutil.copytree(ROOT / "assets" / "mug", asset)
+    sphere = trimesh.creation.icosphere(subdivisions=6, radius=0.04)  # 81,920 faces
+    assert len(sphere.faces) > HEAVY_COLLISION_FACES
+    sphere.export(asset / "mesh" / "mug_collision.obj")
+    spec = parse_urdf(asset / "mug.urdf")
+    with pytest.warns(UserWarning, match=r"81,920 faces.*slow.*Fix: simplify"):
+        asset_geometry(spec)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        asset_geometry(spec)  # cached: no second warning
