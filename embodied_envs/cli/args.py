@@ -6,12 +6,16 @@ import argparse
 import os
 
 
+def _parse(text: str, convert, what: str):
+    try:
+        return convert(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not {what}") from None
+
+
 def positive_int(text: str) -> int:
     """An integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    value = _parse(text, int, "an integer")
     if value < 1:
         raise argparse.ArgumentTypeError(f"{value} is not a positive integer (>= 1)")
     return value
@@ -19,10 +23,7 @@ def positive_int(text: str) -> int:
 
 def seed_int(text: str) -> int:
     """A seed: an integer in [0, 2**63)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer seed") from None
+    value = _parse(text, int, "an integer seed")
     if not 0 <= value < 2**63:
         raise argparse.ArgumentTypeError(f"seed {value} is outside [0, 2**63)")
     return value
@@ -41,10 +42,7 @@ def image_side(text: str) -> int:
 
 def unit_float(text: str) -> float:
     """A finite number in [0, 1] (a colour channel)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    value = _parse(text, float, "a number")
     if not 0.0 <= value <= 1.0:  # NaN fails too
         raise argparse.ArgumentTypeError(f"{text} is not in [0, 1]")
     return value
