@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -22,6 +24,7 @@ from embodied_envs.layout.placement import (
     world_vertices,
 )
 from embodied_envs.splat import SplatFileError, read_ply
+from embodied_envs.workers import exit_with_parent
 
 
 def add_parser(sub) -> None:
@@ -49,6 +52,9 @@ def add_parser(sub) -> None:
     pr.set_defaults(func=cmd_preview)
 
 
+MANIFEST = ".embodied_envs_variants.json"  # in --out: which layout file each stem came from
+
+
 def _generate_one(args: tuple[str, int, str]) -> str:
     layout_path, seed, out = args
     layout = load_layout(layout_path, check_files=False)
@@ -56,9 +62,33 @@ def _generate_one(args: tuple[str, int, str]) -> str:
     return str(placed.save(Path(out) / f"{Path(layout_path).stem}_{seed:06d}.json"))
 
 
+def claim_stem(out: Path, layout: Path) -> None:
+    """Record that ``out``'s ``<stem>_*.json`` variants come from ``layout``; refuse when they
+    come from another layout file of the same stem (its variants would be replaced)."""
+    manifest = out / MANIFEST
+    try:
+        owners = json.loads(manifest.read_text()) if manifest.is_file() else {}
+    except (OSError, json.JSONDecodeError):
+        owners = {}
+    stem, source = layout.stem, str(layout.resolve())
+    owner = owners.get(stem)
+    if owner is None and any(out.glob(f"{stem}_[0-9]*.json")):
+        owner = "a layout this command did not record"
+    if owner is not None and owner != source:
+        raise SystemExit(
+            f"error: --out {out} already holds variants {stem}_*.json of {owner}; this run "
+            f"would replace them with variants of {source}. Fix: choose another --out."
+        )
+    owners[stem] = source
+    tmp = manifest.with_name(f"{MANIFEST}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(owners, indent=2))
+    os.replace(tmp, manifest)
+
+
 def cmd_generate(args) -> int:
     load_layout(args.layout, check_poses=False)  # validate once, up front (poses re-drawn)
     writable_dir(args.out)
+    claim_stem(args.out, args.layout)
     jobs = [(str(args.layout), args.seed + i, str(args.out)) for i in range(args.num)]
     bar = tqdm(total=args.num, desc="placing", unit="layout")
     if args.workers == 1:
@@ -66,7 +96,9 @@ def cmd_generate(args) -> int:
             _generate_one(job)
             bar.update()
     else:
-        with ProcessPoolExecutor(args.workers) as pool:
+        with ProcessPoolExecutor(
+            args.workers, initializer=exit_with_parent, initargs=(os.getpid(),)
+        ) as pool:
             for _ in pool.map(
                 _generate_one, jobs, chunksize=max(1, args.num // (4 * args.workers))
             ):
@@ -82,6 +114,8 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
         layout = load_layout(path)
     except LayoutError as e:
         return e.problems
+    except OSError as e:  # unreadable file, permission, a folder given as file, ...
+        return [f"{path}: {e.strerror or e} ({e.filename or path}). Fix: check the path."]
     from embodied_envs.envs.config import resolve_robot
 
     problems = []
@@ -93,7 +127,7 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
     if splat.is_file():  # optional: only hybrid rendering needs it, but it must be readable
         try:
             read_ply(splat)
-        except SplatFileError as e:
+        except (SplatFileError, OSError) as e:
             problems.append(str(e))
     if check_placement:
         try:

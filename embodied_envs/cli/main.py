@@ -38,6 +38,11 @@ def main(argv: list[str] | None = None) -> int:
     except (LayoutError, PlacementError, SplatFileError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
+    except OSError as e:  # a full disk, a read-only folder, a vanished file: one line
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"error: {where}{e.strerror or e}. Fix: free space or choose a writable --out.",
+              file=sys.stderr)  # fmt: skip
+        return 1
 
 
 if __name__ == "__main__":

@@ -108,8 +108,9 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
 
     import embodied_envs  # noqa: F401
     from embodied_envs.solvers.pick_place import PickPlaceSolver
+    from embodied_envs.workers import exit_with_parent
 
-    parent = os.getppid()
+    exit_with_parent(os.getppid())  # a killed collect leaves no worker writing on
     env = gym.make(
         ENV_ID,
         layout_file=plan.layout,
@@ -133,8 +134,6 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
     kept = 0
     try:
         for seed in seeds:
-            if os.getppid() != parent:  # the parent is gone: write nothing more
-                return
             t0 = time.perf_counter()
             env.reset(seed=seed)
             result = PickPlaceSolver(env, seed=seed).solve()

@@ -1,0 +1,91 @@
+"""Outputs under faults: a killed command, a full disk, two layouts into one folder."""
+
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import DEFAULT_LAYOUT, snapshot
+
+from embodied_envs.cli.main import main
+
+CLI = [sys.executable, "-m", "embodied_envs.cli.main"]
+
+
+def finals(out: Path) -> list[Path]:
+    return sorted(p for p in out.glob("*.json") if not p.name.startswith("."))
+
+
+def processes_mentioning(text: str) -> list[int]:
+    found = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                if text in (proc / "cmdline").read_bytes().decode(errors="ignore"):
+                    found.append(int(proc.name))
+            except OSError:
+                continue
+    return found
+
+
+def test_kill_9_leaves_whole_files_and_no_workers(tmp_path):
+    out = tmp_path / "variants_killed"
+    cmd = [*CLI, "layout", "generate", str(DEFAULT_LAYOUT), "--num", "3000", "--workers", "2",
+           "--out", str(out)]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 120
+    while len(finals(out)) < 20 and time.time() < deadline:
+        time.sleep(0.2)
+    assert len(finals(out)) >= 20, "the command should be writing variants"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    try:
+        time.sleep(2.0)  # the workers notice within PARENT_CHECK_SECONDS
+        after_kill = len(finals(out))
+        time.sleep(2.0)
+        assert len(finals(out)) == after_kill, "no orphaned worker writes on"
+        assert processes_mentioning(str(out)) == [], "every worker ended with its parent"
+    finally:
+        for pid in processes_mentioning(str(out)):  # a failing run leaves no strays behind
+            os.kill(pid, signal.SIGKILL)
+    assert 20 <= after_kill < 3000
+    for path in finals(out):  # every file under its final name is whole
+        data = json.loads(path.read_text())
+        assert set(data["position"]) >= {"can", "table", "franka"}
+
+
+def test_full_disk_is_one_line_and_leaves_no_partial_file(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "variants"
+    real = Path.write_text
+
+    def full(self, *args, **kwargs):
+        if out in self.parents:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self))
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "write_text", full)
+    code = main(["layout", "generate", str(DEFAULT_LAYOUT), "--num", "2", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert len(err) == 1 and "No space left on device" in err[0] and "Traceback" not in err[0]
+    assert list(out.iterdir()) == []
+
+
+def test_variants_of_another_layout_are_not_replaced(tmp_path, scene_copy, capsys):
+    out = tmp_path / "variants"
+    assert main(["layout", "generate", str(DEFAULT_LAYOUT), "--num", "2", "--out", str(out)]) == 0
+    before = snapshot(out)
+    other = scene_copy / "layouts" / "default.json"  # same stem, another file
+    with pytest.raises(SystemExit) as e:
+        main(["layout", "generate", str(other), "--num", "2", "--out", str(out)])
+    msg = str(e.value.code)
+    assert "already holds variants default_*.json of" in msg and str(DEFAULT_LAYOUT) in msg
+    assert "Fix: choose another --out" in msg
+    assert snapshot(out) == before
+    # the same layout again is fine: its own variants are re-written
+    assert main(["layout", "generate", str(DEFAULT_LAYOUT), "--num", "2", "--out", str(out)]) == 0
