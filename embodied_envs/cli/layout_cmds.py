@@ -52,7 +52,7 @@ def add_parser(sub) -> None:
     pr.set_defaults(func=cmd_preview)
 
 
-MANIFEST = ".embodied_envs_variants.json"  # in --out: which layout file each stem came from
+MANIFEST = ".embodied_envs_variants"  # in --out (JSON, not *.json): the layout of each stem
 
 
 def _generate_one(args: tuple[str, int, str]) -> str:
