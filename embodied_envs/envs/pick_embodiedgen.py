@@ -120,7 +120,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         objs_z_offset: float = 0.002,
         robot_z_offset: float = 0.002,
         camera_cfg: dict | None = None,
-        enable_grasp: bool = False,
+        enable_grasp: bool = False,  # EmbodiedGen's keyword: accepted, has no effect
         hybrid_obs: bool = False,
         hybrid_depth_test: bool = True,
         splat_backend: str = "auto",
@@ -150,7 +150,6 @@ class PickEmbodiedGenEnv(BaseEnv):
         self.init_3dgs_quat = tuple(float(v) for v in init_3dgs_quat)
         self.objs_z_offset = float(objs_z_offset)
         self.robot_z_offset = float(robot_z_offset)
-        self.enable_grasp = enable_grasp
         self.hybrid_depth_test = bool(hybrid_depth_test)
         self.hybrid_obs = bool(hybrid_obs)
         self.hybrid: HybridRenderer | None = None

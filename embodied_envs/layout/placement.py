@@ -57,8 +57,13 @@ class PlacementLimits:
 
 
 @functools.lru_cache(maxsize=256)
-def _geometry_for(urdf: Path, mtime: float) -> AssetGeometry:
-    return asset_geometry(parse_urdf(urdf))
+def _geometry_for(urdf: Path, stamp: tuple[float, float]) -> AssetGeometry:
+    return asset_geometry(_spec_for(urdf, stamp[0]))
+
+
+@functools.lru_cache(maxsize=256)
+def _spec_for(urdf: Path, urdf_mtime: float):
+    return parse_urdf(urdf)
 
 
 @functools.lru_cache(maxsize=1024)
@@ -66,13 +71,15 @@ def _urdf_for(root: Path, asset: str, node: str) -> Path:
     return urdf_path_for((root / asset).resolve(), node)
 
 
-def asset_key(layout: LayoutInfo, node: str) -> tuple[Path, float]:
-    """(URDF path, modification time) of a node's asset: the key of every geometry cache, so
-    a changed file is re-read while an unchanged one is resolved without touching the disk
-    more than one ``stat``."""
+def asset_key(layout: LayoutInfo, node: str) -> tuple[Path, tuple[float, float]]:
+    """(URDF path, (URDF, collision mesh) modification times) of a node's asset: the key of
+    every geometry cache, so a change of either file is re-read while unchanged ones cost two
+    ``stat`` calls."""
     root = layout.asset_root or (layout.source.parent if layout.source else Path.cwd())
     urdf = _urdf_for(root, layout.assets[node], node)
-    return urdf, urdf.stat().st_mtime
+    urdf_mtime = urdf.stat().st_mtime
+    collision = _spec_for(urdf, urdf_mtime).collision.path
+    return urdf, (urdf_mtime, collision.stat().st_mtime)
 
 
 def node_geometry(layout: LayoutInfo, node: str) -> AssetGeometry:
@@ -81,18 +88,18 @@ def node_geometry(layout: LayoutInfo, node: str) -> AssetGeometry:
 
 
 @functools.lru_cache(maxsize=256)
-def _footprint_cached(urdf: Path, mtime: float) -> np.ndarray:
-    return _geometry_for(urdf, mtime).footprint()
+def _footprint_cached(urdf: Path, stamp: tuple[float, float]) -> np.ndarray:
+    return _geometry_for(urdf, stamp).footprint()
 
 
 @functools.lru_cache(maxsize=256)
-def _bottom_cached(urdf: Path, mtime: float, percentile: float) -> float:
-    return float(np.percentile(_geometry_for(urdf, mtime).vertices[:, 2], percentile))
+def _bottom_cached(urdf: Path, stamp: tuple[float, float], percentile: float) -> float:
+    return float(np.percentile(_geometry_for(urdf, stamp).vertices[:, 2], percentile))
 
 
 @functools.lru_cache(maxsize=256)
-def _top_cached(urdf: Path, mtime: float, band: float, margin: float):
-    geom = _geometry_for(urdf, mtime)
+def _top_cached(urdf: Path, stamp: tuple[float, float], band: float, margin: float):
+    geom = _geometry_for(urdf, stamp)
     hull = geom.top_hull(band)
     try:
         shrunk = shrink_polygon(hull, margin)
@@ -253,7 +260,7 @@ def top_surface(vertices: np.ndarray, band: float) -> Surface:
     return Surface(convex_hull_2d(top[:, :2]), top_z)
 
 
-def robot_base_pose(top: Surface, limits: PlacementLimits, u: float) -> LayoutPose:
+def robot_base_pose(top: Surface, u: float) -> LayoutPose:
     """Robot base on the shrunk top's boundary at perimeter fraction ``u``, facing the centre."""
     if top.shrunk is None:
         raise PlacementError(
@@ -414,7 +421,7 @@ class _Placer:
         self.context_footprint = self.foot[ctx] @ rotation_2d(np.float64(ctx_pose.yaw)).T
         surfaces = {ctx: _surface_at(self.keys[ctx], ctx_pose, lim.top_band, lim.hull_margin)}
         # 3. robot on the table's edge, facing its centre
-        robot = robot_base_pose(surfaces[ctx], lim, rng.uniform(0, 1))
+        robot = robot_base_pose(surfaces[ctx], rng.uniform(0, 1))
         self.poses[layout.robot] = robot
         self.add_obstacle(layout.robot, square(np.array(robot.p), lim.robot_footprint, robot.yaw))
         # 4. objects, breadth first from the table, larger footprints first

@@ -101,13 +101,6 @@ class LayoutInfo:
     def children(self, parent: str) -> list[tuple[str, str]]:
         return [(c, r) for c, r in self.tree.get(parent, [])]
 
-    def parent_of(self, node: str) -> tuple[str, str] | None:
-        for parent, kids in self.tree.items():
-            for child, rel in kids:
-                if child == node:
-                    return parent, rel
-        return None
-
     def with_poses(self, poses: dict[str, LayoutPose]) -> LayoutInfo:
         """A copy with some node poses replaced."""
         position = {k: list(v) for k, v in self.position.items()}

@@ -110,7 +110,7 @@ def grasp_frame(
     top = vertices_world[:, 2].max()
     z = max(top - cfg.grasp_depth, support_z + cfg.min_tcp_height)
     z = min(z, top - 0.005)
-    return np.array([centre2[0], centre2[1], z]), closing, float(min(wu, wv))
+    return np.array([centre2[0], centre2[1], z]), closing
 
 
 class PickPlaceSolver:
@@ -296,7 +296,7 @@ class PickPlaceSolver:
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             verts = pose.transform_points(geom.vertices)
             support = float(self.base.layout_scene.top_z[i])
-            centre, closing, _ = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
+            centre, closing = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
             down = np.array([0, 0, -1.0])
             poses.append([agent.build_grasp_pose(down, c, centre) for c in (closing, -closing)])
         return poses

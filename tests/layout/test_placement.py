@@ -68,3 +68,25 @@ def test_impossible_request_fails_fast_naming_object(tmp_path):
     assert time.perf_counter() - t < 10
     assert exc.value.node.startswith("bowl"), exc.value.node  # the table fills with bowls
     assert "no overlap" in str(exc.value)
+
+
+def test_editing_only_the_collision_mesh_is_seen_by_placement(scene_copy):
+    """Geometry caches are keyed on the URDF and on the collision mesh it names."""
+    import os
+
+    from embodied_envs.layout.placement import node_footprint, polygon_area
+
+    layout = load_layout(scene_copy / "layouts" / "default.json")
+    before = polygon_area(node_footprint(layout, "mug"))
+    mesh = scene_copy / "assets" / "mug" / "mesh" / "mug_collision.obj"
+    lines = []
+    for line in mesh.read_text().splitlines():
+        if line.startswith("v "):
+            x, y, z = (2 * float(v) for v in line.split()[1:4])
+            line = f"v {x} {y} {z}"
+        lines.append(line)
+    mesh.write_text("\n".join(lines) + "\n")
+    later = mesh.stat().st_mtime + 5  # a new modification time even on coarse clocks
+    os.utime(mesh, (later, later))
+    after = polygon_area(node_footprint(layout, "mug"))
+    assert after == pytest.approx(4 * before, rel=1e-6)
