@@ -95,7 +95,7 @@ def check_env_idx(options: dict | None, num_envs: int, device) -> dict | None:
     return {**options, "env_idx": t.to(device=device, dtype=torch.long)}
 
 
-def check_action(action, single_shape: tuple, num_envs: int, what: str):
+def check_action(action, single_shape: tuple, num_envs: int, control_mode: str):
     """The action as a tensor (lists and arrays are converted), or ``None`` / a dict as given.
 
     Raises:
@@ -109,7 +109,8 @@ def check_action(action, single_shape: tuple, num_envs: int, what: str):
         raise ValueError(f"action must be numbers of shape {single_shape}: {e}") from None
     if tuple(a.shape) not in (single_shape, (num_envs, *single_shape)):
         raise ValueError(
-            f"action has shape {tuple(a.shape)}; {what} takes {single_shape} or "
+            f"action has shape {tuple(a.shape)}; PickEmbodiedGen-v1 with control_mode="
+            f"{control_mode!r} takes {single_shape} or "
             f"({num_envs}, {single_shape[0]})"
         )
     if not a.is_floating_point():

@@ -292,8 +292,9 @@ class PickEmbodiedGenEnv(BaseEnv):
 
     def step(self, action):
         self._check_open("step")
-        what = f"PickEmbodiedGen-v1 with control_mode={self.control_mode!r}"
-        action = check_action(action, tuple(self.single_action_space.shape), self.num_envs, what)
+        action = check_action(
+            action, tuple(self.single_action_space.shape), self.num_envs, self.control_mode
+        )
         if isinstance(action, torch.Tensor):
             action = action.to(self.device)
         return super().step(action)
@@ -317,7 +318,7 @@ class PickEmbodiedGenEnv(BaseEnv):
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         b = len(env_idx)
         ls = self.layout_scene
-        start = ls.episodes.draw(env_idx, self._batched_episode_rng[env_idx.cpu().numpy()])
+        start = ls.episodes.draw(env_idx, self._batched_episode_rng)
         with torch.device(self.device):
             self.agent.robot.set_root_pose(Pose.create(ls.robot_poses[env_idx]))
             qpos = torch.as_tensor(REST_QPOS, dtype=torch.float32).repeat(b, 1)
@@ -392,9 +393,7 @@ class PickEmbodiedGenEnv(BaseEnv):
         if self.hybrid is not None:
             ls = self.layout_scene
             self.hybrid.to(self.device).configure(
-                foreground_ids=stacked_ids(
-                    self.agent.robot.links + [ls.node_actors[n] for n in ls.node_actors]
-                ),
+                foreground_ids=stacked_ids(self.agent.robot.links + list(ls.node_actors.values())),
                 hidden_ids=stacked_ids(self._hidden_objects),
                 background_poses=[x.pose(self.base_layout.background) for x in self.layouts],
             )

@@ -38,6 +38,7 @@ from embodied_envs.layout.placement import (
     local_top,
     node_footprint,
     node_geometry,
+    square,
     support_order,
 )
 from embodied_envs.layout.schema import LayoutInfo
@@ -95,12 +96,6 @@ def normals(keys: torch.Tensor, stream: int, n: int) -> torch.Tensor:
 
 
 # --- batched 2D geometry ---------------------------------------------------------------------
-def rotation(yaw: torch.Tensor) -> torch.Tensor:
-    """``(..., 2, 2)`` rotations by ``yaw``."""
-    c, s = torch.cos(yaw), torch.sin(yaw)
-    return torch.stack([torch.stack([c, -s], -1), torch.stack([s, c], -1)], -2)
-
-
 def rotate(points: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
     """``points (m, 2)`` rotated by each ``yaw (...)``: ``(..., m, 2)``."""
     c, s = torch.cos(yaw)[..., None], torch.sin(yaw)[..., None]
@@ -320,8 +315,7 @@ class EpisodeSampler:
         order = support_order(base)
         parents = {parent for _, parent in order}
         feet = [node_footprint(base, node) for node, _ in order]
-        h = limits.robot_footprint / 2.0
-        robot_square = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])  # as placement.square
+        robot_square = square(np.zeros(2), limits.robot_footprint, 0.0)  # in its own frame
         self.shapes = Shapes.of([robot_square, *feet], self.device)  # robot base, then items
         obstacles = ["robot"] + [node for node, _ in order]
         ancestors = {ctx: {ctx}}
@@ -397,7 +391,7 @@ class EpisodeSampler:
         yaw = torch.tensor([p.yaw for p in poses], dtype=torch.float32, device=self.device)
         xy = torch.tensor([p.p[:2] for p in poses], dtype=torch.float32, device=self.device)
         poly = torch.as_tensor(local, dtype=torch.float32, device=self.device)
-        return poly @ rotation(yaw).transpose(1, 2) + xy[:, None]
+        return rotate(poly, yaw) + xy[:, None]
 
     def _init_goals(self, base: LayoutInfo, ctx: str, ctx_poses, layouts) -> None:
         """The goal region per env: top hull shrunk by the goal margin, reach band, heading."""
@@ -455,18 +449,19 @@ class EpisodeSampler:
 
         Args:
             env_idx: ``(b,)`` envs being reset.
-            rngs: ManiSkill's ``BatchedRNG`` of those envs (``_batched_episode_rng[env_idx]``);
-                read only when a block of starts runs out.
+            rngs: ManiSkill's ``BatchedRNG`` of all envs (``_batched_episode_rng``); only the
+                envs whose block of starts ran out are read.
         """
         empty = self._next[env_idx] >= self.block
         if bool(empty.any()):
             refill = env_idx[empty]
-            rows = np.flatnonzero(empty.cpu().numpy())
-            keys = np.asarray(rngs[rows].randint(0, 2**31, size=self.block))
+            keys = np.asarray(rngs[refill.cpu().numpy()].randint(0, 2**31, size=self.block))
             keys = torch.as_tensor(keys.reshape(-1), device=self.device)
             flat = refill.repeat_interleave(self.block)
             start = EpisodeStart(
-                self.objects(flat, keys), self.goals(flat, keys), normals(keys, NOISE_STREAM, 7)
+                self.objects(flat, keys),
+                self.goals(flat, keys),
+                normals(keys, NOISE_STREAM, NOISE_DIMS),
             )
             if self._queue is None:
                 self._queue = EpisodeStart(

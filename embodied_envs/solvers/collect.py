@@ -11,6 +11,7 @@ collects a disjoint block of seeds into its own file, and the blocks are merged 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import multiprocessing as mp
@@ -196,7 +197,7 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
         for k, (seeds, quota) in enumerate(blocks):
             p = ctx.Process(
                 target=_worker,
-                args=(CollectPlan(**{**asdict(plan), "layout": str(layout)}), seeds, quota,
+                args=(dataclasses.replace(plan, layout=str(layout)), seeds, quota,
                       str(work), f"part{k:03d}", queue),
                 daemon=True,
             )  # fmt: skip
@@ -227,7 +228,6 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
         parts = sorted(work.glob("part*.h5"))
         staged = work / "trajectory.h5"
         merge_trajectories(str(staged), [str(p) for p in parts])
-        _finish_json(work / "trajectory.json")
         steps = [r.steps for r in kept] or [0]
         summary = LayoutSummary(
             layout=str(layout),
@@ -256,13 +256,3 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
         return summary
     finally:
         shutil.rmtree(work, ignore_errors=True)
-
-
-def _finish_json(path: Path) -> None:
-    """ManiSkill's merge keeps the first part's metadata; the episodes keep their seeds."""
-    data = json.loads(path.read_text())
-    data.setdefault("source_type", "motionplanning")
-    data.setdefault("source_desc", SOURCE_DESC)
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2))
-    tmp.replace(path)
