@@ -1,8 +1,10 @@
-"""Where the shipped data lives."""
+"""Where the shipped data lives, and how outputs are written."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -19,3 +21,17 @@ def default_layout() -> Path:
 
 def shipped_layouts() -> list[Path]:
     return sorted((data_root() / "layouts").glob("*.json"))
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
+    """A temporary name beside ``path`` (same suffix) to write to; renamed to ``path`` when the
+    block ends without error, removed otherwise, so a crash or a full disk never leaves a
+    truncated file under the final name."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)

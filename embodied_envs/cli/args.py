@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from pathlib import Path
 
 
 def _parse(text: str, convert, what: str):
@@ -51,8 +52,6 @@ def unit_float(text: str) -> float:
 def writable_dir(path):
     """An output folder that exists or can be made, and can be written: checked before any
     long work, so a bad ``--out`` costs one line, not a traceback after minutes."""
-    from pathlib import Path
-
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise SystemExit(f"error: --out {path} is a file, not a folder. Fix: choose a folder.")
@@ -66,3 +65,31 @@ def writable_dir(path):
             f"error: --out {path} cannot be written ({e.strerror}). Fix: choose a writable folder."
         ) from None
     return path
+
+
+def add_config_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--config",
+        type=Path,
+        action="append",
+        help="YAML/JSON file of PickEmbodiedGen-v1 keywords; repeat to merge in order (later "
+        "files win); flags win over files",
+    )
+
+
+def env_config(paths: list[Path] | None, owned: dict[str, str]) -> dict:
+    """The env keywords of ``--config`` files, merged in order. A key the command sets itself
+    is refused, naming the flag (or the reason) that sets it.
+
+    Raises:
+        embodied_envs.config.ConfigError
+    """
+    from embodied_envs.config import ConfigError, load_config
+
+    config = load_config(paths)
+    for key in sorted(set(config) & set(owned)):
+        raise ConfigError(
+            f"{', '.join(map(str, paths))}: {key} is set by this command ({owned[key]}); "
+            "remove it from the config file"
+        )
+    return config

@@ -5,7 +5,24 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from embodied_envs.cli.args import positive_int, seed_int, writable_dir
+from embodied_envs.cli.args import (
+    add_config_argument,
+    env_config,
+    positive_int,
+    seed_int,
+    writable_dir,
+)
+
+# env keywords collect sets itself: a --config file may not set them
+OWNED_KEYS = {
+    "layout_file": "--layout",
+    "obs_mode": "--obs-mode",
+    "hybrid_obs": "--hybrid-obs",
+    "render_mode": "--video",
+    "control_mode": "the solver records pd_joint_pos; convert with embodied-envs replay",
+    "num_envs": "--workers: one env per process",
+    "sim_backend": "one CPU env per process",
+}
 
 
 def add_parser(sub) -> None:
@@ -39,6 +56,7 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--workers", type=positive_int, default=None, help="processes (default 1)")
     p.add_argument("--video", action="store_true", help="also an MP4 per kept episode")
+    add_config_argument(p)
     p.set_defaults(func=cmd_collect)
 
 
@@ -49,6 +67,7 @@ def cmd_collect(args) -> int:
     from embodied_envs.paths import default_layout
     from embodied_envs.solvers.collect import CollectError, CollectPlan, collect
 
+    config = env_config(args.config, OWNED_KEYS)
     layouts = [p.resolve() for p in (args.layout or [default_layout()])]
     for path in layouts:
         load_layout(path)  # bad input fails here, before any simulation
@@ -68,6 +87,7 @@ def cmd_collect(args) -> int:
             max_attempts=args.max_attempts,
             workers=workers,
             video=args.video,
+            env_kwargs=config,
         )
         with tqdm(total=plan.attempts(), desc=path.stem, unit="episode") as bar:
             try:

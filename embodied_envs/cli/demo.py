@@ -17,10 +17,28 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from embodied_envs.cli.args import image_side, positive_int, seed_int
+from embodied_envs.cli.args import (
+    add_config_argument,
+    env_config,
+    image_side,
+    positive_int,
+    seed_int,
+)
+from embodied_envs.config import CameraSpec, merge_config
 from embodied_envs.layout import load_layout
 from embodied_envs.layout.placement import derive_seed, place
-from embodied_envs.paths import default_layout
+from embodied_envs.paths import atomic_output, default_layout
+from embodied_envs.registration import CONTROL_FREQ, ENV_ID
+
+# env keywords the demo sets itself: a --config file may not set them
+OWNED_KEYS = {
+    "layout_file": "--layout",
+    "render_mode": "--render-mode",
+    "num_envs": "--num-envs: one env per process",
+    "replace_objs": "env 0 keeps the file's poses, env k a placed variant",
+    "control_mode": "the scripted solver drives pd_joint_pos",
+    "sim_backend": "one CPU env per process",
+}
 
 
 def add_parser(sub) -> None:
@@ -35,10 +53,14 @@ def add_parser(sub) -> None:
         default="hybrid",
         help="hybrid: simulated scene over the layout's splat background",
     )
-    p.add_argument("--camera-eye", type=float, nargs=3, default=[0.9, 0.0, 1.1])
-    p.add_argument("--camera-target", type=float, nargs=3, default=[0.0, 0.0, 0.9])
-    p.add_argument("--image-hw", type=image_side, nargs=2, default=[256, 256])
-    p.add_argument("--fovy-deg", type=float, default=75.0)
+    cam = CameraSpec()
+    p.add_argument("--camera-eye", type=float, nargs=3, help=f"default {list(cam.eye)}")
+    p.add_argument("--camera-target", type=float, nargs=3, help=f"default {list(cam.target)}")
+    p.add_argument(
+        "--image-hw", type=image_side, nargs=2, help=f"default {[cam.height, cam.width]}"
+    )
+    p.add_argument("--fovy-deg", type=float, help=f"default {cam.fovy_deg}")
+    add_config_argument(p)
     p.add_argument(
         "--frame-every", type=positive_int, default=2, help="record every k-th control step"
     )
@@ -70,12 +92,12 @@ def _run_env(job: dict) -> list[EnvEpisode]:
     from embodied_envs.solvers import PickPlaceSolver
 
     env = gym.make(
-        "PickEmbodiedGen-v1",
+        ENV_ID,
+        **job["env_kwargs"],
         layout_file=job["layout"],
         replace_objs=False,
         render_mode=job["render_mode"],
         control_mode="pd_joint_pos",
-        camera_cfg=job["camera_cfg"],
     )
     out = []
     every = job["frame_every"]
@@ -145,7 +167,10 @@ def write_video(path: Path, per_env_frames: list[list[np.ndarray]], fps: int) ->
     import imageio.v2 as imageio
 
     n = max(len(f) for f in per_env_frames)
-    with imageio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=1) as w:
+    with (
+        atomic_output(path) as tmp,
+        imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7, macro_block_size=1) as w,
+    ):
         for t in range(n):
             w.append_data(tile([f[min(t, len(f) - 1)] for f in per_env_frames]))
     return n
@@ -165,20 +190,25 @@ def cmd_demo(args) -> int:
     layout_path = (args.layout or default_layout()).resolve()
     if args.num_envs < 1 or args.episodes < 1:
         raise SystemExit("error: --num-envs and --episodes must be at least 1")
-    args.out.mkdir(parents=True, exist_ok=True)
-    layouts = env_layouts(layout_path, args.num_envs, args.seed, args.out)
-    camera_cfg = dict(
+    config = env_config(args.config, OWNED_KEYS)
+    camera = dict(
         camera_eye=args.camera_eye,
         camera_target_pt=args.camera_target,
-        image_hw=list(args.image_hw),
+        image_hw=args.image_hw,
         fovy_deg=args.fovy_deg,
     )
+    env_kwargs = merge_config(
+        config, dict(camera_cfg={k: v for k, v in camera.items() if v is not None})
+    )
+    CameraSpec.from_cfg(env_kwargs["camera_cfg"])  # a bad camera fails before any output
+    args.out.mkdir(parents=True, exist_ok=True)
+    layouts = env_layouts(layout_path, args.num_envs, args.seed, args.out)
     jobs = [
         dict(
             env=k,
             layout=layouts[k],
             render_mode=args.render_mode,
-            camera_cfg=camera_cfg,
+            env_kwargs=env_kwargs,
             frame_every=args.frame_every,
             seeds=[args.seed + e * args.num_envs + k for e in range(args.episodes)],
         )
@@ -198,7 +228,7 @@ def cmd_demo(args) -> int:
                 results.append(r)
                 bar.update(len(r))
     bar.close()
-    fps = max(1, int(round(50 / args.frame_every)))
+    fps = max(1, int(round(CONTROL_FREQ / args.frame_every)))
     summary = dict(
         layout=str(layout_path),
         num_envs=args.num_envs,
@@ -228,6 +258,7 @@ def cmd_demo(args) -> int:
             f"steps {[ep.steps for ep in eps]}, video {video}"
         )
     summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    with atomic_output(args.out / "summary.json") as tmp:
+        tmp.write_text(json.dumps(summary, indent=2) + "\n")
     print(f"wrote {args.out / 'summary.json'}")
     return 0

@@ -23,7 +23,8 @@ from embodied_envs.layout.placement import (
     top_surface,
     world_vertices,
 )
-from embodied_envs.splat import SplatFileError, read_ply
+from embodied_envs.paths import atomic_output
+from embodied_envs.splat import SplatFileError, check_ply
 from embodied_envs.workers import exit_with_parent
 
 
@@ -80,9 +81,8 @@ def claim_stem(out: Path, layout: Path) -> None:
             f"would replace them with variants of {source}. Fix: choose another --out."
         )
     owners[stem] = source
-    tmp = manifest.with_name(f"{MANIFEST}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(owners, indent=2))
-    os.replace(tmp, manifest)
+    with atomic_output(manifest) as tmp:
+        tmp.write_text(json.dumps(owners, indent=2))
 
 
 def cmd_generate(args) -> int:
@@ -116,7 +116,7 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
         return e.problems
     except OSError as e:  # unreadable file, permission, a folder given as file, ...
         return [f"{path}: {e.strerror or e} ({e.filename or path}). Fix: check the path."]
-    from embodied_envs.envs.config import resolve_robot
+    from embodied_envs.config import resolve_robot
 
     problems = []
     try:
@@ -126,7 +126,7 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
     splat = layout.gs_model_path()
     if splat.is_file():  # optional: only hybrid rendering needs it, but it must be readable
         try:
-            read_ply(splat)
+            check_ply(splat)
         except (SplatFileError, OSError) as e:
             problems.append(str(e))
     if check_placement:
@@ -230,6 +230,7 @@ def cmd_preview(args) -> int:
         both.paste(Image.fromarray(frame), (img.width, 0))
         img = both
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    img.save(args.out)
+    with atomic_output(args.out) as tmp:
+        img.save(tmp)
     print(f"wrote {args.out}")
     return 0

@@ -5,12 +5,11 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import imageio.v3 as iio
 import numpy as np
 
 from embodied_envs.cli.args import image_side, unit_float
-from embodied_envs.splat import PinholeCamera, read_ply, render
-from embodied_envs.splat.render import BACKENDS
+from embodied_envs.paths import atomic_output
+from embodied_envs.splat import BACKENDS
 
 DEPTH_PNG_SCALE = 1000.0  # 16-bit depth PNG units per metre (millimetres)
 
@@ -52,6 +51,10 @@ def add_parser(sub) -> None:
 
 
 def cmd_render(args) -> int:
+    import imageio.v3 as iio
+
+    from embodied_envs.splat import PinholeCamera, read_ply, render
+
     camera = PinholeCamera.look_at(
         args.eye, args.target, args.up, args.width, args.height, args.fovy
     )
@@ -60,12 +63,14 @@ def cmd_render(args) -> int:
     image = render(splat, camera, backend=args.backend, background=tuple(args.background))
     seconds = time.perf_counter() - start
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(args.out, image.rgb_uint8().cpu().numpy())
+    with atomic_output(args.out) as tmp:
+        iio.imwrite(tmp, image.rgb_uint8().cpu().numpy())
     print(f"wrote {args.out} ({len(splat)} Gaussians, {args.width}x{args.height}, {seconds:.2f} s)")
     if args.depth_out is not None:
         depth = image.surface_depth(min_alpha=0.5).cpu().numpy()
         depth = np.where(np.isfinite(depth), depth * DEPTH_PNG_SCALE, 0.0)
         args.depth_out.parent.mkdir(parents=True, exist_ok=True)
-        iio.imwrite(args.depth_out, np.clip(np.round(depth), 0, 65535).astype(np.uint16))
+        with atomic_output(args.depth_out) as tmp:
+            iio.imwrite(tmp, np.clip(np.round(depth), 0, 65535).astype(np.uint16))
         print(f"wrote {args.depth_out} (16-bit depth, mm)")
     return 0

@@ -30,11 +30,6 @@ def dataclass_arg(cls, value, name: str):
     raise ValueError(f"{name} must be a dict of {cls.__name__} fields, got {type(value).__name__}")
 
 
-def fields_of(obj) -> dict:
-    """A dataclass instance's fields as keyword arguments."""
-    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
-
-
 def check_num_envs(num_envs, sim_backend: str) -> None:
     """Several envs in one process need ManiSkill's GPU simulation, hence CUDA."""
     if isinstance(num_envs, bool) or not isinstance(num_envs, numbers.Integral) or num_envs < 1:

@@ -21,10 +21,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import torch
+from mani_skill.utils.visualization.misc import tile_images
 
 from embodied_envs.layout.pose import LayoutPose, quat_multiply_xyzw
 from embodied_envs.splat import PinholeCamera, SplatFileError, pose_splat, read_ply, render
-from embodied_envs.splat.render import resolve_backend
+from embodied_envs.splat.backend import resolve_backend
 
 SPLAT_SURFACE_ALPHA = 0.5  # splat pixels at least this opaque have a surface for the depth test
 CAMERA_TOLERANCE = 1e-6  # camera matrices closer than this reuse the cached background
@@ -83,6 +84,7 @@ class HybridRenderer:
         self.poses: list[LayoutPose] = []  # per env, the background node's layout pose
         self._lut: dict[str, torch.Tensor] = {}  # "sensor" / "human" -> (n, max id + 1) bool
         self._cameras: dict[str, CameraBackgrounds] = {}
+        self._prerender_due = False  # set by configure, cleared by prerender
         self.renders = 0  # background renders so far
         self.render_seconds = 0.0  # time spent in them
 
@@ -126,6 +128,7 @@ class HybridRenderer:
         self.poses = list(background_poses)
         for cam in self._cameras.values():
             cam.valid[:] = False
+        self._prerender_due = True
 
     # --- backgrounds ---------------------------------------------------------------------
     def render_one(self, camera: PinholeCamera, pose: LayoutPose) -> tuple[torch.Tensor, ...]:
@@ -257,7 +260,11 @@ class HybridRenderer:
         return obs
 
     def prerender(self, scene) -> None:
-        """Render the human cameras' backgrounds of every env now (at configuration)."""
+        """After a :meth:`configure`, render the human cameras' backgrounds of every env now
+        (the env calls it once the episode has posed the cameras), not at the first frame."""
+        if not self._prerender_due:
+            return
+        self._prerender_due = False
         for name, camera in scene.human_render_cameras.items():
             self.backgrounds(
                 name,
@@ -267,8 +274,9 @@ class HybridRenderer:
                 camera.config.height,
             )
 
-    def render(self, scene, hidden_objects: list) -> list[torch.Tensor]:
-        """Every human render camera's image composited over the splat, ``(n, H, W, 3)``."""
+    def render(self, scene, hidden_objects: list) -> torch.Tensor:
+        """The human render cameras' images composited over the splat, ``(n, H, W, 3)``
+        (several cameras side by side, as ManiSkill's ``render_rgb_array``)."""
         for obj in hidden_objects:
             obj.show_visual()
         scene.update_render(update_sensors=False, update_human_render_cameras=True)
@@ -279,7 +287,7 @@ class HybridRenderer:
             images.append(self.composite_camera(name, camera, data, human=True))
         for obj in hidden_objects:
             obj.hide_visual()
-        return images
+        return images[0] if len(images) == 1 else tile_images(images)
 
 
 def stacked_ids(actors: list) -> torch.Tensor:

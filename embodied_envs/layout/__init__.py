@@ -2,16 +2,19 @@
 
 from embodied_envs.layout.assets import AssetGeometry, AssetSpec, asset_geometry, parse_urdf
 from embodied_envs.layout.errors import LayoutError, PlacementError
+from embodied_envs.layout.limits import GoalRegion, PlacementLimits
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.layout.schema import LayoutInfo, check_asset_files, load_layout
 
 __all__ = [
     "AssetGeometry",
     "AssetSpec",
+    "GoalRegion",
     "LayoutError",
     "LayoutInfo",
     "LayoutPose",
     "PlacementError",
+    "PlacementLimits",
     "asset_geometry",
     "check_asset_files",
     "load_layout",

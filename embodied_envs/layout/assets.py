@@ -210,7 +210,7 @@ class AssetGeometry:
         """Counter-clockwise 2D convex hull ``(m, 2)`` of the vertices projected on XY."""
         return convex_hull_2d(self.vertices[:, :2])
 
-    def top_hull(self, band: float = 0.05) -> np.ndarray:
+    def top_hull(self, band: float) -> np.ndarray:
         """2D hull of the vertices within ``band`` metres of the highest point (the top)."""
         top = self.vertices[self.vertices[:, 2] >= self.max_z - band]
         return convex_hull_2d(top[:, :2])

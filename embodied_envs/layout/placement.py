@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,36 +24,11 @@ from embodied_envs.layout.assets import (
     urdf_path_for,
 )
 from embodied_envs.layout.errors import PlacementError
+from embodied_envs.layout.limits import PlacementLimits
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.layout.schema import LayoutInfo
 
 SUPPORT_RELATIONS = ("ON", "IN", "INSIDE")
-
-
-@dataclass(frozen=True)
-class PlacementLimits:
-    """Tunable limits of :func:`place`."""
-
-    reach_min: float = 0.20  # m, manipulated object centre to robot base, exclusive
-    reach_max: float = 0.78  # m, exclusive: the Panda's top-down grasps fail from ~0.80 m
-    max_heading_deg: float = 60.0  # manipulated objects within this angle of the robot heading
-    hull_margin: float = 0.02  # m, the parent's top hull is shrunk by this much
-    clearance: float = 0.01  # m, minimum gap between footprints
-    robot_footprint: float = 0.12  # m, side of the robot base's square footprint
-    top_band: float = 0.05  # m, vertices this close to the highest point form the top
-    bottom_percentile: float = 1.0  # the context's lowest point is this percentile of its z
-    floor_radius: float = 1.5  # m, FLOOR objects are placed within this distance of the origin
-    max_attempts: int = 4096  # candidates per object before giving up
-    batch: int = 96  # candidates drawn per vectorised batch
-    episode_candidates: int = 128  # per object and env in each per-episode draw (one batch)
-
-    @classmethod
-    def from_kwargs(cls, **kwargs) -> PlacementLimits:
-        names = {f.name for f in fields(cls)}
-        unknown = set(kwargs) - names
-        if unknown:
-            raise TypeError(f"unknown placement limit(s) {sorted(unknown)}; known: {sorted(names)}")
-        return cls(**kwargs)
 
 
 @functools.lru_cache(maxsize=256)
@@ -75,8 +50,7 @@ def asset_key(layout: LayoutInfo, node: str) -> tuple[Path, tuple[float, float]]
     """(URDF path, (URDF, collision mesh) modification times) of a node's asset: the key of
     every geometry cache, so a change of either file is re-read while unchanged ones cost two
     ``stat`` calls."""
-    root = layout.asset_root or (layout.source.parent if layout.source else Path.cwd())
-    urdf = _urdf_for(root, layout.assets[node], node)
+    urdf = _urdf_for(layout.asset_base, layout.assets[node], node)
     urdf_mtime = urdf.stat().st_mtime
     collision = _spec_for(urdf, urdf_mtime).collision.path
     return urdf, (urdf_mtime, collision.stat().st_mtime)
@@ -511,13 +485,15 @@ def check_file_poses(layout: LayoutInfo) -> list[str]:
     return problems
 
 
-def place(layout: LayoutInfo, seed: int | np.random.Generator, **limits) -> LayoutInfo:
+def place(
+    layout: LayoutInfo, seed: int | np.random.Generator, limits: PlacementLimits | None = None
+) -> LayoutInfo:
     """Re-draw every pose of a layout: background yaw, table yaw, robot spot, objects.
 
     Args:
         layout: a validated layout (its asset folders must exist).
         seed: an int, or a ``numpy.random.Generator`` that every draw then comes from.
-        **limits: overrides of :class:`PlacementLimits` fields.
+        limits: the placement limits (default: :class:`PlacementLimits`'s defaults).
 
     Returns:
         A new layout with the background, context, robot and object poses re-drawn.
@@ -527,7 +503,7 @@ def place(layout: LayoutInfo, seed: int | np.random.Generator, **limits) -> Layo
     """
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     try:
-        poses = _Placer(layout, rng, PlacementLimits.from_kwargs(**limits)).run()
+        poses = _Placer(layout, rng, limits or PlacementLimits()).run()
     except PlacementError as e:
         if layout.source is None or e.source:
             raise

@@ -88,7 +88,8 @@ class LayoutPose:
         x, y, z, w = self.q_xyzw  # first column of the rotation matrix, written out
         return math.atan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z))
 
-    def translated(self, dz: float) -> LayoutPose:
+    def raised(self, dz: float) -> LayoutPose:
+        """The same pose moved up by ``dz`` metres (z only)."""
         return LayoutPose((self.p[0], self.p[1], self.p[2] + dz), self.q_xyzw)
 
 

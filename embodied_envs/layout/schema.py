@@ -20,6 +20,7 @@ import numpy as np
 from embodied_envs.layout.assets import AssetSpec, node_stem, parse_urdf, urdf_path_for
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE, LayoutPose
+from embodied_envs.paths import atomic_output
 
 CATEGORIES = ("background", "context", "manipulated_objs", "distractor_objs")
 RELATIONS = ("ON", "IN", "INSIDE", "FLOOR")
@@ -70,12 +71,8 @@ class LayoutInfo:
         return list(self.relation["manipulated_objs"])
 
     @property
-    def distractor_objs(self) -> list[str]:
-        return list(self.relation["distractor_objs"])
-
-    @property
-    def target(self) -> str:
-        """The graded object: the first manipulated object."""
+    def target_node(self) -> str:
+        """The graded object's node name: the first manipulated object."""
         return self.manipulated_objs[0]
 
     def object_nodes(self) -> list[str]:
@@ -85,9 +82,14 @@ class LayoutInfo:
     def pose(self, node: str) -> LayoutPose:
         return LayoutPose.from_layout(self.position[node])
 
+    @property
+    def asset_base(self) -> Path:
+        """The folder asset paths resolve against: ``asset_root``, else the layout file's
+        folder, else the working directory."""
+        return self.asset_root or (self.source.parent if self.source else Path.cwd())
+
     def asset_dir(self, node: str) -> Path:
-        root = self.asset_root or (self.source.parent if self.source else Path.cwd())
-        return (root / self.assets[node]).resolve()
+        return (self.asset_base / self.assets[node]).resolve()
 
     def urdf_path(self, node: str) -> Path:
         return urdf_path_for(self.asset_dir(node), node)
@@ -180,19 +182,12 @@ class LayoutInfo:
             data["assets"] = {
                 n: _relpath((Path(root) / d).resolve(), path.parent) for n, d in self.assets.items()
             }
-        # a temporary name in the same folder, renamed when complete: a crash or a full disk
-        # never leaves a truncated file under the final name
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        try:
+        with atomic_output(path) as tmp:
             tmp.write_text(json.dumps(data, indent=4) + "\n")
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
         return path
 
 
 def _relpath(target: Path, start: Path) -> str:
-    import os
 
     return os.path.relpath(target, start)
 

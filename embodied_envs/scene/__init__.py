@@ -1,12 +1,11 @@
 """Turn layout assets into SAPIEN/ManiSkill actors; per-episode randomisation of each env."""
 
 from embodied_envs.scene.builder import asset_density, build_asset_actor
-from embodied_envs.scene.episode import EpisodeSampler, GoalRegion
+from embodied_envs.scene.episode import EpisodeSampler
 from embodied_envs.scene.layout_scene import LayoutScene, load_layout_scene
 
 __all__ = [
     "EpisodeSampler",
-    "GoalRegion",
     "LayoutScene",
     "asset_density",
     "build_asset_actor",

@@ -33,8 +33,8 @@ import numpy as np
 import torch
 
 from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.limits import GoalRegion, PlacementLimits
 from embodied_envs.layout.placement import (
-    PlacementLimits,
     local_top,
     node_footprint,
     node_geometry,
@@ -42,18 +42,6 @@ from embodied_envs.layout.placement import (
     support_order,
 )
 from embodied_envs.layout.schema import LayoutInfo
-
-
-@dataclass(frozen=True)
-class GoalRegion:
-    """Where goals may be drawn: above the table top, within the robot's reach."""
-
-    reach: tuple[float, float] = (0.30, 0.65)  # m from the robot base
-    max_heading_deg: float = 50.0  # within this angle of the robot heading
-    margin: float = 0.05  # m inside the table top's hull
-    height: tuple[float, float] = (0.05, 0.25)  # m above the table top
-    candidates: int = 64  # per env in each draw; the region fills >= ~20% of their box
-
 
 # --- counter-based random numbers ----------------------------------------------------------
 GOAL_STREAM = 1 << 20  # object j uses stream j; these are far from any object index
@@ -299,12 +287,13 @@ class EpisodeSampler:
         self,
         layouts: list[LayoutInfo],
         limits: PlacementLimits,
-        goal_region: GoalRegion = GoalRegion(),
+        goal_region: GoalRegion | None = None,
         objs_z_offset: float = 0.0,
         device: torch.device | str = "cpu",
     ):
         base = layouts[0]
-        self.limits, self.goal_region, self.device = limits, goal_region, torch.device(device)
+        self.limits, self.device = limits, torch.device(device)
+        self.goal_region = GoalRegion() if goal_region is None else goal_region
         self.objs_z_offset = float(objs_z_offset)
         self.fallbacks = 0  # envs that kept their configuration's arrangement
         ctx = self.context = base.context
@@ -362,9 +351,7 @@ class EpisodeSampler:
         )
         # per env: the configuration's object poses (kept by an env whose draw fails)
         self.fallback = {
-            it.node: t(
-                [lay.pose(it.node).translated(self.objs_z_offset).to_raw() for lay in layouts]
-            )
+            it.node: t([lay.pose(it.node).raised(self.objs_z_offset).to_raw() for lay in layouts])
             for it in self.items
         }
         # per env: the table top (shrunk by the placement margin) and the robot
@@ -401,9 +388,10 @@ class EpisodeSampler:
             self._posed(hull if shrunk is None else shrunk, ctx_poses), self.top_z
         )
         # bounding box of the reach sector (dense arc samples, padded) within the top's box
-        half = math.radians(g.max_heading_deg)
+        half = math.radians(self.limits.max_heading_deg)
         a = self.robot_yaw[:, None] + torch.linspace(-half, half, 361, device=self.device)
-        arcs = torch.cat([r * torch.stack([a.cos(), a.sin()], -1) for r in g.reach], 1)
+        band = g.distance_band(self.limits)
+        arcs = torch.cat([r * torch.stack([a.cos(), a.sin()], -1) for r in band], 1)
         arcs = arcs + self.robot_xy[:, None]
         self.goal_lo = torch.maximum(arcs.amin(1) - 1e-3, self.goal_table.lo)
         self.goal_hi = torch.minimum(arcs.amax(1) + 1e-3, self.goal_table.hi)
@@ -420,22 +408,22 @@ class EpisodeSampler:
             lay = layouts[int(empty.nonzero()[0])]
             raise LayoutError(
                 f'{lay.source or "<layout>"}: position["{lay.robot}"]: no point of the "{ctx}" '
-                f"top lies within {g.reach} m of the robot base and {g.max_heading_deg} deg of "
-                "its heading. Fix: put the robot at the table's edge, facing the table."
+                f"top lies within {band} m of the robot base and {self.limits.max_heading_deg} "
+                "deg of its heading. Fix: put the robot at the table's edge, facing the table."
             )
 
     def _in_goal_region(self, xy: torch.Tensor, env_idx: torch.Tensor) -> torch.Tensor:
         """``xy (b, k, 2)`` -> ``(b, k)``: inside the goal region of each env."""
-        g = self.goal_region
+        near, far = self.goal_region.distance_band(self.limits)
         rel = xy - self.robot_xy[env_idx][:, None]
         d = rel.norm(dim=-1)
         return (
             self.goal_table.rows(env_idx).contains(xy)
-            & (d >= g.reach[0])
-            & (d <= g.reach[1])
+            & (d >= near)
+            & (d <= far)
             & (
                 _heading_error(rel, self.robot_yaw[env_idx][:, None])
-                <= math.radians(g.max_heading_deg)
+                <= math.radians(self.limits.max_heading_deg)
             )
         )
 
@@ -443,6 +431,14 @@ class EpisodeSampler:
     def invalidate(self, env_idx: torch.Tensor | None = None) -> None:
         """Drop the prepared starts of ``env_idx`` (all when None): their RNG was reseeded."""
         self._next[slice(None) if env_idx is None else env_idx] = self.block
+
+    def reseeded(self, seed, env_idx, enhanced_determinism: bool) -> None:
+        """After ManiSkill's ``_set_episode_rng(seed, env_idx)``: a seed re-creates every env's
+        episode RNG; without one, only enhanced determinism re-creates those of ``env_idx``."""
+        if seed is not None:
+            self.invalidate()
+        elif enhanced_determinism:
+            self.invalidate(torch.as_tensor(env_idx, device=self.device))
 
     def draw(self, env_idx: torch.Tensor, rngs) -> EpisodeStart:
         """The next episode start of each env in ``env_idx``.

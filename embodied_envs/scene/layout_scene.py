@@ -9,10 +9,11 @@ import numpy as np
 import torch
 
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.placement import PlacementLimits
+from embodied_envs.layout.limits import GoalRegion, PlacementLimits
+from embodied_envs.layout.placement import derive_seed, place
 from embodied_envs.layout.schema import LayoutInfo
 from embodied_envs.scene.builder import build_asset_actor
-from embodied_envs.scene.episode import EpisodeSampler, GoalRegion
+from embodied_envs.scene.episode import EpisodeSampler
 
 if TYPE_CHECKING:
     from mani_skill.envs.scene import ManiSkillScene
@@ -29,7 +30,7 @@ class LayoutScene:
         dynamic_nodes: nodes whose pose is reset each episode (all but the context).
         node_poses: each node's configuration raw pose per env, ``(num_envs, 7)`` (the
             layouts' poses, objects raised by ``objs_z_offset``).
-        target: the graded object of each env merged over envs.
+        target_actor: the graded object of each env merged over envs.
         robot_poses: robot base raw pose per env, ``(num_envs, 7)``.
         episodes: per-episode object starts, goals and joint noise of every env.
     """
@@ -38,14 +39,43 @@ class LayoutScene:
     node_actors: dict[str, Actor]
     dynamic_nodes: list[str]
     node_poses: dict[str, torch.Tensor]
-    target: Actor
+    target_actor: Actor
     robot_poses: torch.Tensor
     episodes: EpisodeSampler
+
+    def state_entries(self) -> list[Actor]:
+        """What the env's state dict holds: each dynamic node's actors merged over envs (the
+        per-env actors are views of them)."""
+        return [self.node_actors[node] for node in self.dynamic_nodes]
+
+    def set_episode_poses(self, env_idx: torch.Tensor, objects: dict[str, torch.Tensor]) -> None:
+        """Pose every dynamic node of ``env_idx`` at rest: at ``objects[node]`` (raw poses
+        ``(b, 7)``) when given, else at its configuration's pose."""
+        from mani_skill.utils.structs.pose import Pose
+
+        zeros = torch.zeros((len(env_idx), 3), device=env_idx.device)
+        for node in self.dynamic_nodes:
+            pose = objects[node] if node in objects else self.node_poses[node][env_idx]
+            actor = self.node_actors[node]
+            actor.set_pose(Pose.create(pose))
+            actor.set_linear_velocity(zeros)
+            actor.set_angular_velocity(zeros)
 
     @property
     def top_z(self) -> torch.Tensor:
         """Height of the context's top per env, ``(num_envs,)``."""
         return self.episodes.top_z
+
+
+def configuration_layouts(
+    base: LayoutInfo, seeds: np.ndarray, keep_file_poses: bool, limits: PlacementLimits
+) -> list[LayoutInfo]:
+    """One placed layout per env (env k placed with ``derive_seed(seeds[k], k)``); with
+    ``keep_file_poses``, env 0 keeps the file's poses."""
+    return [
+        base if (keep_file_poses and k == 0) else place(base, derive_seed(s, k), limits)
+        for k, s in enumerate(np.asarray(seeds).reshape(-1))
+    ]
 
 
 def load_layout_scene(
@@ -75,19 +105,19 @@ def load_layout_scene(
         actors = {}
         for node in nodes:
             static = layout.objs_mapping[node] == "context"
-            pose = layout.pose(node).translated(0.0 if static else objs_z_offset)
+            pose = layout.pose(node).raised(0.0 if static else objs_z_offset)
             node_poses[node][i] = pose.to_raw()
             actors[node] = build_asset_actor(
                 scene, specs[node], pose, f"env{i}/{node}", [i], static
             )
         env_actors[f"env{i}"] = actors
-        robot_poses[i] = layout.pose(layout.robot).translated(robot_z_offset).to_raw()
+        robot_poses[i] = layout.pose(layout.robot).raised(robot_z_offset).to_raw()
     node_actors = {}
     for node in nodes:
         per_env = [env_actors[f"env{i}"][node] for i in range(num_envs)]
         node_actors[node] = Actor.merge(per_env, name=node)
-    target = Actor.merge(
-        [env_actors[f"env{i}"][layouts[i].target] for i in range(num_envs)], name="target_obj"
+    target_actor = Actor.merge(
+        [env_actors[f"env{i}"][layouts[i].target_node] for i in range(num_envs)], name="target_obj"
     )
 
     def t(x):
@@ -99,7 +129,7 @@ def load_layout_scene(
         node_actors=node_actors,
         dynamic_nodes=[n for n in nodes if layouts[0].objs_mapping[n] != "context"],
         node_poses=node_poses,
-        target=target,
+        target_actor=target_actor,
         robot_poses=t(robot_poses),
         episodes=EpisodeSampler(layouts, limits, goal_region, objs_z_offset, device),
     )

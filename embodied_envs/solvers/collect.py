@@ -50,6 +50,8 @@ class CollectPlan:
         max_attempts: the bound on seeds tried for ``only_success``.
         workers: processes.
         video: also write one MP4 per kept episode.
+        env_kwargs: further ``gym.make`` keywords (from ``--config`` files), recorded with the
+            dataset's ``env_kwargs``.
     """
 
     layout: str
@@ -61,6 +63,7 @@ class CollectPlan:
     max_attempts: int | None = None
     workers: int = 1
     video: bool = False
+    env_kwargs: dict = field(default_factory=dict)
 
     def attempts(self) -> int:
         return (self.max_attempts or 2 * self.num) if self.only_success else self.num
@@ -114,6 +117,7 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
     exit_with_parent(os.getppid())  # a killed collect leaves no worker writing on
     env = gym.make(
         ENV_ID,
+        **plan.env_kwargs,
         layout_file=plan.layout,
         obs_mode=plan.obs_mode,
         hybrid_obs=plan.hybrid_obs,

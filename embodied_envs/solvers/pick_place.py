@@ -174,7 +174,7 @@ class PickPlaceSolver:
             actors = self.base.env_actors[f"env{i}"]
             clouds = []
             for node, actor in actors.items():
-                if node == layout.target:
+                if node == layout.target_node:
                     continue
                 geom = asset_geometry(layout.asset_spec(node))
                 pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
@@ -291,8 +291,8 @@ class PickPlaceSolver:
         tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
         poses = []
         for i, layout in enumerate(self.base.layouts):
-            actor = self.base.env_actors[f"env{i}"][layout.target]
-            geom = asset_geometry(layout.asset_spec(layout.target))
+            actor = self.base.env_actors[f"env{i}"][layout.target_node]
+            geom = asset_geometry(layout.asset_spec(layout.target_node))
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             verts = pose.transform_points(geom.vertices)
             support = float(self.base.layout_scene.top_z[i])

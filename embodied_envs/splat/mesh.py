@@ -9,7 +9,8 @@ import numpy as np
 import torch
 import trimesh
 
-from embodied_envs.splat.model import SH_C0, GaussianSplat
+from embodied_envs.splat.model import GaussianSplat
+from embodied_envs.splat.sh import SH_C0
 
 FLAT_SCALE = 1e-3  # m, standard deviation of each Gaussian along the surface normal
 SPREAD = 1.0  # in-plane standard deviation, in units of the mean sample spacing

@@ -6,13 +6,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-SH_C0 = 0.28209479177387814  # zeroth-order real spherical-harmonic constant
-MAX_SH_DEGREE = 3
-
-
-def sh_coeff_count(degree: int) -> int:
-    """Spherical-harmonic coefficients per colour channel for a degree: (d + 1)^2."""
-    return (degree + 1) ** 2
+from embodied_envs.splat.sh import MAX_SH_DEGREE, SH_C0, sh_coeff_count
 
 
 @dataclass(frozen=True)

@@ -11,11 +11,17 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
-from embodied_envs.splat.model import MAX_SH_DEGREE, GaussianSplat, sh_coeff_count
+from embodied_envs.paths import atomic_output
+from embodied_envs.splat.sh import MAX_SH_DEGREE, sh_coeff_count
+
+if TYPE_CHECKING:
+    import torch
+
+    from embodied_envs.splat.model import GaussianSplat
 
 PLY_TYPES = {
     "char": "i1",
@@ -107,13 +113,18 @@ def _read_header(path: Path, data: bytes) -> tuple[list[tuple[str, int, list]], 
 MAX_SCALE = 1e3  # m: a Gaussian larger than this is a corrupt value, not a scene part
 
 
-def read_ply(path: str | os.PathLike) -> GaussianSplat:
-    """Read a 3DGS PLY file into a :class:`GaussianSplat` (float32, CPU).
+def read_ply_arrays(path: str | os.PathLike) -> dict[str, np.ndarray | None]:
+    """Read and check a 3DGS PLY file with numpy alone (no torch: ``layout validate`` uses it).
+
+    Returns:
+        float32 arrays: ``means (N, 3)``, ``quats_wxyz (N, 4)``, ``log_scales (N, 3)``,
+        ``opacity_logits (N,)``, ``sh (N, K, 3)`` and ``normals (N, 3)`` or None.
 
     Raises:
         SplatFileError: the file is missing, not binary little-endian, has no ``vertex``
             element, lacks a required property, has an SH property count that is not a degree
-            0..3 one, or is shorter than its header promises.
+            0..3 one, is shorter than its header promises, holds no Gaussians, or holds a NaN,
+            a scale over ``MAX_SCALE`` or an all-zero quaternion.
     """
     path = Path(path)
     if not path.is_file():
@@ -180,52 +191,78 @@ def read_ply(path: str | os.PathLike) -> GaussianSplat:
         )
     v = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
 
-    def cols(*props: str) -> torch.Tensor:
-        return torch.from_numpy(np.stack([v[p].astype(np.float32) for p in props], axis=1))
+    def cols(*props: str) -> np.ndarray:
+        return np.stack([v[p].astype(np.float32) for p in props], axis=1)
 
-    degree = degrees[n_rest]
-    k = sh_coeff_count(degree)
-    dc = cols("f_dc_0", "f_dc_1", "f_dc_2")[:, None, :]
+    k = sh_coeff_count(degrees[n_rest])
+    sh = cols("f_dc_0", "f_dc_1", "f_dc_2")[:, None, :]
     if k > 1:
         rest = cols(*(f"f_rest_{i}" for i in range(n_rest))).reshape(count, 3, k - 1)
-        sh = torch.cat([dc, rest.transpose(1, 2)], dim=1)
-    else:
-        sh = dc
-    normals = cols("nx", "ny", "nz") if {"nx", "ny", "nz"} <= names else None
-    splat = GaussianSplat(
+        sh = np.concatenate([sh, rest.transpose(0, 2, 1)], axis=1)
+    arrays = dict(
         means=cols("x", "y", "z"),
         quats_wxyz=cols("rot_0", "rot_1", "rot_2", "rot_3"),
         log_scales=cols("scale_0", "scale_1", "scale_2"),
         opacity_logits=cols("opacity")[:, 0],
-        sh=sh.contiguous(),
-        normals=normals,
+        sh=np.ascontiguousarray(sh),
+        normals=cols("nx", "ny", "nz") if {"nx", "ny", "nz"} <= names else None,
     )
-    values = [splat.means, splat.quats_wxyz, splat.log_scales, splat.opacity_logits[:, None]]
-    bad = ~torch.isfinite(torch.cat([*values, splat.sh.reshape(count, -1)], 1)).all(1)
-    if bool(bad.any()):
+    _check_values(path, arrays)
+    return arrays
+
+
+def _check_values(path: Path, a: dict[str, np.ndarray | None]) -> None:
+    count = len(a["means"])
+    values = [a["means"], a["quats_wxyz"], a["log_scales"], a["opacity_logits"][:, None]]
+    bad = ~np.isfinite(np.concatenate([*values, a["sh"].reshape(count, -1)], 1)).all(1)
+    if bad.any():
         raise SplatFileError(
             path,
             f"{int(bad.sum())} Gaussians have a NaN or infinite value (first: vertex "
-            f"{int(bad.nonzero()[0])})",
+            f"{int(bad.nonzero()[0][0])})",
             "remove them or re-export the splat",
         )
-    huge = splat.log_scales.amax(1) > math.log(MAX_SCALE)
-    if bool(huge.any()):
+    huge = a["log_scales"].max(1) > math.log(MAX_SCALE)
+    if huge.any():
         raise SplatFileError(
             path,
             f"{int(huge.sum())} Gaussians have a scale over {MAX_SCALE:g} m (first: vertex "
-            f"{int(huge.nonzero()[0])}, scale exp({float(splat.log_scales[huge][0].max()):.3g}))",
+            f"{int(huge.nonzero()[0][0])}, scale exp({float(a['log_scales'][huge][0].max()):.3g}))",
             "scale_* are natural logs of metres in a 3DGS PLY; remove those Gaussians",
         )
-    flat = torch.linalg.vector_norm(splat.quats_wxyz, dim=1) < 1e-8
-    if bool(flat.any()):
+    flat = np.linalg.norm(a["quats_wxyz"], axis=1) < 1e-8
+    if flat.any():
         raise SplatFileError(
             path,
             f"{int(flat.sum())} Gaussians have an all-zero rotation quaternion (first: vertex "
-            f"{int(flat.nonzero()[0])})",
+            f"{int(flat.nonzero()[0][0])})",
             "write unit quaternions rot_0..3 (w x y z)",
         )
-    return splat
+
+
+def check_ply(path: str | os.PathLike) -> int:
+    """Check a 3DGS PLY file without torch; returns its number of Gaussians.
+
+    Raises:
+        SplatFileError: as :func:`read_ply_arrays`.
+    """
+    return len(read_ply_arrays(path)["means"])
+
+
+def read_ply(path: str | os.PathLike) -> GaussianSplat:
+    """Read a 3DGS PLY file into a :class:`GaussianSplat` (float32, CPU).
+
+    Raises:
+        SplatFileError: as :func:`read_ply_arrays`.
+    """
+    import torch
+
+    from embodied_envs.splat.model import GaussianSplat
+
+    arrays = read_ply_arrays(path)
+    return GaussianSplat(
+        **{k: None if v is None else torch.from_numpy(v) for k, v in arrays.items()}
+    )
 
 
 def write_ply(splat: GaussianSplat, path: str | os.PathLike) -> Path:
@@ -254,7 +291,7 @@ def write_ply(splat: GaussianSplat, path: str | os.PathLike) -> Path:
     header += [f"property float {name}" for name, _ in columns]
     header.append("end_header")
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("wb") as f:
+    with atomic_output(path) as tmp, tmp.open("wb") as f:
         f.write(("\n".join(header) + "\n").encode("ascii"))
         f.write(table.tobytes())
     return path

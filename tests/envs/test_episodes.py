@@ -44,7 +44,7 @@ def test_same_seed_same_start_other_seed_other_start(env):
     assert torch.equal(obs_a, obs_b) and torch.equal(goal_a, u.goal_site.pose.p)
     obs_c, _ = env.reset(seed=22)
     assert not torch.equal(obs_a, obs_c)
-    target = u.layouts[0].target
+    target = u.layouts[0].target_node
     assert not np.array_equal(start_a[target], object_poses(u)[target])
 
 
@@ -56,7 +56,7 @@ def test_fixed_poses_regime_uses_the_file_every_episode():
         for seed in (0, 1, None):
             e.reset(seed=seed)
             for node, raw in object_poses(u).items():
-                want = file.pose(node).translated(u.objs_z_offset).to_raw()
+                want = file.pose(node).raised(u.objs_z_offset).to_raw()
                 np.testing.assert_allclose(raw[:3], want[:3], atol=1e-5, err_msg=node)
                 assert abs(abs(np.dot(raw[3:], want[3:])) - 1) < 1e-5, node
         e.reset(seed=3, options=dict(reconfigure=True))

@@ -41,7 +41,7 @@ def test_each_env_grades_its_own_target(env):
     u = env.unwrapped
     env.reset(seed=3)
     for k in range(N):
-        own = u.env_actors[f"env{k}"][u.layouts[k].target]
+        own = u.env_actors[f"env{k}"][u.layouts[k].target_node]
         assert torch.allclose(u.obj.pose.p[k], own.pose.p[0])
     _, reward, _, _, info = env.step(torch.zeros(env.action_space.shape, device=u.device))
     # nothing grasped yet: the reward is the reaching term of each env's own object
@@ -115,7 +115,7 @@ def test_per_episode_placement_on_the_gpu(n):
 def test_cuda_backends_match_the_cpu_rasterizer():
     from embodied_envs.paths import data_root
     from embodied_envs.splat import PinholeCamera, read_ply, render
-    from embodied_envs.splat.render import gsplat_available
+    from embodied_envs.splat.backend import gsplat_available
 
     splat = read_ply(data_root() / "assets" / "background" / "gs_model.ply")
     cam = PinholeCamera.look_at((0.0, 1.3, 0.0), (2.0, 1.0, -1.0), up=(0, 1, 0))

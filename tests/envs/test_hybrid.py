@@ -21,7 +21,7 @@ from embodied_envs.splat import (
     render,
     write_ply,
 )
-from embodied_envs.splat.model import SH_C0
+from embodied_envs.splat.sh import SH_C0
 
 ENV_ID = "PickEmbodiedGen-v1"
 MAGENTA = (1.0, 0.0, 1.0)

@@ -23,7 +23,7 @@ def test_make_without_arguments_uses_default_layout():
     e = gym.make(ENV_ID)
     try:
         assert e.unwrapped.layout_file == ROOT / "layouts" / "default.json"
-        assert e.unwrapped.layouts[0].target == "can"
+        assert e.unwrapped.layouts[0].target_node == "can"
         from mani_skill.utils.registration import REGISTERED_ENVS
 
         assert REGISTERED_ENVS[ENV_ID].max_episode_steps == 300
@@ -46,7 +46,7 @@ def test_reset_puts_everything_at_layout_poses_and_steps(env):
             x, y, z, qw, qx, qy, qz = u.env_actors["env0"][node].pose.raw_pose[0].tolist()
             poses[node] = LayoutPose.from_layout([x, y, z - u.objs_z_offset, qx, qy, qz, qw])
     assert check_constraints(layout.with_poses(poses)) == []
-    robot = layout.pose(layout.robot).translated(u.robot_z_offset).to_raw()
+    robot = layout.pose(layout.robot).raised(u.robot_z_offset).to_raw()
     np.testing.assert_allclose(
         u.agent.robot.pose.raw_pose[0].cpu().numpy()[:3], robot[:3], atol=1e-5
     )
@@ -54,7 +54,7 @@ def test_reset_puts_everything_at_layout_poses_and_steps(env):
     assert np.all(np.abs(qpos[:7] - REST_QPOS[:7]) < 0.02 * 6)
     np.testing.assert_allclose(qpos[7:], [0.04, 0.04], atol=1e-6)
     # the graded object is this env's first manipulated object
-    assert torch.equal(u.obj.pose.p, u.env_actors["env0"][layout.target].pose.p)
+    assert torch.equal(u.obj.pose.p, u.env_actors["env0"][layout.target_node].pose.p)
     goal = u.goal_site.pose.p[0].cpu().numpy()
     top_z = float(u.layout_scene.top_z[0])
     assert top_z + 0.05 - 1e-5 <= goal[2] <= top_z + 0.25 + 1e-5
@@ -134,7 +134,7 @@ def test_render_modes_and_visual_obs():
         ids = seg.get_obs(rgb=False, depth=False, segmentation=True)["segmentation"][0, ..., 0]
         layout = u.layouts[0]
         table_id = u.env_actors["env0"][layout.context].per_scene_id[0]
-        obj_id = u.env_actors["env0"][layout.target].per_scene_id[0]
+        obj_id = u.env_actors["env0"][layout.target_node].per_scene_id[0]
         assert (ids == table_id).float().mean() > 0.2
         assert (ids == obj_id).sum() > 10
         # the goal is shown in human renders and hidden from sensors

@@ -29,7 +29,7 @@ def test_round_trip_is_lossless_with_unknown_keys(tmp_path, layout_dict):
 def test_assets_resolve_relative_to_layout_folder():
     info = load_layout(DEFAULT_LAYOUT)
     assert info.asset_dir("can") == (ROOT / "assets" / "can").resolve()
-    assert info.target == "can"
+    assert info.target_node == "can"
     assert info.urdf_path("can").name == "can.urdf"
 
 

@@ -12,10 +12,10 @@ from shapely.geometry import MultiPoint, Point, Polygon
 from shapely.ops import unary_union
 
 from embodied_envs.layout import LayoutPose, load_layout
-from embodied_envs.layout.placement import PlacementLimits, place
+from embodied_envs.layout.limits import GoalRegion, PlacementLimits
+from embodied_envs.layout.placement import place
 from embodied_envs.scene.episode import (
     EpisodeSampler,
-    GoalRegion,
     Shapes,
     overlap,
     uniforms,
@@ -166,8 +166,10 @@ def test_partial_draws_only_touch_env_idx():
     assert torch.equal(again.joint_noise[0], first.joint_noise[1])
 
 
-def goal_region_polygon(config, region: GoalRegion):
-    """The goal region of a configuration, built with shapely from the layout alone."""
+def goal_region_polygon(config, region: GoalRegion, limits: PlacementLimits):
+    """The goal region of a configuration, built with shapely from the layout alone: the
+    table top shrunk by the margin, within the robot's reach (placement's band and heading)
+    shrunk by the inset."""
     from placement_checks import world_points
 
     table = world_points(config, config.context)
@@ -175,10 +177,11 @@ def goal_region_polygon(config, region: GoalRegion):
     hull = MultiPoint(top[:, :2].tolist()).convex_hull.buffer(-region.margin)
     robot = config.pose(config.robot)
     x, y = robot.p[:2]
-    half = math.radians(region.max_heading_deg)
+    half = math.radians(limits.max_heading_deg)
     arc = np.linspace(robot.yaw - half, robot.yaw + half, 400)
-    outer = [(x + region.reach[1] * math.cos(a), y + region.reach[1] * math.sin(a)) for a in arc]
-    inner = [(x + region.reach[0] * math.cos(a), y + region.reach[0] * math.sin(a)) for a in arc]
+    near, far = limits.reach_min + region.inset, limits.reach_max - region.inset
+    outer = [(x + far * math.cos(a), y + far * math.sin(a)) for a in arc]
+    inner = [(x + near * math.cos(a), y + near * math.sin(a)) for a in arc]
     sector = Polygon(outer + inner[::-1])
     return hull.intersection(sector), robot, float(table[:, 2].max())
 
@@ -189,11 +192,11 @@ def test_goals_cover_the_whole_region_uniformly(path):
     band in proportion to the areas (the first 256 grid points of the old sampler never
     reached one side)."""
     config = configurations(path, 1)[0]
-    region = GoalRegion()
-    sampler = EpisodeSampler([config], PlacementLimits(), region)
+    region, limits = GoalRegion(), PlacementLimits()
+    sampler = EpisodeSampler([config], limits, region)
     n = 6000
     goals = sampler.goals(torch.zeros(n, dtype=torch.long), torch.arange(n)).numpy()
-    area, robot, top_z = goal_region_polygon(config, region)
+    area, robot, top_z = goal_region_polygon(config, region, limits)
     rel = goals[:, :2] - np.array(robot.p[:2])
     heading = np.array([math.cos(robot.yaw), math.sin(robot.yaw)])
     left = heading[0] * rel[:, 1] - heading[1] * rel[:, 0] > 0
@@ -210,7 +213,7 @@ def test_goals_cover_the_whole_region_uniformly(path):
             (x - far * heading[1], y + far * heading[0]),
         ]
     )
-    mid = sum(region.reach) / 2
+    mid = limits.reach_min + (limits.reach_max - limits.reach_min) / 2
     near = Point(x, y).buffer(mid, 256)
     sigma = 4.5 / math.sqrt(n)  # 4.5 standard errors of a fraction near 1/2
     for mask, part in ((left, left_half), (np.hypot(*rel.T) < mid, near)):
@@ -231,7 +234,7 @@ def test_targets_spread_over_both_sides_and_distractors_move(path):
     starts = sampler.objects(torch.zeros(n, dtype=torch.long), torch.arange(n))
     robot = config.pose(config.robot)
     heading = np.array([math.cos(robot.yaw), math.sin(robot.yaw)])
-    rel = starts[config.target][:, :2].numpy() - np.array(robot.p[:2])
+    rel = starts[config.target_node][:, :2].numpy() - np.array(robot.p[:2])
     left = (heading[0] * rel[:, 1] - heading[1] * rel[:, 0] > 0).mean()
     assert 0.2 < left < 0.8
     for node, raw in starts.items():

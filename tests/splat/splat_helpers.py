@@ -3,7 +3,8 @@
 import numpy as np
 import torch
 
-from embodied_envs.splat.model import SH_C0, GaussianSplat
+from embodied_envs.splat.model import GaussianSplat
+from embodied_envs.splat.sh import SH_C0
 
 
 def random_splat(

@@ -118,7 +118,7 @@ def test_an_inria_file_renders_like_the_reference_from_its_raw_values(tmp_path):
     from reference import render_reference
 
     from embodied_envs.splat import PinholeCamera, render
-    from embodied_envs.splat.model import SH_C0
+    from embodied_envs.splat.sh import SH_C0
 
     rng = np.random.default_rng(3)
     n = 150

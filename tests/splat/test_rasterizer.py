@@ -8,8 +8,9 @@ from splat_helpers import random_splat
 
 from embodied_envs.splat import PinholeCamera, pose_splat, render
 from embodied_envs.splat import rasterizer as rast
-from embodied_envs.splat.model import SH_C0, GaussianSplat, quat_wxyz_to_matrix, sh_colors
-from embodied_envs.splat.render import resolve_backend
+from embodied_envs.splat.backend import resolve_backend
+from embodied_envs.splat.model import GaussianSplat, quat_wxyz_to_matrix, sh_colors
+from embodied_envs.splat.sh import SH_C0
 
 TOL = 2.0 / 255.0
 

@@ -11,6 +11,7 @@ import importlib.util
 
 import torch
 
+from embodied_envs.splat import BACKENDS
 from embodied_envs.splat.camera import PinholeCamera
 from embodied_envs.splat.model import GaussianSplat, sh_colors
 from embodied_envs.splat.rasterizer import (
@@ -19,8 +20,6 @@ from embodied_envs.splat.rasterizer import (
     SplatImage,
     rasterize_torch,
 )
-
-BACKENDS = ("auto", "torch", "gsplat")
 
 
 def gsplat_available() -> bool:

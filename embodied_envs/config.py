@@ -1,0 +1,223 @@
+"""Env settings that do not need the simulator: robots, the render camera, config files.
+
+Config files (YAML or JSON) hold ``gym.make`` keyword arguments of ``PickEmbodiedGen-v1``::
+
+    robot_init_qpos_noise: 0.0
+    placement_limits: {reach_max: 0.70}
+    goal_region: {height: [0.10, 0.20]}
+    camera_cfg: {image_hw: [512, 512]}
+
+:func:`load_config` merges several in order, a later file overriding an earlier one key by key
+(dict-valued settings merge field by field); ``gym.make(..., config=[...])`` and the CLI's
+``--config`` use it, and keywords given directly win over every file.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.limits import GoalRegion, PlacementLimits
+
+# Layout robot names -> ManiSkill robot uids. An unknown name is an error unless the user
+# passes robot_uids explicitly (EmbodiedGen silently fell back to panda).
+ROBOT_REGISTRY = {
+    "franka": "panda",
+    "franka_panda": "panda",
+    "panda": "panda",
+    "panda_wristcam": "panda_wristcam",
+}
+SUPPORTED_ROBOTS = sorted(set(ROBOT_REGISTRY.values()))
+
+
+def resolve_robot(layout_robot: str, robot_uids: str | None, source: str) -> str:
+    """The ManiSkill robot uid to load.
+
+    Raises:
+        LayoutError: when ``robot_uids`` is not given and the layout's robot is not registered.
+    """
+    if robot_uids is not None:
+        if robot_uids not in SUPPORTED_ROBOTS:
+            raise ValueError(
+                f"robot_uids={robot_uids!r} is not supported; use one of {SUPPORTED_ROBOTS}"
+            )
+        return robot_uids
+    key = layout_robot.lower().replace(" ", "_")
+    if key not in ROBOT_REGISTRY:
+        raise LayoutError(
+            f'{source}: relation["robot"] is "{layout_robot}", which is not a registered robot '
+            f"({sorted(ROBOT_REGISTRY)}). Fix: rename it, or pass robot_uids explicitly."
+        )
+    return ROBOT_REGISTRY[key]
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """The human render camera (``camera_cfg``): eye, target, image size and vertical fov."""
+
+    eye: tuple[float, float, float] = (0.9, 0.0, 1.1)
+    target: tuple[float, float, float] = (0.0, 0.0, 0.9)
+    height: int = 256
+    width: int = 256
+    fovy_deg: float = 75.0
+
+    KEYS = ("camera_eye", "camera_target_pt", "image_hw", "fovy_deg")  # EmbodiedGen's names
+
+    @classmethod
+    def from_cfg(cls, cfg: Mapping | None) -> CameraSpec:
+        """From EmbodiedGen's ``camera_cfg`` dict; missing keys take the defaults.
+
+        Raises:
+            ValueError: naming the field and the fix.
+        """
+        if cfg is None:
+            return cls()
+        unknown = set(cfg) - set(cls.KEYS)
+        if unknown:
+            raise ValueError(f"camera_cfg: unknown keys {sorted(unknown)}; known: {list(cls.KEYS)}")
+        d = cls()
+        eye = tuple(float(v) for v in cfg.get("camera_eye", d.eye))
+        target = tuple(float(v) for v in cfg.get("camera_target_pt", d.target))
+        hw = cfg.get("image_hw", (d.height, d.width))
+        fovy = float(cfg.get("fovy_deg", d.fovy_deg))
+        if len(eye) != 3 or len(target) != 3 or not all(map(math.isfinite, eye + target)):
+            raise ValueError("camera_cfg: camera_eye and camera_target_pt need 3 finite numbers")
+        if math.dist(eye, target) < 1e-6:
+            raise ValueError("camera_cfg: camera_eye equals camera_target_pt. Fix: move the eye.")
+        if len(hw) != 2 or not all(
+            isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in hw
+        ):
+            raise ValueError(
+                f"camera_cfg: image_hw={list(hw)} must be two positive integers [height, width]"
+            )
+        if not 0 < fovy < 180:
+            raise ValueError(f"camera_cfg: fovy_deg={fovy} must be in (0, 180)")
+        return cls(eye, target, int(hw[0]), int(hw[1]), fovy)
+
+
+# --- config files ----------------------------------------------------------------------------
+# settings whose value is a dict, merged field by field, and the fields each accepts
+NESTED_KEYS: dict[str, tuple[str, ...]] = {
+    "placement_limits": tuple(f.name for f in fields(PlacementLimits)),
+    "goal_region": tuple(f.name for f in fields(GoalRegion)),
+    "camera_cfg": CameraSpec.KEYS,
+}
+
+
+class ConfigError(ValueError):
+    """A config file that cannot be used; names the file, the key and the fix."""
+
+
+def env_keywords() -> tuple[str, ...]:
+    """Every keyword ``gym.make("PickEmbodiedGen-v1", ...)`` accepts (imports the env)."""
+    import inspect
+
+    from mani_skill.envs.sapien_env import BaseEnv
+
+    from embodied_envs.envs.pick_embodiedgen import PickEmbodiedGenEnv
+
+    names = [
+        p.name
+        for cls in (PickEmbodiedGenEnv, BaseEnv)
+        for p in inspect.signature(cls.__init__).parameters.values()
+        if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD
+    ]
+    return tuple(sorted(set(names) - {"self"}))
+
+
+def read_config_file(path: str | os.PathLike) -> dict:
+    """One config file (``.yaml``/``.yml`` or ``.json``) as a dict.
+
+    Raises:
+        ConfigError: unreadable, not YAML/JSON, or not a mapping at the top.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read the config file ({e.strerror or e})") from None
+    import yaml
+
+    try:
+        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as e:
+        kind = "JSON" if path.suffix.lower() == ".json" else "YAML"
+        raise ConfigError(f"{path}: not valid {kind}: {e}") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(
+            f"{path}: a config file holds a mapping of env keywords (name: value), "
+            f"got a {type(data).__name__}"
+        )
+    return data
+
+
+def check_config_keys(config: Mapping, known: Sequence[str], source: str) -> None:
+    """Refuse an unknown key, top level or inside a dict-valued setting, naming the known ones.
+
+    Raises:
+        ConfigError
+    """
+    unknown = sorted(set(config) - set(known))
+    if unknown:
+        raise ConfigError(
+            f"{source}: unknown key(s) {unknown}; known: {sorted(known)}. Fix: spell the key "
+            "as the gym.make keyword of PickEmbodiedGen-v1."
+        )
+    for key, allowed in NESTED_KEYS.items():
+        value = config.get(key)
+        if value is None:
+            continue
+        if not isinstance(value, Mapping):
+            raise ConfigError(
+                f"{source}: {key} must be a mapping of its fields {list(allowed)}, "
+                f"got {type(value).__name__}"
+            )
+        bad = sorted(set(value) - set(allowed))
+        if bad:
+            raise ConfigError(f"{source}: {key}: unknown key(s) {bad}; known: {list(allowed)}")
+
+
+def merge_config(base: Mapping, override: Mapping) -> dict:
+    """``override`` over ``base``: dict-valued settings merge field by field, the rest replace."""
+    out = copy.deepcopy(dict(base))
+    for key, value in override.items():
+        if key in NESTED_KEYS and isinstance(out.get(key), Mapping) and isinstance(value, Mapping):
+            out[key] = {**out[key], **copy.deepcopy(dict(value))}
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def load_config(
+    paths: str | os.PathLike | Sequence[str | os.PathLike] | None,
+    known: Sequence[str] | None = None,
+) -> dict:
+    """Merge config files in order (later overrides earlier), checking every key.
+
+    Args:
+        paths: one file or a list; None gives ``{}``.
+        known: accepted top-level keys (default: every keyword of the env, see
+            :func:`env_keywords`).
+
+    Raises:
+        ConfigError: naming the file and the key.
+    """
+    if paths is None:
+        return {}
+    if isinstance(paths, str | os.PathLike):
+        paths = [paths]
+    known = env_keywords() if known is None else known
+    merged: dict = {}
+    for path in paths:
+        data = read_config_file(path)
+        check_config_keys(data, known, str(path))
+        merged = merge_config(merged, data)
+    return merged

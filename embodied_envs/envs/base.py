@@ -1,0 +1,110 @@
+"""A ManiSkill ``BaseEnv`` whose public calls check their arguments before simulating.
+
+Task files subclass :class:`CheckedEnv` and keep to the task; this class holds what every env of
+the package does the same way: render-mode and ``num_envs`` checks, ``reset`` seed and
+``env_idx`` checks (gymnasium's generator follows the seed too), action checks on ``step``, a
+closed-env guard, a spec whose ``layout_file`` is absolute (RecordEpisode stores it), fresh
+sensor parameters per call, and ``render_mode="human"`` without a display.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+from gymnasium.utils import seeding
+from mani_skill.envs.sapien_env import BaseEnv
+
+from embodied_envs.envs.arguments import check_action, check_env_idx, check_num_envs, check_seed
+
+
+def has_display() -> bool:
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+class CheckedEnv(BaseEnv):
+    SUPPORTED_RENDER_MODES = ("human", "rgb_array", "sensors", "all")
+
+    def __init__(self, *args, num_envs: int = 1, render_mode: str | None = None, **kwargs):
+        if render_mode is not None and render_mode not in self.SUPPORTED_RENDER_MODES:
+            raise ValueError(
+                f"render_mode={render_mode!r} is not supported; use one of "
+                f"{list(self.SUPPORTED_RENDER_MODES)} or None"
+            )
+        check_num_envs(num_envs, kwargs.get("sim_backend", "auto"))
+        super().__init__(*args, num_envs=num_envs, render_mode=render_mode, **kwargs)
+
+    @property
+    def spec(self):
+        return self.__dict__.get("_spec")
+
+    @spec.setter
+    def spec(self, spec) -> None:
+        # gymnasium sets the spec that RecordEpisode stores as env_kwargs: keep the layout file
+        # absolute there and the config files' values spelled out, so a recorded dataset
+        # re-creates the env from any working directory
+        if spec is not None:
+            from embodied_envs.registration import env_kwargs
+
+            kwargs = env_kwargs(**spec.kwargs)
+            if kwargs.get("layout_file") is not None:
+                kwargs["layout_file"] = str(Path(kwargs["layout_file"]).resolve())
+            spec = dataclasses.replace(spec, kwargs=kwargs)
+        self.__dict__["_spec"] = spec
+
+    def _reconfigure(self, options: dict | None = None):
+        options = {} if options is None else options
+        if self.render_mode == "human" and not has_display():
+            # headless: no viewer window; "human" then returns the render camera's frames
+            self.render_mode = "rgb_array"
+            try:
+                super()._reconfigure(options)
+            finally:
+                self.render_mode = "human"
+        else:
+            super()._reconfigure(options)
+
+    def render_human(self):
+        if has_display():
+            super().render_human()
+        return self.render_rgb_array()
+
+    def reset(self, seed: int | list[int] | None = None, options: dict | None = None):
+        self._check_open("reset")
+        check_seed(seed, self.num_envs)
+        options = check_env_idx(options, self.num_envs, self.device)
+        if seed is not None:
+            # gymnasium's own generator follows the reset seed too, as gymnasium's checker and
+            # wrappers expect (ManiSkill only seeds its episode RNGs); nothing here draws from it
+            first = np.asarray(seed).reshape(-1)[0]
+            self._np_random, self._np_random_seed = seeding.np_random(int(first))
+        return super().reset(seed=seed, options=options)
+
+    def step(self, action):
+        self._check_open("step")
+        action = check_action(
+            action, tuple(self.single_action_space.shape), self.num_envs, self.control_mode
+        )
+        if isinstance(action, torch.Tensor):
+            action = action.to(self.device)
+        return super().step(action)
+
+    def close(self):
+        self._closed = True
+        super().close()
+
+    def _check_open(self, call: str) -> None:
+        if self.__dict__.get("_closed"):
+            name = getattr(self.spec, "id", type(self).__name__)
+            raise RuntimeError(f"{call}() on a closed {name} env; make a new env")
+
+    def get_sensor_params(self) -> dict[str, dict[str, torch.Tensor]]:
+        # new tensors on every call: SAPIEN returns its cached intrinsic matrix, and an
+        # observation must not change when a later one is taken
+        return {
+            name: {k: v.clone() for k, v in params.items()}
+            for name, params in super().get_sensor_params().items()
+        }
