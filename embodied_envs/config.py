@@ -35,6 +35,10 @@ ROBOT_REGISTRY = {
 }
 SUPPORTED_ROBOTS = sorted(set(ROBOT_REGISTRY.values()))
 
+# init_3dgs_quat's default (x y z w): +90 deg about x, turning a splat stored Y-up (as 3DGS and
+# EmbodiedGen store them) Z-up; applied before the layout's background pose
+SPLAT_Y_UP_TO_Z_UP = (0.7071, 0.0, 0.0, 0.7071)
+
 
 def resolve_robot(layout_robot: str, robot_uids: str | None, source: str) -> str:
     """The ManiSkill robot uid to load.

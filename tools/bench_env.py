@@ -27,6 +27,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import embodied_envs  # noqa: E402,F401
+from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP  # noqa: E402
 from embodied_envs.envs.hybrid import CameraBackgrounds, HybridRenderer  # noqa: E402
 from embodied_envs.layout.pose import LayoutPose  # noqa: E402
 from embodied_envs.paths import default_layout  # noqa: E402
@@ -84,7 +85,7 @@ def compositing_seconds(n: int, size: int = 128, repeats: int = 10) -> float:
 
     device = "cuda" if torch.cuda.is_available() else "cpu"
     splat = load_layout(default_layout()).gs_model_path()
-    hybrid = HybridRenderer(splat, (0.7071, 0.0, 0.0, 0.7071), device=device)
+    hybrid = HybridRenderer(splat, SPLAT_Y_UP_TO_Z_UP, device=device)
     g = torch.Generator().manual_seed(0)
     ids = torch.randint(1, 60, (n, 12), generator=g)
     hybrid.configure(ids, ids[:, :1] + 60, [LayoutPose.from_xyz_yaw((0, 0, 0), 0.0)] * n)

@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 import trimesh
 
+from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP
 from embodied_envs.layout import load_layout
 from embodied_envs.layout.pose import quat_multiply_xyzw
 from embodied_envs.splat import PinholeCamera, mesh_to_splat, pose_splat, render
@@ -44,7 +45,7 @@ def main() -> None:
         torch.set_num_threads(args.threads)
     layout = load_layout(ROOT / "layouts" / "default.json")
     pose = layout.pose(layout.background)
-    q = quat_multiply_xyzw(pose.q_xyzw, (0.7071, 0.0, 0.0, 0.7071))
+    q = quat_multiply_xyzw(pose.q_xyzw, SPLAT_Y_UP_TO_Z_UP)
     mesh = trimesh.load(layout.asset_dir(layout.background) / "mesh_model.ply", force="mesh")
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, backend {args.backend}")
     print(f"{'gaussians':>10} {'view':>14} {'median s':>9} {'target s':>9}")

@@ -2,15 +2,18 @@
 
 :class:`HybridRenderer` owns all hybrid state of one env instance: the splat, the foreground
 ids of every env, every env's background pose, and per camera the stacked backgrounds of all
-envs on the env's device. The env calls it in three places: at (re)configuration
-(:meth:`HybridRenderer.configure`), for sensor observations
+envs on the env's device. The env calls it at (re)configuration
+(:meth:`HybridRenderer.configure`), after the reset that follows it
+(:meth:`HybridRenderer.prerender`), for sensor observations
 (:meth:`HybridRenderer.composite_sensors`) and for ``render()`` (:meth:`HybridRenderer.render`).
 
 Per (camera, env) the background splat is rendered once, posed by that env's layout, and
-re-rendered only when that env's camera or background pose changes. Compositing is one batched
-tensor operation over envs: a pixel is foreground when its segmentation id is one of its env's
-foreground ids (robot links and layout actors, given explicitly); with the depth test on, a
-foreground pixel farther than the splat surface shows the background.
+re-rendered only when that env's camera or background pose changes; the envs due are rendered
+together, in batched rasterizer calls (each env's camera moved into the splat's frame).
+Compositing is one batched tensor operation over envs: a pixel is foreground when its
+segmentation id is one of its env's foreground ids (robot links and layout actors, given
+explicitly); with the depth test on, a foreground pixel farther than the splat surface shows
+the background.
 """
 
 from __future__ import annotations
@@ -23,12 +26,13 @@ from pathlib import Path
 import torch
 from mani_skill.utils.visualization.misc import tile_images
 
-from embodied_envs.layout.pose import LayoutPose, quat_multiply_xyzw
+from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.splat import PinholeCamera, SplatFileError, pose_splat, read_ply, render
 from embodied_envs.splat.backend import resolve_backend
 
 SPLAT_SURFACE_ALPHA = 0.5  # splat pixels at least this opaque have a surface for the depth test
 CAMERA_TOLERANCE = 1e-6  # camera matrices closer than this reuse the cached background
+CAMERAS_PER_CALL = 64  # backgrounds rendered per batched rasterizer call (bounds its memory)
 
 
 @dataclass
@@ -78,8 +82,10 @@ class HybridRenderer:
             )
         self.backend = resolve_backend(backend)
         self.device = torch.device(device)
-        self.splat = read_ply(splat_path).to(self.device)
-        self.init_quat_xyzw = tuple(float(v) for v in init_quat_xyzw)
+        x, y, z, w = (float(v) for v in init_quat_xyzw)
+        # the stored splat turned Z-up once; each env's layout pose moves the camera instead
+        self.splat = pose_splat(read_ply(splat_path), torch.zeros(3), torch.tensor([w, x, y, z]))
+        self.splat = self.splat.to(self.device)
         self.depth_test = bool(depth_test)
         self.poses: list[LayoutPose] = []  # per env, the background node's layout pose
         self._lut: dict[str, torch.Tensor] = {}  # "sensor" / "human" -> (n, max id + 1) bool
@@ -131,17 +137,27 @@ class HybridRenderer:
         self._prerender_due = True
 
     # --- backgrounds ---------------------------------------------------------------------
+    def render_backgrounds(
+        self, cameras: list[PinholeCamera], poses: list[LayoutPose]
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The splat posed by ``poses[k]`` seen from ``cameras[k]`` (cameras of one size):
+        uint8 RGB ``(k, H, W, 3)`` and surface depth ``(k, H, W)``, in batched rasterizer calls
+        of up to ``CAMERAS_PER_CALL`` cameras."""
+        start = time.perf_counter()
+        moved = [cam.in_frame(pose.matrix()) for cam, pose in zip(cameras, poses, strict=True)]
+        rgb, depth = [], []
+        for i in range(0, len(moved), CAMERAS_PER_CALL):
+            image = render(self.splat, moved[i : i + CAMERAS_PER_CALL], backend=self.backend)
+            rgb.append(image.rgb_uint8().to(self.device))
+            depth.append(image.surface_depth(SPLAT_SURFACE_ALPHA).to(self.device))
+        self.renders += len(moved)
+        self.render_seconds += time.perf_counter() - start
+        return torch.cat(rgb), torch.cat(depth)
+
     def render_one(self, camera: PinholeCamera, pose: LayoutPose) -> tuple[torch.Tensor, ...]:
         """The splat posed by ``pose`` seen from ``camera``: uint8 RGB and surface depth."""
-        start = time.perf_counter()
-        q = quat_multiply_xyzw(pose.q_xyzw, self.init_quat_xyzw)  # init first, then layout
-        posed = pose_splat(self.splat, torch.tensor(pose.p), torch.tensor(q[[3, 0, 1, 2]]))
-        image = render(posed, camera, backend=self.backend)
-        self.renders += 1
-        self.render_seconds += time.perf_counter() - start
-        return image.rgb_uint8().to(self.device), image.surface_depth(SPLAT_SURFACE_ALPHA).to(
-            self.device
-        )
+        rgb, depth = self.render_backgrounds([camera], [pose])
+        return rgb[0], depth[0]
 
     def backgrounds(
         self,
@@ -178,9 +194,11 @@ class HybridRenderer:
         stale = (~cached.valid | moved).nonzero().reshape(-1).tolist()
         if stale:  # only at (re)configuration or when a camera moves
             model_np, k_np = model.cpu().numpy(), k.cpu().numpy()
-            for env in stale:
-                camera = PinholeCamera.from_opengl(model_np[env], k_np[env], width, height)
-                cached.rgb[env], cached.depth[env] = self.render_one(camera, self.poses[env])
+            cameras = [
+                PinholeCamera.from_opengl(model_np[e], k_np[e], width, height) for e in stale
+            ]
+            rgb, depth = self.render_backgrounds(cameras, [self.poses[e] for e in stale])
+            cached.rgb[stale], cached.depth[stale] = rgb, depth
             cached.model[stale], cached.intrinsic[stale] = model[stale], k[stale]
             cached.valid[stale] = True
         return cached

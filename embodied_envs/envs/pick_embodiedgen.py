@@ -16,7 +16,12 @@ from mani_skill.utils.registration import register
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
-from embodied_envs.config import SUPPORTED_ROBOTS, CameraSpec, resolve_robot
+from embodied_envs.config import (
+    SPLAT_Y_UP_TO_Z_UP,
+    SUPPORTED_ROBOTS,
+    CameraSpec,
+    resolve_robot,
+)
 from embodied_envs.envs.arguments import dataclass_arg
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
@@ -40,15 +45,11 @@ class PickEmbodiedGenEnv(CheckedEnv):
     point above the table (a green sphere in human renders, hidden from sensors). Distractors
     and the table are obstacles. The scene comes from an EmbodiedGen layout file.
 
-    **Randomizations:**
-    - per configuration (construction, ``reconfiguration_freq``, ``reset(options=dict(
-      reconfigure=True))``), with ``replace_objs=True``: table yaw, robot spot and background
-      yaw are re-drawn per env by the seeded BFS placement, except env 0 on the first
-      configuration, which keeps the file's poses. Splat backgrounds are rendered then, cached.
-    - per episode (every ``reset``, only the reset envs), with ``replace_objs=True``: every
-      object on the table is re-drawn on its env's table with the placement limits (footprint
-      inside the shrunk top, no overlap, robot base clear, manipulated objects within reach)
-    - ``replace_objs=False``: the file's poses, always
+    **Randomizations** (``replace_objs=False``: the file's poses, always):
+    - per configuration (construction, ``reconfiguration_freq``, ``reconfigure=True``): table
+      yaw, robot spot and background yaw per env, by the seeded placement (env 0 keeps the
+      file's poses on the first configuration); splat backgrounds are rendered then
+    - per episode (the reset envs): every object on the table, within the placement limits
     - arm joints: ``REST_QPOS`` plus N(0, ``robot_init_qpos_noise``); fingers open
     - goal: uniform over the table top within the robot's reach (``goal_region``)
 
@@ -67,14 +68,10 @@ class PickEmbodiedGenEnv(CheckedEnv):
     **Episode End:** truncation after ``MAX_EPISODE_STEPS`` (300) control steps, 6 s; ``success``
     is reported in ``info``.
 
-    **Arguments** (``gym.make`` keywords; ``config=[files]`` sets any from YAML/JSON files, see
-    :mod:`embodied_envs.config`): ``layout_file``, ``replace_objs``, ``robot_uids`` (default:
-    the layout's robot), ``robot_init_qpos_noise``, ``init_3dgs_quat``, ``objs_z_offset``,
-    ``robot_z_offset``, ``camera_cfg`` (render camera: ``camera_eye``, ``camera_target_pt``,
-    ``image_hw``, ``fovy_deg``), ``enable_grasp`` (accepted, unused), ``hybrid_obs`` (sensor RGB
-    over the splat), ``hybrid_depth_test``, ``splat_backend`` (``auto``, ``torch``, ``gsplat``),
-    ``placement_limits``, ``goal_region`` (dicts of :mod:`embodied_envs.layout.limits` fields),
-    and ManiSkill's own (``num_envs``, ``obs_mode``, ``control_mode``, ``render_mode``, ...).
+    **Arguments:** ``__init__``'s keywords (each commented there), ManiSkill's own, and
+    ``config`` (YAML/JSON files merged in order, :mod:`embodied_envs.config`).
+    ``placement_limits`` and ``goal_region`` take the fields of
+    :mod:`embodied_envs.layout.limits`; ``camera_cfg`` those of ``config.CameraSpec``.
     """
 
     SUPPORTED_ROBOTS = SUPPORTED_ROBOTS
@@ -90,18 +87,19 @@ class PickEmbodiedGenEnv(CheckedEnv):
     def __init__(
         self,
         *args,
-        layout_file: str | os.PathLike | None = None,
+        layout_file: str | os.PathLike | None = None,  # default: the shipped default layout
         replace_objs: bool = True,
         robot_uids: str | None = None,
         robot_init_qpos_noise: float = 0.02,
-        init_3dgs_quat: tuple[float, float, float, float] = (0.7071, 0.0, 0.0, 0.7071),
+        init_3dgs_quat: tuple[float, float, float, float] = SPLAT_Y_UP_TO_Z_UP,
         objs_z_offset: float = 0.002,
         robot_z_offset: float = 0.002,
-        camera_cfg: dict | None = None,
+        camera_cfg: dict
+        | None = None,  # render camera: camera_eye, camera_target_pt, image_hw, fovy_deg
         enable_grasp: bool = False,  # EmbodiedGen's keyword: accepted, has no effect
-        hybrid_obs: bool = False,
-        hybrid_depth_test: bool = True,
-        splat_backend: str = "auto",
+        hybrid_obs: bool = False,  # sensor RGB over the splat, whatever render_mode is
+        hybrid_depth_test: bool = True,  # simulated pixels behind the splat surface are hidden
+        splat_backend: str = "auto",  # or "torch", "gsplat"
         placement_limits: dict | PlacementLimits | None = None,
         goal_region: dict | GoalRegion | None = None,
         render_mode: str | None = None,
@@ -178,12 +176,8 @@ class PickEmbodiedGenEnv(CheckedEnv):
             goal_region=self.goal_region,
             device=self.device,
         )
-        self.env_actors = ls.env_actors
-        for actor in (a for env in ls.env_actors.values() for a in env.values()):
-            self.remove_from_state_dict_registry(actor)
-        for actor in ls.state_entries():
-            self.add_to_state_dict_registry(actor)
-        self.obj = ls.target_actor
+        self.env_actors, self.obj = ls.env_actors, ls.target_actor
+        ls.register_state(self)
         self.goal_site = actors.build_sphere(
             self.scene,
             radius=self.goal_thresh,

@@ -25,7 +25,7 @@ from embodied_envs.layout.assets import (
 )
 from embodied_envs.layout.errors import PlacementError
 from embodied_envs.layout.limits import PlacementLimits
-from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.layout.pose import LayoutPose, wrap_angle
 from embodied_envs.layout.schema import LayoutInfo
 
 SUPPORT_RELATIONS = ("ON", "IN", "INSIDE")
@@ -211,7 +211,8 @@ def square(center: np.ndarray, side: float, yaw: float) -> np.ndarray:
 
 
 def angle_diff(a: np.ndarray, b: float) -> np.ndarray:
-    return np.abs((a - b + np.pi) % (2 * np.pi) - np.pi)
+    """``|a - b|`` wrapped to [0, pi]."""
+    return np.abs(wrap_angle(a - b))
 
 
 @dataclass(frozen=True)
@@ -302,13 +303,14 @@ class _Placer:
         near_nodes = [n for n in self.obstacles if n not in ancestors]
         obstacles = [self.obstacles[n] for n in near_nodes]
         obstacle_normals = [self.obstacle_info[n][0] for n in near_nodes]
-        fails = {"footprint inside parent top": 0, "no overlap with placed footprints": 0}
+        inside_key, free_key = "footprint inside parent top", "no overlap with placed footprints"
+        reach_key = f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base"
+        heading_key = f"within {lim.max_heading_deg:g} deg of the robot heading"
+        fails = {inside_key: 0, free_key: 0}
         if manipulated:
-            fails[f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base"] = 0
-            fails[f"within {lim.max_heading_deg:g} deg of the robot heading"] = 0
+            fails |= {reach_key: 0, heading_key: 0}
         foot_r = float(np.linalg.norm(foot, axis=1).max())
         obstacle_circles = [self.obstacle_info[n][1:] for n in near_nodes]
-        keys = list(fails)
         tried = 0
         while tried < lim.max_attempts:
             b = min(lim.batch, lim.max_attempts - tried)
@@ -319,15 +321,15 @@ class _Placer:
             poly = rotation_2d(yaw) @ foot.T  # (b, 2, m)
             poly = np.swapaxes(poly, 1, 2) + xy[:, None, :]
             inside = ((poly @ normals.T) >= offsets - 1e-9).all(axis=(1, 2))
-            fails[keys[0]] += int((~inside).sum())
+            fails[inside_key] += int((~inside).sum())
             ok = inside
             if manipulated:
                 d = np.linalg.norm(xy - robot_xy, axis=1)
                 reach = (d > lim.reach_min) & (d < lim.reach_max)
                 bearing = np.arctan2(xy[:, 1] - robot_xy[1], xy[:, 0] - robot_xy[0])
                 facing = angle_diff(bearing, robot.yaw) <= np.deg2rad(lim.max_heading_deg)
-                fails[keys[2]] += int((~reach).sum())
-                fails[keys[3]] += int((~facing).sum())
+                fails[reach_key] += int((~reach).sum())
+                fails[heading_key] += int((~facing).sum())
                 ok = ok & reach & facing
             idx = np.flatnonzero(ok)
             free = np.ones(len(idx), bool)
@@ -344,7 +346,7 @@ class _Placer:
                     free[cand] = ~polygons_overlap(
                         poly[idx[cand]], q, lim.clearance, cand_normals[cand], qn
                     )
-            fails[keys[1]] += int((~free).sum())
+            fails[free_key] += int((~free).sum())
             hits = idx[free]
             if len(hits):
                 k = hits[0]
@@ -354,12 +356,12 @@ class _Placer:
         worst = max(fails, key=fails.get)
         raise PlacementError(node, worst, tried, f"rejections per constraint: {fails}")
 
-    def sample_floor_object(self, node: str) -> LayoutPose:
-        """An object standing on the floor (z = 0) around the table, clear of everything."""
+    def sample_floor_object(self, node: str, ctx_poly: np.ndarray) -> LayoutPose:
+        """An object standing on the floor (z = 0) around the table (world footprint
+        ``ctx_poly``), clear of everything."""
         lim = self.limits
         foot = node_footprint(self.layout, node)
         geom = node_geometry(self.layout, node)
-        ctx_poly = self.context_footprint
         tried = 0
         fails = {"no overlap with placed footprints": 0}
         while tried < lim.max_attempts:
@@ -392,7 +394,6 @@ class _Placer:
         z0 = -_bottom_cached(*self.keys[ctx], lim.bottom_percentile)
         ctx_pose = LayoutPose.from_xyz_yaw([0, 0, z0], rng.uniform(-np.pi, np.pi))
         self.poses[ctx] = ctx_pose
-        self.context_footprint = self.foot[ctx] @ rotation_2d(np.float64(ctx_pose.yaw)).T
         surfaces = {ctx: _surface_at(self.keys[ctx], ctx_pose, lim.top_band, lim.hull_margin)}
         # 3. robot on the table's edge, facing its centre
         robot = robot_base_pose(surfaces[ctx], rng.uniform(0, 1))
@@ -411,8 +412,9 @@ class _Placer:
             for c, r in layout.children(layout.background)
             if r == "FLOOR" and c not in self.poses and c != layout.robot
         ]
+        ctx_poly = self.foot[ctx] @ rotation_2d(np.float64(ctx_pose.yaw)).T
         for kid in floor_kids:
-            self.poses[kid] = self.sample_floor_object(kid)
+            self.poses[kid] = self.sample_floor_object(kid, ctx_poly)
         missing = [n for n in layout.object_nodes() if n not in self.poses]
         if missing:
             raise PlacementError(

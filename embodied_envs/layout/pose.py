@@ -78,6 +78,12 @@ class LayoutPose:
     def rotation_matrix(self) -> np.ndarray:
         return Rotation.from_quat(self.q_xyzw).as_matrix()
 
+    def matrix(self) -> np.ndarray:
+        """The pose as a 4x4 homogeneous transform (child frame to parent frame)."""
+        m = np.eye(4)
+        m[:3, :3], m[:3, 3] = self.rotation_matrix(), self.p
+        return m
+
     def transform_points(self, points: np.ndarray) -> np.ndarray:
         """Map ``(n, 3)`` points from this pose's frame to the parent frame."""
         return np.asarray(points) @ self.rotation_matrix().T + np.asarray(self.p)
@@ -91,6 +97,11 @@ class LayoutPose:
     def raised(self, dz: float) -> LayoutPose:
         """The same pose moved up by ``dz`` metres (z only)."""
         return LayoutPose((self.p[0], self.p[1], self.p[2] + dz), self.q_xyzw)
+
+
+def wrap_angle(angle):
+    """An angle (float, numpy array or torch tensor) wrapped to [-pi, pi)."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def rpy_to_matrix(rpy: Sequence[float]) -> np.ndarray:

@@ -247,9 +247,18 @@ def _check_node_name(f: str, node: str) -> str | None:
 
 
 def _check_structure(data, f: str) -> list[str]:
-    """Structural checks that need no files. Returns every problem found."""
+    """Structural checks that need no files, in stages (a stage runs when the ones before it
+    found nothing it depends on). Returns every problem found."""
     if not isinstance(data, dict):
         return [f"{f}: the top level must be a JSON object, got {type(data).__name__}."]
+    problems = _check_fields(data, f) or _check_relation(data["relation"], f)
+    if problems:
+        return problems
+    return _check_nodes(data, f) + _check_tree(data, f)
+
+
+def _check_fields(data: dict, f: str) -> list[str]:
+    """The required top-level fields exist and are JSON objects."""
     problems = []
     types = {"tree": dict, "relation": dict, "objs_mapping": dict, "assets": dict, "position": dict}
     for key in REQUIRED_FIELDS:
@@ -263,29 +272,35 @@ def _check_structure(data, f: str) -> list[str]:
     for key in ("objs_desc", "quality"):
         if key in data and data[key] is not None and not isinstance(data[key], dict):
             problems.append(f'{f}: field "{key}" must be a JSON object when present.')
-    if problems:
-        return problems
+    return problems
 
-    rel, mapping, assets, position, tree = (
-        data["relation"],
-        data["objs_mapping"],
-        data["assets"],
-        data["position"],
-        data["tree"],
-    )
+
+def _check_relation(rel: dict, f: str) -> list[str]:
+    """``relation`` names the robot, background and context and lists the objects."""
+    problems = []
     for key in ("robot", "background", "context"):
         if not isinstance(rel.get(key), str) or not rel.get(key):
             problems.append(f'{f}: relation["{key}"] must be a node name (string). Fix: add it.')
     for key in ("manipulated_objs", "distractor_objs"):
         if key not in rel or not _is_str_list(rel[key]):
             problems.append(f'{f}: relation["{key}"] must be a list of node names. Fix: add it.')
-    if problems:
-        return problems
+    return problems
+
+
+def _check_nodes(data: dict, f: str) -> list[str]:
+    """Every node has a category that agrees with ``relation``, a valid name, an asset folder
+    and a valid pose; no object is listed twice."""
+    rel, mapping, assets, position = (
+        data["relation"],
+        data["objs_mapping"],
+        data["assets"],
+        data["position"],
+    )
+    problems = []
     if not rel["manipulated_objs"]:
         problems.append(
             f'{f}: relation["manipulated_objs"] is empty. Fix: name at least one object to pick.'
         )
-
     for node, cat in mapping.items():
         if cat not in CATEGORIES:
             problems.append(
@@ -338,7 +353,15 @@ def _check_structure(data, f: str) -> list[str]:
         msg = _check_pose(f, node, values)
         if msg:
             problems.append(msg)
+    return problems
 
+
+def _check_tree(data: dict, f: str) -> list[str]:
+    """``tree``: known nodes, known relations, one parent per node, no cycle, the background
+    first, and every object resting (through its parents) on the context."""
+    rel, mapping, tree = data["relation"], data["objs_mapping"], data["tree"]
+    robot = rel["robot"]
+    problems = []
     known = set(mapping) | {robot}
     parent_of: dict[str, str] = {}
     for parent, kids in tree.items():

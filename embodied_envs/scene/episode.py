@@ -41,6 +41,7 @@ from embodied_envs.layout.placement import (
     square,
     support_order,
 )
+from embodied_envs.layout.pose import wrap_angle
 from embodied_envs.layout.schema import LayoutInfo
 
 # --- counter-based random numbers ----------------------------------------------------------
@@ -605,4 +606,4 @@ def _fields(start: EpisodeStart) -> list[torch.Tensor]:
 def _heading_error(rel: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
     """``|angle(rel) - yaw|`` wrapped to [0, pi]; ``yaw`` broadcasts against ``rel[..., 0]``."""
     bearing = torch.atan2(rel[..., 1], rel[..., 0])
-    return torch.remainder(bearing - yaw + math.pi, 2 * math.pi).sub(math.pi).abs()
+    return wrap_angle(bearing - yaw).abs()

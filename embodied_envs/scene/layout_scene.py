@@ -43,10 +43,13 @@ class LayoutScene:
     robot_poses: torch.Tensor
     episodes: EpisodeSampler
 
-    def state_entries(self) -> list[Actor]:
-        """What the env's state dict holds: each dynamic node's actors merged over envs (the
-        per-env actors are views of them)."""
-        return [self.node_actors[node] for node in self.dynamic_nodes]
+    def register_state(self, env) -> None:
+        """Make each dynamic node one entry of ``env``'s state dict, over all envs (its per-env
+        actors are views of the merged one and leave the registry)."""
+        for actor in (a for actors in self.env_actors.values() for a in actors.values()):
+            env.remove_from_state_dict_registry(actor)
+        for node in self.dynamic_nodes:
+            env.add_to_state_dict_registry(self.node_actors[node])
 
     def set_episode_poses(self, env_idx: torch.Tensor, objects: dict[str, torch.Tensor]) -> None:
         """Pose every dynamic node of ``env_idx`` at rest: at ``objects[node]`` (raw poses

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -103,6 +104,14 @@ class PinholeCamera:
             float(k[1, 1]),
             float(k[0, 2]),
             float(k[1, 2]),
+        )
+
+    def in_frame(self, frame_to_world: np.ndarray) -> PinholeCamera:
+        """This camera with extrinsics relative to a frame posed at ``frame_to_world`` (4x4):
+        a splat stored in that frame, seen by the result, looks like the splat moved by
+        ``frame_to_world`` seen by this camera."""
+        return dataclasses.replace(
+            self, world_to_cam=self.world_to_cam @ np.asarray(frame_to_world, dtype=np.float64)
         )
 
     @property

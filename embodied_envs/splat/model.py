@@ -220,15 +220,17 @@ def sh_colors(
     """RGB in [0, 1] of each Gaussian (or of ``index``) seen from ``camera_center``.
 
     Colour = 0.5 + sum_k basis_k(view direction) * sh_k, clamped to [0, 1], with the view
-    direction (camera to Gaussian) rotated into the splat's own frame.
+    direction (camera to Gaussian) rotated into the splat's own frame. ``camera_center`` is
+    ``(3,)``, one centre per Gaussian ``(M, 3)``, or ``(C, 1, 3)`` for ``(C, N, 3)`` colours of
+    C cameras (degree 0 gives ``(N, 3)``, the same from every camera).
     """
     means = splat.means if index is None else splat.means[index]
     sh = splat.sh if index is None else splat.sh[index]
     if splat.sh_degree == 0:
         return (0.5 + SH_C0 * sh[:, 0]).clamp(0.0, 1.0)
     dirs = means - camera_center
-    dirs = dirs / dirs.norm(dim=1, keepdim=True).clamp_min(1e-12)
+    dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     if splat.sh_frame is not None:
         dirs = dirs @ splat.sh_frame.to(dirs)  # row vectors: R^T d for each d
     basis = sh_basis(dirs, splat.sh_degree)
-    return (0.5 + torch.einsum("nk,nkc->nc", basis, sh)).clamp(0.0, 1.0)
+    return (0.5 + torch.einsum("...k,...kc->...c", basis, sh)).clamp(0.0, 1.0)

@@ -1,24 +1,35 @@
-"""EWA splatting of 3D Gaussians in PyTorch (CPU or CUDA), and the backend switch.
+"""EWA splatting of 3D Gaussians in PyTorch (CPU or CUDA).
 
-The rules (as in 3DGS): Gaussians with camera z <= ``NEAR_Z`` are dropped and
-centres outside ``FRUSTUM_MARGIN`` times the view frustum are culled; the 3D covariance is
-projected with the perspective Jacobian (x/z and y/z clamped to the same margin) plus a
-``LOW_PASS`` px^2 filter; a Gaussian covers the pixels whose centres lie within its
-``FOOTPRINT_SIGMA``-sigma ellipse; per pixel, Gaussians are composited front to back by camera
-z with ``alpha = min(ALPHA_MAX, opacity * exp(-q / 2))``, skipping ``alpha < ALPHA_MIN``, and
-a pixel stops at the first Gaussian that would take its transmittance below ``T_MIN``.
+The rules (as in 3DGS): Gaussians with camera z <= ``NEAR_Z`` are dropped and centres outside
+``FRUSTUM_MARGIN`` times the view frustum are culled (so the perspective Jacobian is only
+evaluated within that margin, where 3DGS clamps it); the 3D covariance is projected with that
+Jacobian plus a ``LOW_PASS`` px^2 filter; a Gaussian covers the pixels whose centres lie within
+its ``FOOTPRINT_SIGMA``-sigma ellipse; per pixel, Gaussians are composited front to back by
+camera z with ``alpha = min(ALPHA_MAX, opacity * exp(-q / 2))``, skipping ``alpha <
+ALPHA_MIN``, and a pixel stops at the first Gaussian that would take its transmittance below
+``T_MIN``.
 
-Implementation: every Gaussian is expanded into the (pixel, Gaussian) pairs of its footprint,
-in depth-sorted chunks; per pixel, a segmented cumulative sum of ``log(1 - alpha)`` gives each
-pair's transmittance, which reproduces sequential compositing exactly, stop rule included.
-Pixels that have stopped are skipped by later chunks.
+Stages, each a function that can be tested on its own (as gsplat splits its rasterizer):
+
+1. :func:`project`: cull, project and colour the Gaussians of every camera, sorted by depth;
+2. :func:`expand_pairs`: the (pixel, Gaussian) pairs of each footprint, row by row;
+3. :func:`composite_pairs`: per pixel, a segmented cumulative sum of ``log(1 - alpha)`` gives
+   each pair's transmittance, which reproduces sequential compositing exactly, stop rule
+   included.
+
+:func:`rasterize_torch` runs them over depth-sorted chunks of Gaussians; pixels that have
+stopped are skipped by later chunks. Several cameras of one size render in one call: their
+images are stacked into one tall image (camera ``c`` owns rows ``c*H .. c*H+H-1``), so every
+stage works on all cameras at once.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from embodied_envs.splat.camera import PinholeCamera
@@ -36,12 +47,12 @@ MAX_PAIRS_PER_CHUNK = 1 << 19  # pairs expanded at once; smaller chunks skip mor
 
 @dataclass(frozen=True)
 class SplatImage:
-    """A rendered splat.
+    """A rendered splat; with several cameras every field has a leading camera dimension.
 
     Attributes:
-        rgb: (H, W, 3) float in [0, 1], composited over the background colour.
-        alpha: (H, W) accumulated opacity, 1 - final transmittance.
-        depth: (H, W) sum over contributions of weight x camera z (not divided by alpha).
+        rgb: ([C,] H, W, 3) float in [0, 1], composited over the background colour.
+        alpha: ([C,] H, W) accumulated opacity, 1 - final transmittance.
+        depth: ([C,] H, W) sum over contributions of weight x camera z (not divided by alpha).
     """
 
     rgb: torch.Tensor
@@ -58,10 +69,60 @@ class SplatImage:
 
 
 @dataclass(frozen=True)
-class Projected:
-    """Visible Gaussians in screen space, sorted front to back (all tensors (M,))."""
+class CameraBatch:
+    """Cameras of one image size as tensors: the rasterizer's batched camera argument."""
 
-    mx: torch.Tensor  # pixel coordinates of the centre
+    world_to_cam: torch.Tensor  # (C, 4, 4)
+    fx: torch.Tensor  # (C,) each
+    fy: torch.Tensor
+    cx: torch.Tensor
+    cy: torch.Tensor
+    center: torch.Tensor  # (C, 3) camera centres in world coordinates
+    width: int
+    height: int
+
+    @classmethod
+    def of(
+        cls, cameras: Sequence[PinholeCamera], device: torch.device, dtype: torch.dtype
+    ) -> CameraBatch:
+        """Stack pinhole cameras.
+
+        Raises:
+            ValueError: no camera, or cameras of different image sizes.
+        """
+        if not cameras:
+            raise ValueError("render needs at least one camera")
+        sizes = {(c.width, c.height) for c in cameras}
+        if len(sizes) > 1:
+            raise ValueError(f"cameras rendered in one call share one image size, got {sizes}")
+
+        def t(values) -> torch.Tensor:
+            return torch.as_tensor(np.asarray(values), dtype=dtype, device=device)
+
+        return cls(
+            world_to_cam=t([c.world_to_cam for c in cameras]),
+            fx=t([c.fx for c in cameras]),
+            fy=t([c.fy for c in cameras]),
+            cx=t([c.cx for c in cameras]),
+            cy=t([c.cy for c in cameras]),
+            center=t([c.center for c in cameras]),
+            width=cameras[0].width,
+            height=cameras[0].height,
+        )
+
+    def __len__(self) -> int:
+        return self.world_to_cam.shape[0]
+
+
+@dataclass(frozen=True)
+class Projected:
+    """Visible (camera, Gaussian) instances in screen space, sorted front to back (all (M,)).
+
+    Rows are in the stacked image of all cameras: camera ``c`` owns rows ``c*H .. c*H+H-1``.
+    """
+
+    cam: torch.Tensor  # camera index
+    mx: torch.Tensor  # pixel coordinates of the centre (my in the stacked image)
     my: torch.Tensor
     sxx: torch.Tensor  # 2D covariance, px^2, low-pass included
     sxy: torch.Tensor
@@ -76,59 +137,70 @@ class Projected:
         return (2.0 * torch.log(self.opacity / ALPHA_MIN)).clamp_max(FOOTPRINT_SIGMA**2)
 
 
-def project(splat: GaussianSplat, camera: PinholeCamera) -> Projected:
-    """Cull, project and colour the Gaussians; the result is sorted by camera z."""
-    dev, dt = splat.device, splat.means.dtype
-    w2c = torch.as_tensor(camera.world_to_cam, dtype=dt, device=dev)
-    rot, trans = w2c[:3, :3], w2c[:3, 3]
-    p = torch.addmm(trans, splat.means, rot.T)
+def project(splat: GaussianSplat, cameras: CameraBatch) -> Projected:
+    """Stage 1: cull, project and colour every Gaussian in every camera, sorted by camera z
+    (ties keep camera, then Gaussian order)."""
+    rot, trans = cameras.world_to_cam[:, :3, :3], cameras.world_to_cam[:, :3, 3]
+    p = torch.einsum("cij,nj->cni", rot, splat.means) + trans[:, None]  # (C, N, 3)
+    z = p[..., 2]
+    w, h = cameras.width, cameras.height
+    lim_x = FRUSTUM_MARGIN * torch.maximum(cameras.cx, w - cameras.cx) / cameras.fx
+    lim_y = FRUSTUM_MARGIN * torch.maximum(cameras.cy, h - cameras.cy) / cameras.fy
+    keep = (
+        (z > NEAR_Z)
+        & (p[..., 0].abs() <= lim_x[:, None] * z)
+        & (p[..., 1].abs() <= lim_y[:, None] * z)
+    )
+    cam, idx = keep.nonzero(as_tuple=True)  # camera-major, then Gaussian order
+    order = torch.argsort(z[cam, idx], stable=True)
+    cam, idx = cam.index_select(0, order), idx.index_select(0, order)
+    p = p[cam, idx]
     z = p[:, 2]
-    lim_x = FRUSTUM_MARGIN * max(camera.cx, camera.width - camera.cx) / camera.fx
-    lim_y = FRUSTUM_MARGIN * max(camera.cy, camera.height - camera.cy) / camera.fy
-    keep = (z > NEAR_Z) & (p[:, 0].abs() <= lim_x * z) & (p[:, 1].abs() <= lim_y * z)
-    idx = keep.nonzero().squeeze(1)
-    idx = idx.index_select(0, torch.argsort(z.index_select(0, idx), stable=True))
-    p = p.index_select(0, idx)
-    z = p[:, 2]
-    tx, ty = p[:, 0] / z, p[:, 1] / z
+    tx, ty = p[:, 0] / z, p[:, 1] / z  # within the culling margin: no Jacobian clamp needed
     q = splat.quats_wxyz.index_select(0, idx)
     rs = quat_wxyz_to_matrix(q / q.norm(dim=1, keepdim=True).clamp_min(1e-12))
     rs = rs * torch.exp(splat.log_scales.index_select(0, idx))[:, None, :]
-    m = torch.matmul(rot, rs)  # R S in the camera frame
+    m = torch.matmul(rot.index_select(0, cam), rs)  # R S in the camera frame
 
-    # 2D covariance: J R S (J R S)^T + LOW_PASS I, with J the clamped perspective Jacobian
-    txc, tyc = tx.clamp(-lim_x, lim_x), ty.clamp(-lim_y, lim_y)
-    ax = (m[:, 0] - txc[:, None] * m[:, 2]) * (camera.fx / z)[:, None]
-    ay = (m[:, 1] - tyc[:, None] * m[:, 2]) * (camera.fy / z)[:, None]
-    center = torch.as_tensor(camera.center, dtype=dt, device=dev)
+    # 2D covariance: J R S (J R S)^T + LOW_PASS I, with J the perspective Jacobian
+    fx, fy = cameras.fx.index_select(0, cam), cameras.fy.index_select(0, cam)
+    ax = (m[:, 0] - tx[:, None] * m[:, 2]) * (fx / z)[:, None]
+    ay = (m[:, 1] - ty[:, None] * m[:, 2]) * (fy / z)[:, None]
     return Projected(
-        mx=camera.fx * tx + camera.cx,
-        my=camera.fy * ty + camera.cy,
+        cam=cam,
+        mx=fx * tx + cameras.cx.index_select(0, cam),
+        my=fy * ty + cameras.cy.index_select(0, cam) + cam * h,
         sxx=(ax * ax).sum(1) + LOW_PASS,
         sxy=(ax * ay).sum(1),
         syy=(ay * ay).sum(1) + LOW_PASS,
         depth=z,
         opacity=torch.sigmoid(splat.opacity_logits.index_select(0, idx)),
-        color=sh_colors(splat, center, idx),
+        color=sh_colors(splat, cameras.center.index_select(0, cam), idx),
     )
 
 
-def _row_ranges(pr: Projected, height: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per Gaussian: first pixel row its footprint may cover, and the number of rows."""
+def row_ranges(pr: Projected, height: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per instance: first row (stacked image) its footprint may cover, and the number of rows,
+    within its own camera's rows."""
     half = torch.sqrt(pr.q_max.clamp_min(0.0) * pr.syy)
-    v0 = torch.ceil(pr.my - half - 0.5).clamp(0, height).long()
-    v1 = torch.floor(pr.my + half - 0.5).clamp(-1, height - 1).long()
+    top = pr.cam * height
+    v0 = torch.maximum(torch.minimum(torch.ceil(pr.my - half - 0.5).long(), top + height), top)
+    v1 = torch.minimum(
+        torch.maximum(torch.floor(pr.my + half - 0.5).long(), top - 1), top + height - 1
+    )
     return v0, (v1 - v0 + 1).clamp_min(0)
 
 
-def _expand(pr: Projected, g: torch.Tensor, v0: torch.Tensor, rows: torch.Tensor, width: int):
-    """The (pixel, Gaussian) pairs of Gaussians ``g``, Gaussian-major, row by row.
+def expand_pairs(
+    pr: Projected, g: torch.Tensor, v0: torch.Tensor, rows: torch.Tensor, width: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Stage 2: the (pixel, Gaussian) pairs of instances ``g``, instance-major, row by row.
 
     Each row of a footprint spans the exact pixel interval of the ellipse q <= q_max at that
     row: q = dy^2 / syy + (dx - dy sxy / syy)^2 / (sxx - sxy^2 / syy).
 
     Returns:
-        pixel index, Gaussian index and q of every pair.
+        pixel index (in the stacked image), instance index and q of every pair.
     """
     dev = g.device
     n_rows = int(rows.sum())
@@ -167,26 +239,77 @@ def _live_counts(done: torch.Tensor, width: int, height: int, u0, v0, bw, bh) ->
     return sat[v1, u1] - sat[v0, u1] - sat[v1, u0] + sat[v0, u0]
 
 
+@dataclass
+class Canvas:
+    """Per-pixel accumulators of the stacked image: colour, depth, log transmittance, stopped."""
+
+    color: torch.Tensor  # (P, 3) float32
+    depth: torch.Tensor  # (P,) float32
+    log_t: torch.Tensor  # (P,) float64
+    done: torch.Tensor  # (P,) bool
+
+    @classmethod
+    def empty(cls, pixels: int, device: torch.device) -> Canvas:
+        return cls(
+            color=torch.zeros((pixels, 3), dtype=torch.float32, device=device),
+            depth=torch.zeros(pixels, dtype=torch.float32, device=device),
+            log_t=torch.zeros(pixels, dtype=torch.float64, device=device),
+            done=torch.zeros(pixels, dtype=torch.bool, device=device),
+        )
+
+
+def composite_pairs(
+    canvas: Canvas, pr: Projected, pix: torch.Tensor, gp: torch.Tensor, q: torch.Tensor
+) -> None:
+    """Stage 3: composite pairs onto ``canvas`` (in place). Pairs come in depth order per
+    pixel (instance-major, instances sorted by depth)."""
+    # pairs outside the footprint, below ALPHA_MIN or on stopped pixels become alpha = 0:
+    # they neither contribute nor change transmittance, so no compaction is needed
+    alpha = torch.exp(torch.log(pr.opacity.index_select(0, gp)) - 0.5 * q).clamp_max(ALPHA_MAX)
+    ok = (q <= FOOTPRINT_SIGMA**2) & (alpha >= ALPHA_MIN) & ~canvas.done.index_select(0, pix)
+    alpha = alpha * ok
+    pix, order = torch.sort(pix.int(), stable=True)  # int32 sorts faster
+    pix = pix.long()
+    gp, alpha = gp.index_select(0, order), alpha.index_select(0, order)
+
+    # per-pixel prefix sums of log(1 - alpha) in depth order; the running sum is
+    # non-increasing, so a cummin over segment starts recovers each segment's base
+    logs = torch.log1p(-alpha.double())
+    csum = logs.cumsum(0)
+    excl = csum - logs
+    first = torch.ones_like(pix, dtype=torch.bool)
+    first[1:] = pix[1:] != pix[:-1]
+    base = torch.cummin(torch.where(first, excl, math.inf), 0).values
+    before_t = canvas.log_t.index_select(0, pix) + (excl - base)
+    include = before_t + logs >= math.log(T_MIN)
+    weight = (alpha * torch.exp(before_t).float()) * include
+    canvas.color.index_add_(0, pix, weight[:, None] * pr.color.index_select(0, gp))
+    canvas.depth.index_add_(0, pix, weight * pr.depth.index_select(0, gp))
+    canvas.log_t.index_add_(0, pix, logs * include)
+    canvas.done[pix[~include]] = True
+
+
 def rasterize_torch(
     splat: GaussianSplat,
-    camera: PinholeCamera,
+    camera: PinholeCamera | Sequence[PinholeCamera],
     background: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> SplatImage:
-    """Render a splat with the PyTorch rasterizer, on the splat's device (CPU or CUDA)."""
-    dev = splat.device
-    w, h = camera.width, camera.height
-    pr = project(splat, camera)
-    v0, rows = _row_ranges(pr, h)
-    half_x = torch.sqrt(pr.q_max.clamp_min(0.0) * pr.sxx)
-    bound = rows * (2 * half_x.ceil().long() + 1).clamp_max(w)  # pairs per Gaussian, at most
+    """Render a splat with the PyTorch rasterizer, on the splat's device (CPU or CUDA).
 
-    npix = w * h
-    color = torch.zeros((npix, 3), dtype=torch.float32, device=dev)
-    depth = torch.zeros(npix, dtype=torch.float32, device=dev)
-    log_t = torch.zeros(npix, dtype=torch.float64, device=dev)
-    done = torch.zeros(npix, dtype=torch.bool, device=dev)
-    log_t_min = math.log(T_MIN)
-    log_opacity = torch.log(pr.opacity)
+    Args:
+        camera: one camera, or a sequence of cameras of one image size rendered in one call
+            (the image then has a leading camera dimension).
+    """
+    dev = splat.device
+    cameras = CameraBatch.of(
+        [camera] if isinstance(camera, PinholeCamera) else list(camera), dev, splat.means.dtype
+    )
+    w, h = cameras.width, len(cameras) * cameras.height  # the stacked image
+    pr = project(splat, cameras)
+    v0, rows = row_ranges(pr, cameras.height)
+    half_x = torch.sqrt(pr.q_max.clamp_min(0.0) * pr.sxx)
+    bound = rows * (2 * half_x.ceil().long() + 1).clamp_max(w)  # pairs per instance, at most
+    canvas = Canvas.empty(w * h, dev)
 
     cum = bound.cumsum(0)
     n = len(bound)
@@ -198,51 +321,29 @@ def rasterize_torch(
         g = torch.arange(start, end, device=dev)
         start = end
         r = rows.index_select(0, g)
-        if before > 0 and bool(done.any()):
-            # later chunks: skip Gaussians whose box holds only stopped pixels
+        if before > 0 and bool(canvas.done.any()):
+            # later chunks: skip instances whose box holds only stopped pixels
             hx = half_x.index_select(0, g)
             mx = pr.mx.index_select(0, g)
             u0 = torch.ceil(mx - hx - 0.5).clamp(0, w).long()
             u1 = torch.floor(mx + hx - 0.5).clamp(-1, w - 1).long()
             live = _live_counts(
-                done, w, h, u0, v0.index_select(0, g), (u1 - u0 + 1).clamp_min(0), r
+                canvas.done, w, h, u0, v0.index_select(0, g), (u1 - u0 + 1).clamp_min(0), r
             )
             r = torch.where(live > 0, r, torch.zeros_like(r))
         if int(r.sum()) == 0:
             continue
-        pix, gp, q = _expand(pr, g, v0, r, w)
-        if len(pix) == 0:
-            continue
-        # pairs outside the footprint, below ALPHA_MIN or on stopped pixels become alpha = 0:
-        # they neither contribute nor change transmittance, so no compaction is needed
-        alpha = torch.exp(log_opacity.index_select(0, gp) - 0.5 * q).clamp_max(ALPHA_MAX)
-        ok = (q <= FOOTPRINT_SIGMA**2) & (alpha >= ALPHA_MIN) & ~done.index_select(0, pix)
-        alpha = alpha * ok
-        pix, order = torch.sort(pix.int(), stable=True)
-        pix = pix.long()
-        gp, alpha = gp.index_select(0, order), alpha.index_select(0, order)
+        pix, gp, q = expand_pairs(pr, g, v0, r, w)
+        if len(pix):
+            composite_pairs(canvas, pr, pix, gp, q)
 
-        # per-pixel prefix sums of log(1 - alpha) in depth order; the running sum is
-        # non-increasing, so a cummin over segment starts recovers each segment's base
-        logs = torch.log1p(-alpha.double())
-        csum = logs.cumsum(0)
-        excl = csum - logs
-        first = torch.ones_like(pix, dtype=torch.bool)
-        first[1:] = pix[1:] != pix[:-1]
-        base = torch.cummin(torch.where(first, excl, math.inf), 0).values
-        before_t = log_t.index_select(0, pix) + (excl - base)
-        include = before_t + logs >= log_t_min
-        weight = (alpha * torch.exp(before_t).float()) * include
-        color.index_add_(0, pix, weight[:, None] * pr.color.index_select(0, gp))
-        depth.index_add_(0, pix, weight * pr.depth.index_select(0, gp))
-        log_t.index_add_(0, pix, logs * include)
-        done[pix[~include]] = True
-
-    trans = torch.exp(log_t).float()
+    trans = torch.exp(canvas.log_t).float()
     bg = torch.as_tensor(background, dtype=torch.float32, device=dev)
-    rgb = color + trans[:, None] * bg
+    shape = (cameras.height, w)
+    if not isinstance(camera, PinholeCamera):
+        shape = (len(cameras), *shape)
     return SplatImage(
-        rgb=rgb.view(h, w, 3).clamp(0.0, 1.0),
-        alpha=(1.0 - trans).view(h, w),
-        depth=depth.view(h, w),
+        rgb=(canvas.color + trans[:, None] * bg).view(*shape, 3).clamp(0.0, 1.0),
+        alpha=(1.0 - trans).view(shape),
+        depth=canvas.depth.view(shape),
     )

@@ -119,9 +119,15 @@ def test_cuda_backends_match_the_cpu_rasterizer():
 
     splat = read_ply(data_root() / "assets" / "background" / "gs_model.ply")
     cam = PinholeCamera.look_at((0.0, 1.3, 0.0), (2.0, 1.0, -1.0), up=(0, 1, 0))
-    cpu = render(splat, cam, backend="torch")
+    other = PinholeCamera.look_at((0.5, 1.2, 0.3), (-2.0, 1.0, 1.0), up=(0, 1, 0))
+    cpu = [render(splat, c, backend="torch") for c in (cam, other)]
     backends = ["torch"] + (["gsplat"] if gsplat_available() else [])
     for backend in backends:
         gpu = render(splat.to("cuda"), cam, backend=backend)
-        diff = (gpu.rgb.cpu() - cpu.rgb).abs()
+        diff = (gpu.rgb.cpu() - cpu[0].rgb).abs()
         assert (diff > 2 / 255).float().mean() <= 0.01, backend
+        both = render(splat.to("cuda"), [cam, other], backend=backend)  # one batched call
+        assert both.rgb.shape[0] == 2
+        for k in range(2):
+            diff = (both.rgb[k].cpu() - cpu[k].rgb).abs()
+            assert (diff > 2 / 255).float().mean() <= 0.01, (backend, k)

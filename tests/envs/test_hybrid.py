@@ -90,7 +90,10 @@ def test_foreground_is_the_simulated_render_and_background_the_splat(env):
     rgb_array = u.render_rgb_array()[0]  # the plain render of the same state
     assert torch.equal(rgb_array, data["rgb"][0])
     assert torch.equal(hybrid[0][fg], rgb_array[fg])
-    assert torch.equal(hybrid[0][~fg], bg.rgb_uint8()[~fg])
+    # the background is the splat posed by the layout (rendered here by posing the splat; the
+    # env moves the camera instead, which differs by float rounding: at most 1 level, rarely)
+    diff = (hybrid[0][~fg].int() - bg.rgb_uint8()[~fg].int()).abs()
+    assert diff.max() <= 1 and (diff > 0).float().mean() < 1e-3
     # the room is drawn: background pixels are not the simulator's empty black
     assert hybrid[0][~fg].float().mean() > 60
 

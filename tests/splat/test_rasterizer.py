@@ -202,3 +202,69 @@ def test_backend_choice_is_explicit():
         assert resolve_backend("auto") == "torch"
         with pytest.raises(ValueError, match='backend "gsplat" cannot run here'):
             resolve_backend("gsplat")
+
+
+def test_one_call_renders_many_cameras_as_each_alone(monkeypatch):
+    """A batched camera argument gives, per camera, the image that camera gives alone; with
+    small chunks too (later chunks skip stopped pixels of every camera)."""
+    splat = random_splat(5, n=300, sh_degree=1)
+    cams = [
+        PinholeCamera.look_at(eye, (0, 0, 0), width=36, height=28, fovy_deg=fov)
+        for eye, fov in (((0.3, -2.5, 1.0), 60), ((2.0, 1.0, 0.5), 45), ((-1.5, -1.5, 2.0), 70))
+    ]
+    for chunk in (rast.MAX_PAIRS_PER_CHUNK, 500):
+        monkeypatch.setattr(rast, "MAX_PAIRS_PER_CHUNK", chunk)
+        batch = rast.rasterize_torch(splat, cams, background=(0.1, 0.2, 0.3))
+        assert batch.rgb.shape == (3, 28, 36, 3) and batch.alpha.shape == (3, 28, 36)
+        for c, cam in enumerate(cams):
+            alone = rast.rasterize_torch(splat, cam, background=(0.1, 0.2, 0.3))
+            assert alone.alpha.mean() > 0.05  # the camera sees the splat
+            torch.testing.assert_close(batch.rgb[c], alone.rgb, atol=1e-5, rtol=0)
+            torch.testing.assert_close(batch.alpha[c], alone.alpha, atol=1e-5, rtol=0)
+            torch.testing.assert_close(batch.depth[c], alone.depth, atol=1e-4, rtol=0)
+    with pytest.raises(ValueError, match="share one image size"):
+        rast.rasterize_torch(splat, [cams[0], PinholeCamera.look_at((1, 1, 1), (0, 0, 0))])
+
+
+def test_stages_projection_pairs_and_compositing():
+    """Each stage on one Gaussian seen head-on: projection puts it at the image centre with
+    the screen variance of f * s / z; its pairs are exactly the pixels within its footprint
+    ellipse; compositing one pair gives alpha = opacity * exp(-q / 2)."""
+    scale, opacity, dist = 0.1, 0.8, 2.0
+    cam = PinholeCamera.look_at((0, -dist, 0), (0, 0, 0), width=32, height=32, fovy_deg=60)
+    splat = single((0, 0, 0), scale, opacity)
+    cams = rast.CameraBatch.of([cam, cam], torch.device("cpu"), torch.float32)
+    pr = rast.project(splat, cams)
+    assert pr.cam.tolist() == [0, 1]  # one instance per camera
+    var = (cam.fx * scale / dist) ** 2 + rast.LOW_PASS
+    assert pr.mx.tolist() == pytest.approx([16.0, 16.0], abs=1e-4)
+    assert pr.my.tolist() == pytest.approx([16.0, 16.0 + 32], abs=1e-4)  # stacked rows
+    assert pr.sxx.tolist() == pytest.approx([var, var], rel=1e-4)
+    assert pr.sxy.abs().max() < 1e-5
+    v0, rows = rast.row_ranges(pr, 32)
+    pix, gp, q = rast.expand_pairs(pr, torch.arange(2), v0, rows, 32)
+    u, v = pix % 32, pix // 32
+    assert set(gp.tolist()) == {0, 1} and bool(((v >= 32) == (gp == 1)).all())
+    # q is the Mahalanobis distance of the pixel centre, all pairs lie within q_max ...
+    expect_q = ((u + 0.5 - pr.mx[gp]) ** 2 + (v + 0.5 - pr.my[gp]) ** 2) / var
+    torch.testing.assert_close(q, expect_q.to(q.dtype), rtol=1e-4, atol=1e-4)
+    assert bool((q <= pr.q_max[gp] + 1e-4).all())
+    # ... and every pixel within q_max is a pair (for camera 0)
+    uu, vv = torch.meshgrid(torch.arange(32), torch.arange(32), indexing="xy")
+    within = ((uu + 0.5 - 16) ** 2 + (vv + 0.5 - 16) ** 2) / var <= float(pr.q_max[0]) - 1e-3
+    assert set((vv * 32 + uu)[within].tolist()) <= set(pix[gp == 0].tolist())
+    canvas = rast.Canvas.empty(32 * 64, torch.device("cpu"))
+    centre = (v == 16) & (u == 16) & (gp == 0)
+    rast.composite_pairs(canvas, pr, pix[centre], gp[centre], q[centre])
+    alpha = 1 - math.exp(float(canvas.log_t[16 * 32 + 16]))
+    assert alpha == pytest.approx(opacity * math.exp(-0.5 * float(q[centre][0])), rel=1e-5)
+
+
+def test_sh_colours_of_many_cameras_in_one_call():
+    splat = random_splat(1, n=50, sh_degree=2)
+    centres = torch.tensor([[1.0, 2.0, 3.0], [-1.0, 0.5, 2.0]])
+    batch = sh_colors(splat, centres[:, None, :])
+    assert batch.shape == (2, 50, 3)
+    for k in range(2):
+        torch.testing.assert_close(batch[k], sh_colors(splat, centres[k]))
+    assert not torch.allclose(batch[0], batch[1])  # view-dependent: the cameras differ
