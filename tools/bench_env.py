@@ -117,6 +117,38 @@ def compositing_seconds(n: int, size: int = 128, repeats: int = 10) -> float:
     return statistics.median(times[1:])
 
 
+def background_seconds(n: int, batched: bool, size: int = 128) -> float:
+    """Seconds to render ``n`` envs' backgrounds (each its own camera and background yaw):
+    one batched call, or one call per env (the previous way)."""
+    from embodied_envs.layout import load_layout
+    from embodied_envs.splat import PinholeCamera
+
+    device = "cuda" if torch.cuda.is_available() else "cpu"
+    hybrid = HybridRenderer(
+        load_layout(default_layout()).gs_model_path(), SPLAT_Y_UP_TO_Z_UP, device=device
+    )
+    angles = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    cams = [
+        PinholeCamera.look_at(
+            (0.6 * np.cos(a), 0.6 * np.sin(a), 1.1), (0, 0, 0.9), (0, 0, 1), size, size
+        )
+        for a in angles
+    ]
+    poses = [LayoutPose.from_xyz_yaw((0, 0, 0), 0.3 * k) for k in range(n)]
+    hybrid.render_backgrounds(cams[:1], poses[:1])  # warm-up
+    if device == "cuda":
+        torch.cuda.synchronize()
+    t = time.perf_counter()
+    if batched:
+        hybrid.render_backgrounds(cams, poses)
+    else:
+        for cam, pose in zip(cams, poses, strict=True):
+            hybrid.render_backgrounds([cam], [pose])
+    if device == "cuda":
+        torch.cuda.synchronize()
+    return time.perf_counter() - t
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -124,6 +156,9 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=20, help="50-step episodes per env")
     ap.add_argument("--resets", type=int, default=200)
     ap.add_argument("--frames", type=int, default=50)
+    ap.add_argument(
+        "--background-envs", type=int, nargs="+", default=[8], help="envs per background batch"
+    )
     args = ap.parse_args()
     ours = reset_seconds("PickEmbodiedGen-v1", args.resets, obs_mode="state")
     base = reset_seconds("PickCube-v1", args.resets, obs_mode="state")
@@ -151,6 +186,13 @@ def main() -> None:
         f"background render:                 {u.hybrid.render_seconds / u.hybrid.renders:.2f} s "
         f"per (camera, env), once per configuration ({len(u.hybrid.splat):,} Gaussians)"
     )
+    for n in args.background_envs:
+        one_call = background_seconds(n, batched=True)
+        per_env = background_seconds(n, batched=False)
+        print(
+            f"backgrounds of {n:4d} envs (128x128): one batched call {one_call:7.2f} s, one call "
+            f"per env {per_env:7.2f} s, ratio {one_call / per_env:.2f}"
+        )
     device = "cuda" if torch.cuda.is_available() else "cpu"
     for n in (1, 64, 1024):
         s = compositing_seconds(n)

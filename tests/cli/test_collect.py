@@ -24,11 +24,14 @@ def run(args, cwd, check=True):
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     """Three seeded demonstrations of the default layout, collected from another folder with
-    a relative layout path, then moved."""
+    a relative layout path and a config file, then moved (the config file is deleted)."""
     work = tmp_path_factory.mktemp("collect")
     layout = os.path.relpath(DEFAULT_LAYOUT, work)
-    res = run(["collect", "--layout", layout, "--num", "3", "--seed", "5", "--out", "out"], work)
+    (work / "cfg.yaml").write_text("goal_region: {inset: 0.12}\n")
+    args = ["--num", "3", "--seed", "5", "--out", "out", "--config", "cfg.yaml"]
+    res = run(["collect", "--layout", layout, *args], work)
     assert "default.json: 3 demonstrations" in res.stdout, res.stdout + res.stderr
+    (work / "cfg.yaml").unlink()  # replays must not need it
     moved = work / "moved"
     shutil.move(work / "out" / "default", moved)
     assert not any(p.name.startswith(".") for p in (work / "out").iterdir()), "no leftovers"
@@ -41,6 +44,8 @@ def test_dataset_is_maniskill_trajectory_format(dataset):
     assert info["env_id"] == "PickEmbodiedGen-v1"
     assert info["env_kwargs"]["layout_file"] == str(DEFAULT_LAYOUT)  # absolute: any cwd
     assert info["env_kwargs"]["control_mode"] == "pd_joint_pos"
+    assert info["env_kwargs"]["goal_region"] == {"inset": 0.12}  # the config file's, spelled out
+    assert "config" not in info["env_kwargs"]
     assert info["max_episode_steps"] == 300
     assert meta["source_type"] == "motionplanning" and "PickPlaceSolver" in meta["source_desc"]
     episodes = meta["episodes"]
