@@ -32,7 +32,10 @@ from embodied_envs.splat.backend import resolve_backend
 
 SPLAT_SURFACE_ALPHA = 0.5  # splat pixels at least this opaque have a surface for the depth test
 CAMERA_TOLERANCE = 1e-6  # camera matrices closer than this reuse the cached background
-CAMERAS_PER_CALL = 64  # backgrounds rendered per batched rasterizer call (bounds its memory)
+# backgrounds rendered per batched rasterizer call: at most 64 cameras, and cameras x Gaussians
+# at most 2^24 (the projection holds a (cameras, Gaussians, 3) tensor: 200 MB at float32)
+MAX_CAMERAS_PER_CALL = 64
+MAX_CAMERA_GAUSSIANS_PER_CALL = 1 << 24
 
 
 @dataclass
@@ -142,12 +145,15 @@ class HybridRenderer:
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """The splat posed by ``poses[k]`` seen from ``cameras[k]`` (cameras of one size):
         uint8 RGB ``(k, H, W, 3)`` and surface depth ``(k, H, W)``, in batched rasterizer calls
-        of up to ``CAMERAS_PER_CALL`` cameras."""
+        (``MAX_CAMERAS_PER_CALL``, ``MAX_CAMERA_GAUSSIANS_PER_CALL``)."""
         start = time.perf_counter()
         moved = [cam.in_frame(pose.matrix()) for cam, pose in zip(cameras, poses, strict=True)]
+        per_call = max(
+            1, min(MAX_CAMERAS_PER_CALL, MAX_CAMERA_GAUSSIANS_PER_CALL // len(self.splat))
+        )
         rgb, depth = [], []
-        for i in range(0, len(moved), CAMERAS_PER_CALL):
-            image = render(self.splat, moved[i : i + CAMERAS_PER_CALL], backend=self.backend)
+        for i in range(0, len(moved), per_call):
+            image = render(self.splat, moved[i : i + per_call], backend=self.backend)
             rgb.append(image.rgb_uint8().to(self.device))
             depth.append(image.surface_depth(SPLAT_SURFACE_ALPHA).to(self.device))
         self.renders += len(moved)

@@ -295,3 +295,33 @@ def test_compositing_is_per_env_with_its_own_ids_background_and_depth(tmp_path):
     out = hybrid.composite("cam", rgb, seg, depth_mm, model, intrinsic, human=False)
     assert (out[0][left] == 77).all()
     assert hybrid.renders == 2, "one background per env, rendered once"
+
+
+def test_backgrounds_of_many_envs_in_batched_calls_equal_the_posed_splat(monkeypatch):
+    """Every env's background from batched calls (three envs, calls of two) is the splat
+    posed by that env's layout pose, as rendered by posing the splat itself."""
+    from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP
+    from embodied_envs.envs import hybrid as hybrid_module
+    from embodied_envs.layout import load_layout
+
+    monkeypatch.setattr(hybrid_module, "MAX_CAMERAS_PER_CALL", 2)
+    path = load_layout(DEFAULT_LAYOUT).gs_model_path()
+    renderer = hybrid_module.HybridRenderer(path, SPLAT_Y_UP_TO_Z_UP)
+    cams = [
+        PinholeCamera.look_at((0.6 * math.cos(a), 0.6 * math.sin(a), 1.1), (0, 0, 0.9), (0, 0, 1),
+                              48, 40)
+        for a in (0.0, 2.0, 4.0)
+    ]  # fmt: skip
+    poses = [LayoutPose.from_xyz_yaw((0.1 * k, 0.0, 0.0), 0.7 * k) for k in range(3)]
+    rgb, depth = renderer.render_backgrounds(cams, poses)
+    assert rgb.shape == (3, 40, 48, 3) and depth.shape == (3, 40, 48)
+    assert renderer.renders == 3
+    stored = read_ply(path)
+    for k, (cam, pose) in enumerate(zip(cams, poses, strict=True)):
+        q = quat_multiply_xyzw(pose.q_xyzw, SPLAT_Y_UP_TO_Z_UP)
+        posed = pose_splat(stored, torch.tensor(pose.p), torch.tensor(q[[3, 0, 1, 2]]))
+        want = render(posed, cam, backend="torch")
+        diff = (rgb[k].int() - want.rgb_uint8().int()).abs()
+        assert diff.max() <= 1 and (diff > 0).float().mean() < 1e-3, k
+        assert want.alpha.mean() > 0.5  # the room fills the view
+    assert not torch.equal(rgb[0], rgb[1])  # each env its own view
