@@ -158,24 +158,15 @@ class PickEmbodiedGenEnv(CheckedEnv):
         super()._load_agent(options, sapien.Pose(p=[0.0, 0.0, 0.0]))
 
     def _load_scene(self, options: dict):
-        first = self._num_configurations == 0
         self._num_configurations += 1
-        self.layouts = (
-            configuration_layouts(
-                self.base_layout, self._episode_seed, first, self.placement_limits
-            )
-            if self.replace_objs
-            else [self.base_layout] * self.num_envs
-        )
+        self.layouts = configuration_layouts(
+            self.base_layout, self._episode_seed, self.placement_limits,
+            first=self._num_configurations == 1, replace=self.replace_objs,
+        )  # fmt: skip
         ls = self.layout_scene = load_layout_scene(
-            self.scene,
-            self.layouts,
-            objs_z_offset=self.objs_z_offset,
-            robot_z_offset=self.robot_z_offset,
-            limits=self.placement_limits,
-            goal_region=self.goal_region,
-            device=self.device,
-        )
+            self.scene, self.layouts, self.objs_z_offset, self.robot_z_offset,
+            self.placement_limits, self.goal_region, self.device,
+        )  # fmt: skip
         self.env_actors, self.obj = ls.env_actors, ls.target_actor
         ls.register_state(self)
         self.goal_site = actors.build_sphere(

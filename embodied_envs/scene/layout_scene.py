@@ -71,13 +71,17 @@ class LayoutScene:
 
 
 def configuration_layouts(
-    base: LayoutInfo, seeds: np.ndarray, keep_file_poses: bool, limits: PlacementLimits
+    base: LayoutInfo, seeds: np.ndarray, limits: PlacementLimits, first: bool, replace: bool
 ) -> list[LayoutInfo]:
-    """One placed layout per env (env k placed with ``derive_seed(seeds[k], k)``); with
-    ``keep_file_poses``, env 0 keeps the file's poses."""
+    """The layout of each env for a configuration: with ``replace``, env k placed by
+    ``derive_seed(seeds[k], k)``, except env 0 on the ``first`` configuration, which keeps the
+    file's poses; without ``replace``, the file's poses everywhere."""
+    seeds = np.asarray(seeds).reshape(-1)
+    if not replace:
+        return [base] * len(seeds)
     return [
-        base if (keep_file_poses and k == 0) else place(base, derive_seed(s, k), limits)
-        for k, s in enumerate(np.asarray(seeds).reshape(-1))
+        base if (first and k == 0) else place(base, derive_seed(s, k), limits)
+        for k, s in enumerate(seeds)
     ]
 
 
