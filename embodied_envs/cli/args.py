@@ -87,7 +87,9 @@ def env_config(paths: list[Path] | None, owned: dict[str, str]) -> dict:
     from embodied_envs.config import ConfigError, load_config
 
     config = load_config(paths)
-    for key in sorted(set(config) & set(owned)):
+    taken = sorted(set(config) & set(owned))
+    if taken:
+        key = taken[0]
         raise ConfigError(
             f"{', '.join(map(str, paths))}: {key} is set by this command ({owned[key]}); "
             "remove it from the config file"

@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+from mani_skill.utils.structs import Actor
+from mani_skill.utils.structs.pose import Pose
 
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.limits import GoalRegion, PlacementLimits
@@ -17,7 +19,6 @@ from embodied_envs.scene.episode import EpisodeSampler
 
 if TYPE_CHECKING:
     from mani_skill.envs.scene import ManiSkillScene
-    from mani_skill.utils.structs import Actor
 
 
 @dataclass
@@ -54,8 +55,6 @@ class LayoutScene:
     def set_episode_poses(self, env_idx: torch.Tensor, objects: dict[str, torch.Tensor]) -> None:
         """Pose every dynamic node of ``env_idx`` at rest: at ``objects[node]`` (raw poses
         ``(b, 7)``) when given, else at its configuration's pose."""
-        from mani_skill.utils.structs.pose import Pose
-
         zeros = torch.zeros((len(env_idx), 3), device=env_idx.device)
         for node in self.dynamic_nodes:
             pose = objects[node] if node in objects else self.node_poses[node][env_idx]
@@ -95,8 +94,6 @@ def load_layout_scene(
     device: torch.device,
 ) -> LayoutScene:
     """Build every env's layout actors and the per-env tensors the task needs."""
-    from mani_skill.utils.structs import Actor
-
     num_envs = len(layouts)
     nodes = layouts[0].object_nodes()
     for i, layout in enumerate(layouts):

@@ -129,6 +129,7 @@ class Projected:
     syy: torch.Tensor
     depth: torch.Tensor  # camera z
     opacity: torch.Tensor
+    log_opacity: torch.Tensor  # log(opacity), once per instance rather than per pair
     color: torch.Tensor  # (M, 3)
 
     @property
@@ -166,6 +167,7 @@ def project(splat: GaussianSplat, cameras: CameraBatch) -> Projected:
     fx, fy = cameras.fx.index_select(0, cam), cameras.fy.index_select(0, cam)
     ax = (m[:, 0] - tx[:, None] * m[:, 2]) * (fx / z)[:, None]
     ay = (m[:, 1] - ty[:, None] * m[:, 2]) * (fy / z)[:, None]
+    opacity = torch.sigmoid(splat.opacity_logits.index_select(0, idx))
     return Projected(
         cam=cam,
         mx=fx * tx + cameras.cx.index_select(0, cam),
@@ -174,7 +176,8 @@ def project(splat: GaussianSplat, cameras: CameraBatch) -> Projected:
         sxy=(ax * ay).sum(1),
         syy=(ay * ay).sum(1) + LOW_PASS,
         depth=z,
-        opacity=torch.sigmoid(splat.opacity_logits.index_select(0, idx)),
+        opacity=opacity,
+        log_opacity=torch.log(opacity),
         color=sh_colors(splat, cameras.center.index_select(0, cam), idx),
     )
 
@@ -265,7 +268,7 @@ def composite_pairs(
     pixel (instance-major, instances sorted by depth)."""
     # pairs outside the footprint, below ALPHA_MIN or on stopped pixels become alpha = 0:
     # they neither contribute nor change transmittance, so no compaction is needed
-    alpha = torch.exp(torch.log(pr.opacity.index_select(0, gp)) - 0.5 * q).clamp_max(ALPHA_MAX)
+    alpha = torch.exp(pr.log_opacity.index_select(0, gp) - 0.5 * q).clamp_max(ALPHA_MAX)
     ok = (q <= FOOTPRINT_SIGMA**2) & (alpha >= ALPHA_MIN) & ~canvas.done.index_select(0, pix)
     alpha = alpha * ok
     pix, order = torch.sort(pix.int(), stable=True)  # int32 sorts faster
