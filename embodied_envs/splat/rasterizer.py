@@ -141,8 +141,9 @@ class Projected:
 def project(splat: GaussianSplat, cameras: CameraBatch) -> Projected:
     """Stage 1: cull, project and colour every Gaussian in every camera, sorted by camera z
     (ties keep camera, then Gaussian order)."""
+    c, n = len(cameras), len(splat)
     rot, trans = cameras.world_to_cam[:, :3, :3], cameras.world_to_cam[:, :3, 3]
-    p = torch.einsum("cij,nj->cni", rot, splat.means) + trans[:, None]  # (C, N, 3)
+    p = torch.matmul(splat.means, rot.transpose(1, 2)) + trans[:, None]  # (C, N, 3)
     z = p[..., 2]
     w, h = cameras.width, cameras.height
     lim_x = FRUSTUM_MARGIN * torch.maximum(cameras.cx, w - cameras.cx) / cameras.fx
@@ -152,33 +153,41 @@ def project(splat: GaussianSplat, cameras: CameraBatch) -> Projected:
         & (p[..., 0].abs() <= lim_x[:, None] * z)
         & (p[..., 1].abs() <= lim_y[:, None] * z)
     )
-    cam, idx = keep.nonzero(as_tuple=True)  # camera-major, then Gaussian order
-    order = torch.argsort(z[cam, idx], stable=True)
-    cam, idx = cam.index_select(0, order), idx.index_select(0, order)
-    p = p[cam, idx]
+    flat = keep.view(-1).nonzero().squeeze(1)  # camera * N + Gaussian, camera-major
+    p = p.view(-1, 3)
+    flat = flat.index_select(0, torch.argsort(p[:, 2].index_select(0, flat), stable=True))
+    cam, idx = flat // n, flat % n
+    p = p.index_select(0, flat)
     z = p[:, 2]
     tx, ty = p[:, 0] / z, p[:, 1] / z  # within the culling margin: no Jacobian clamp needed
     q = splat.quats_wxyz.index_select(0, idx)
     rs = quat_wxyz_to_matrix(q / q.norm(dim=1, keepdim=True).clamp_min(1e-12))
     rs = rs * torch.exp(splat.log_scales.index_select(0, idx))[:, None, :]
-    m = torch.matmul(rot.index_select(0, cam), rs)  # R S in the camera frame
 
-    # 2D covariance: J R S (J R S)^T + LOW_PASS I, with J the perspective Jacobian
-    fx, fy = cameras.fx.index_select(0, cam), cameras.fy.index_select(0, cam)
-    ax = (m[:, 0] - tx[:, None] * m[:, 2]) * (fx / z)[:, None]
-    ay = (m[:, 1] - ty[:, None] * m[:, 2]) * (fy / z)[:, None]
+    # per instance, its camera's rotation rows and intrinsics, in one gather
+    per_cam = torch.cat(
+        [rot.reshape(c, 9), torch.stack([cameras.fx, cameras.fy, cameras.cx, cameras.cy], 1)], 1
+    ).index_select(0, cam)
+    r0, r1, r2 = per_cam[:, 0:3], per_cam[:, 3:6], per_cam[:, 6:9]
+    fx, fy, cx, cy = per_cam[:, 9:13].unbind(1)
+    # 2D covariance: J R S (J R S)^T + LOW_PASS I, with J the perspective Jacobian; the rows of
+    # J R S are (W_0 - tx W_2) R S fx / z and (W_1 - ty W_2) R S fy / z (W: camera rotation)
+    ax = torch.bmm(((r0 - tx[:, None] * r2) * (fx / z)[:, None])[:, None], rs)[:, 0]
+    ay = torch.bmm(((r1 - ty[:, None] * r2) * (fy / z)[:, None])[:, None], rs)[:, 0]
     opacity = torch.sigmoid(splat.opacity_logits.index_select(0, idx))
+    # view-dependent colour needs each instance's camera centre; degree 0 needs none
+    centre = cameras.center.index_select(0, cam) if splat.sh_degree > 0 else cameras.center[0]
     return Projected(
         cam=cam,
-        mx=fx * tx + cameras.cx.index_select(0, cam),
-        my=fy * ty + cameras.cy.index_select(0, cam) + cam * h,
+        mx=fx * tx + cx,
+        my=fy * ty + cy + cam * h,
         sxx=(ax * ax).sum(1) + LOW_PASS,
         sxy=(ax * ay).sum(1),
         syy=(ay * ay).sum(1) + LOW_PASS,
         depth=z,
         opacity=opacity,
         log_opacity=torch.log(opacity),
-        color=sh_colors(splat, cameras.center.index_select(0, cam), idx),
+        color=sh_colors(splat, centre, idx),
     )
 
 
