@@ -109,7 +109,8 @@ def compositing_seconds(n: int, size: int = 128, repeats: int = 10) -> float:
         if device == "cuda":
             torch.cuda.synchronize()
         t = time.perf_counter()
-        hybrid.composite("cam", rgb, seg, depth, model, intrinsic, human=False)
+        images = dict(rgb=rgb, segmentation=seg, depth=depth)
+        hybrid.composite("cam", images, model, intrinsic, human=False)
         if device == "cuda":
             torch.cuda.synchronize()
         times.append(time.perf_counter() - t)

@@ -40,8 +40,9 @@ def check_num_envs(num_envs, sim_backend: str) -> None:
         raise ValueError(
             f"num_envs={num_envs} needs ManiSkill's GPU simulation, and {why}. Fix: one env per "
             "process, vectorised with gym.make_vec('PickEmbodiedGen-v1', num_envs=N, "
-            "vectorization_mode='async', wrappers=[embodied_envs.envs.CPUGymWrapper], "
-            "vector_kwargs=dict(context='forkserver'))"
+            "vectorization_mode='async', wrappers=[CPUGymWrapper], "
+            "vector_kwargs=dict(context='forkserver')), with ManiSkill's CPUGymWrapper "
+            "(mani_skill.utils.wrappers.gymnasium)"
         )
 
 

@@ -36,6 +36,7 @@ CAMERA_TOLERANCE = 1e-6  # camera matrices closer than this reuse the cached bac
 # at most 2^24 (the projection holds a (cameras, Gaussians, 3) tensor: 200 MB at float32)
 MAX_CAMERAS_PER_CALL = 64
 MAX_CAMERA_GAUSSIANS_PER_CALL = 1 << 24
+DEPTH_MM_MAX = 32767  # ManiSkill's depth and position textures are int16 millimetres
 
 
 @dataclass
@@ -93,6 +94,8 @@ class HybridRenderer:
         self.poses: list[LayoutPose] = []  # per env, the background node's layout pose
         self._lut: dict[str, torch.Tensor] = {}  # "sensor" / "human" -> (n, max id + 1) bool
         self._cameras: dict[str, CameraBackgrounds] = {}
+        # sensor camera -> (n, H, W) bool: pixels of its last composite showing splat points
+        self.splat_points: dict[str, torch.Tensor] = {}
         self._prerender_due = False  # set by configure, cleared by prerender
         self.renders = 0  # background renders so far
         self.render_seconds = 0.0  # time spent in them
@@ -221,35 +224,71 @@ class HybridRenderer:
     def composite(
         self,
         camera_name: str,
-        rgb: torch.Tensor,
-        segmentation: torch.Tensor,
-        depth_mm: torch.Tensor,
+        images: dict[str, torch.Tensor],
         cam_to_world_gl: torch.Tensor,
         intrinsic: torch.Tensor,
         human: bool,
-    ) -> torch.Tensor:
+    ) -> dict[str, torch.Tensor]:
         """Composite a batch of camera images over their backgrounds, all envs at once.
+
+        One mask decides every texture: a pixel shows the simulator when its segmentation id is
+        one of its env's foreground ids (and, with the depth test, it is not behind the splat
+        surface); elsewhere it shows the splat: its colour, its surface depth (0 where the
+        splat has no surface, as the simulator's empty pixels), the surface point in the
+        camera frame, and segmentation id 0.
 
         Args:
             camera_name: cache key of the camera.
-            rgb: (n, H, W, 3) uint8 simulated colour.
-            segmentation: (n, H, W, 1) per-scene actor/link ids.
-            depth_mm: (n, H, W, 1) depth in millimetres (ManiSkill's ``depth`` texture).
+            images: ManiSkill's camera textures of the batch, ``(n, H, W, c)``: ``rgb`` uint8,
+                ``segmentation`` per-scene ids and ``depth`` int16 mm (both required), and
+                optionally ``position`` (int16 mm, OpenGL camera frame).
             cam_to_world_gl: (n, 4, 4) SAPIEN model matrices (OpenGL convention).
             intrinsic: (n, 3, 3) OpenCV intrinsics.
             human: a human render camera (hidden objects such as the goal are foreground).
 
         Returns:
-            (n, H, W, 3) uint8.
+            The composited ``rgb``, ``depth``, ``segmentation`` and (when given) ``position``,
+            on the images' device and in their dtypes, and ``splat_points`` ``(n, H, W)`` bool:
+            pixels that show a splat surface point.
         """
+        rgb, segmentation = images["rgb"], images["segmentation"]
         n, h, w = rgb.shape[:3]
         bg = self.backgrounds(camera_name, cam_to_world_gl, intrinsic, w, h)
         mask = self.foreground_mask(segmentation, human)
+        fg_depth = images["depth"][..., 0].to(self.device, torch.float32) / 1000.0
         if self.depth_test:
-            fg_depth = depth_mm[..., 0].to(self.device, torch.float32) / 1000.0
             mask &= fg_depth <= bg.depth
-        out = torch.where(mask[..., None], rgb.to(self.device), bg.rgb)
-        return out.to(rgb.device)
+        # the splat's surface depth in ManiSkill's int16 millimetres; none beyond its range
+        bg_mm = (bg.depth * 1000.0).round()
+        splat_points = ~mask & (bg_mm <= DEPTH_MM_MAX)
+        bg_mm = torch.where(splat_points, bg_mm, torch.zeros_like(bg_mm))
+
+        def pick(fg: torch.Tensor, splat: torch.Tensor) -> torch.Tensor:
+            fg_here = fg.to(self.device)
+            out = torch.where(mask[..., None], fg_here, splat.to(fg_here.dtype))
+            return out.to(fg.device)
+
+        out = {
+            "rgb": pick(rgb[..., :3], bg.rgb),
+            "depth": pick(images["depth"], bg_mm[..., None]),
+            "segmentation": pick(segmentation, torch.zeros_like(bg_mm)[..., None]),
+            "splat_points": splat_points.to(rgb.device),
+        }
+        if "position" in images:
+            out["position"] = pick(images["position"], self._camera_points(bg_mm, intrinsic))
+        return out
+
+    def _camera_points(self, depth_mm: torch.Tensor, intrinsic: torch.Tensor) -> torch.Tensor:
+        """``(n, H, W, 3)`` points in the OpenGL camera frame (mm) of pixels at ``depth_mm``
+        ``(n, H, W)`` along the axis; pixel (u, v) is centred at (u + 0.5, v + 0.5)."""
+        n, h, w = depth_mm.shape
+        k = intrinsic.to(self.device, torch.float32)
+        u = torch.arange(w, device=self.device, dtype=torch.float32) + 0.5
+        v = torch.arange(h, device=self.device, dtype=torch.float32) + 0.5
+        x = (u[None, None, :] - k[:, 0, 2, None, None]) / k[:, 0, 0, None, None] * depth_mm
+        y = (v[None, :, None] - k[:, 1, 2, None, None]) / k[:, 1, 1, None, None] * depth_mm
+        points = torch.stack([x, -y, -depth_mm], -1)  # OpenCV (x, y, z) -> OpenGL (x, -y, -z)
+        return points.round().clamp(-DEPTH_MM_MAX, DEPTH_MM_MAX)
 
     def foreground_mask(self, segmentation: torch.Tensor, human: bool) -> torch.Tensor:
         """``(n, H, W)`` bool: pixels whose id is one of their env's foreground ids."""
@@ -261,27 +300,47 @@ class HybridRenderer:
         return lut.gather(1, flat).reshape(seg.shape) & known
 
     # --- the env's cameras ---------------------------------------------------------------
-    def composite_camera(self, name: str, camera, data: dict, human: bool) -> torch.Tensor:
+    def composite_camera(self, name: str, camera, data: dict, human: bool) -> dict:
         """Composite a ManiSkill camera's ``data`` (its obs dict; segmentation and depth are
-        fetched when missing)."""
+        fetched when missing): :meth:`composite`'s result."""
         if "segmentation" not in data or "depth" not in data:
             data = data | camera.get_obs(rgb=False, depth=True, position=False, segmentation=True)
         return self.composite(
             name,
-            data["rgb"],
-            data["segmentation"],
-            data["depth"],
+            data,
             camera.camera.get_model_matrix(),
             camera.camera.get_intrinsic_matrix(),
             human,
         )
 
     def composite_sensors(self, scene, obs: dict) -> dict:
-        """Sensor observations with every ``rgb`` composited (in place, and returned)."""
+        """Sensor observations composited in place (and returned): of every camera with
+        ``rgb``, each texture it holds (``rgb``, ``depth``, ``segmentation``, ``position``).
+        Which pixels show splat surface points is kept per camera in ``splat_points``."""
         for name, data in obs.items():
             if "rgb" in data:
-                data["rgb"] = self.composite_camera(name, scene.sensors[name], data, human=False)
+                out = self.composite_camera(name, scene.sensors[name], data, human=False)
+                self.splat_points[name] = out["splat_points"]
+                data.update({k: v for k, v in out.items() if k in data})
         return obs
+
+    def place_splat_points(self, pointcloud: dict, sensor_param: dict) -> None:
+        """Fix a ManiSkill point cloud made from composited sensors, in place.
+
+        ManiSkill's ``sensor_data_to_pointcloud`` uses ``segmentation != 0`` as each point's
+        homogeneous coordinate, so a splat point (segmentation 0) would only be rotated into
+        the world: this adds each camera's translation to them and marks them valid (w = 1),
+        as the simulator's own points.
+        """
+        xyzw, start = pointcloud["xyzw"], 0
+        for name, points in self.splat_points.items():
+            n, h, w = points.shape
+            rows = xyzw[:, start : start + h * w]
+            flat = points.reshape(n, -1).to(xyzw.device)
+            t = sensor_param[name]["cam2world_gl"][:, :3, 3].to(xyzw.device, xyzw.dtype)
+            rows[..., :3] += flat[..., None] * t[:, None]
+            rows[..., 3] = torch.where(flat, torch.ones_like(rows[..., 3]), rows[..., 3])
+            start += h * w
 
     def prerender(self, scene) -> None:
         """After a :meth:`configure`, render the human cameras' backgrounds of every env now
@@ -298,17 +357,20 @@ class HybridRenderer:
                 camera.config.height,
             )
 
-    def render(self, scene, hidden_objects: list) -> torch.Tensor:
-        """The human render cameras' images composited over the splat, ``(n, H, W, 3)``
-        (several cameras side by side, as ManiSkill's ``render_rgb_array``)."""
+    def render(self, scene, hidden_objects: list, camera_name: str | None = None) -> torch.Tensor:
+        """The human render cameras' images (or ``camera_name``'s only) composited over the
+        splat, ``(n, H, W, 3)`` (several cameras side by side, as ManiSkill's
+        ``render_rgb_array``)."""
         for obj in hidden_objects:
             obj.show_visual()
         scene.update_render(update_sensors=False, update_human_render_cameras=True)
         images = []
         for name, camera in scene.human_render_cameras.items():
+            if camera_name is not None and name != camera_name:
+                continue
             camera.capture()
             data = camera.get_obs(rgb=True, depth=True, position=False, segmentation=True)
-            images.append(self.composite_camera(name, camera, data, human=True))
+            images.append(self.composite_camera(name, camera, data, human=True)["rgb"])
         for obj in hidden_objects:
             obj.hide_visual()
         return images[0] if len(images) == 1 else tile_images(images)

@@ -12,6 +12,7 @@ import torch
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.building import actors
+from mani_skill.utils.building.ground import build_ground
 from mani_skill.utils.registration import register
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
@@ -43,7 +44,10 @@ class PickEmbodiedGenEnv(CheckedEnv):
     Pick up the layout's target object (the first of ``relation.manipulated_objs``) with the
     Panda, which stands on the table's edge as the layout places it, and hold it still at a goal
     point above the table (a green sphere in human renders, hidden from sensors). Distractors
-    and the table are obstacles. The scene comes from an EmbodiedGen layout file.
+    and the table are obstacles. The scene comes from an EmbodiedGen layout file. A static
+    ground lies at the layout's floor level (the lowest point of its ``FLOOR`` objects; z = 0
+    when none): a knocked-off object comes to rest there. In hybrid frames the splat's room
+    floor shows instead of it.
 
     **Randomizations** (``replace_objs=False``: the file's poses, always):
     - per configuration (construction, ``reconfiguration_freq``, ``reconfigure=True``): table
@@ -57,6 +61,9 @@ class PickEmbodiedGenEnv(CheckedEnv):
     - the object is within ``goal_thresh`` (0.025 m) of the goal, and
     - the robot is static (arm joint speeds below ``static_thresh``, 0.2 rad/s)
 
+    **Fail Conditions:** ``fail`` when the object is off the table: more than ``fail_drop``
+    (0.05 m) below the table's top, or its origin outside the top's footprint seen from above.
+
     **Action Space:** the Panda controller's (default ``pd_joint_delta_pos``).
 
     **Observation Space:** ManiSkill's agent state plus ``extra``: ``tcp_pose``, ``goal_pos``,
@@ -65,8 +72,13 @@ class PickEmbodiedGenEnv(CheckedEnv):
 
     **Rewards:** :meth:`compute_dense_reward`, in [0, 5]; the normalised one is in [0, 1].
 
-    **Episode End:** truncation after ``MAX_EPISODE_STEPS`` (300) control steps, 6 s; ``success``
-    is reported in ``info``.
+    **Episode End:** ``terminated`` on ``success`` or ``fail`` (ManiSkill sets it from both);
+    truncation after ``MAX_EPISODE_STEPS`` (300) control steps, 6 s. Both flags are in ``info``.
+
+    **Render modes:** ManiSkill's, and ``"hybrid"``: the env then is an ``rgb_array`` env
+    (``env.render_mode == "rgb_array"``, so ManiSkill's ``CPUGymWrapper``, ``RecordEpisode``
+    and ``FrameStack`` take its frames unchanged) whose ``render()`` composites the human
+    render cameras over the splat; ``env.unwrapped.render_hybrid`` says so.
 
     **Arguments:** ``__init__``'s keywords (each commented there), ManiSkill's own, and
     ``config`` (YAML/JSON files merged in order, :mod:`embodied_envs.config`).
@@ -79,6 +91,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
     metadata = {"render_modes": SUPPORTED_RENDER_MODES}
 
     goal_thresh = 0.025  # m, object-to-goal distance that counts as placed
+    fail_drop = 0.05  # m, the object this far below the table's top has fallen off
     static_thresh = 0.2  # rad/s, arm joint speed under which the robot is static
     max_reward = 5.0  # dense reward on success; the normalised reward divides by it
     base_camera_eye = (0.95, 0.0, 0.55)  # base_camera eye in the robot base frame, m
@@ -118,8 +131,9 @@ class PickEmbodiedGenEnv(CheckedEnv):
         self.robot_init_qpos_noise = float(robot_init_qpos_noise)
         self.objs_z_offset, self.robot_z_offset = float(objs_z_offset), float(robot_z_offset)
         self.hybrid_obs = bool(hybrid_obs)
+        self.render_hybrid = render_mode == "hybrid"
         self.hybrid: HybridRenderer | None = None
-        if render_mode == "hybrid" or self.hybrid_obs:  # moves to the sim's device when known
+        if self.render_hybrid or self.hybrid_obs:  # moves to the sim's device when known
             self.hybrid = HybridRenderer(
                 self.base_layout.gs_model_path(),
                 tuple(float(v) for v in init_3dgs_quat),
@@ -128,6 +142,8 @@ class PickEmbodiedGenEnv(CheckedEnv):
                 layout_file=self.layout_file,
             )
         self._num_configurations = 0
+        if self.render_hybrid:  # an rgb_array env to every wrapper; render() composites
+            render_mode = "rgb_array"
         super().__init__(*args, robot_uids=robot, render_mode=render_mode, **kwargs)
 
     @property
@@ -169,6 +185,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
         )  # fmt: skip
         self.env_actors, self.obj = ls.env_actors, ls.target_actor
         ls.register_state(self)
+        self.ground = build_ground(self.scene, altitude=ls.floor_z)
         self.goal_site = actors.build_sphere(
             self.scene,
             radius=self.goal_thresh,
@@ -219,6 +236,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
         is_robot_static = self.agent.is_static(self.static_thresh)
         return {
             "success": is_obj_placed & is_robot_static,
+            "fail": self.layout_scene.off_table(self.obj.pose.p, self.fail_drop),
             "is_obj_placed": is_obj_placed,
             "is_robot_static": is_robot_static,
             "is_grasped": self.agent.is_grasping(self.obj),
@@ -266,14 +284,25 @@ class PickEmbodiedGenEnv(CheckedEnv):
     # --- hybrid rendering: HybridRenderer composites; the env only hands it images -----------
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
         obs = super()._get_obs_sensor_data(apply_texture_transforms)
-        if self.hybrid_obs and apply_texture_transforms:  # a policy sees what a person sees
+        # a policy sees what a person sees: colour, depth, points and segmentation agree
+        if self.hybrid_obs and apply_texture_transforms:
             self.hybrid.composite_sensors(self.scene, obs)
         return obs
 
-    def render(self):
-        if self.render_mode == "hybrid":
-            return self.hybrid.render(self.scene, self._hidden_objects)
-        return super().render()
+    def get_obs(self, info: dict | None = None, unflattened: bool = False):
+        obs = super().get_obs(info, unflattened)
+        if self.hybrid_obs and self.obs_mode == "pointcloud":  # splat points at their place
+            self.hybrid.place_splat_points(obs["pointcloud"], obs["sensor_param"])
+        return obs
+
+    def render_rgb_array(self, camera_name: str | None = None):
+        if self.render_hybrid:
+            return self.hybrid.render(self.scene, self._hidden_objects, camera_name)
+        return super().render_rgb_array(camera_name)
+
+    def render_simulated(self, camera_name: str | None = None):
+        """The human render cameras' plain simulator images, without the splat."""
+        return super().render_rgb_array(camera_name)
 
 
 register(ENV_ID, PickEmbodiedGenEnv, max_episode_steps=MAX_EPISODE_STEPS)

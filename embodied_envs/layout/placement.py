@@ -426,6 +426,19 @@ class _Placer:
         return self.poses
 
 
+def floor_height(layout: LayoutInfo) -> float:
+    """The floor's height: the lowest point of the objects standing ``FLOOR`` (the file's poses
+    keep it within ``REST_TOLERANCE`` of z = 0), or 0 when nothing does."""
+    objects = set(layout.object_nodes())
+    lows = [
+        float(world_vertices(node_geometry(layout, child), layout.pose(child))[:, 2].min())
+        for parent in layout.tree
+        for child, relation in layout.children(parent)
+        if relation == "FLOOR" and child in objects
+    ]
+    return min(lows, default=0.0)
+
+
 def check_file_poses(layout: LayoutInfo) -> list[str]:
     """Problems of a layout's own poses that the simulator would act out badly.
 

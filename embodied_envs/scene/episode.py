@@ -358,7 +358,7 @@ class EpisodeSampler:
         # per env: the table top (shrunk by the placement margin) and the robot
         ctx_poses = [lay.pose(ctx) for lay in layouts]
         robots = [lay.pose(lay.robot) for lay in layouts]
-        _, ctx_top, ctx_shrunk = local_top(base, ctx, limits.top_band, limits.hull_margin)
+        ctx_hull, ctx_top, ctx_shrunk = local_top(base, ctx, limits.top_band, limits.hull_margin)
         if ctx_shrunk is None:
             raise LayoutError(
                 f"{base.source or '<layout>'}: the top of {ctx!r} is smaller than twice the hull"
@@ -366,6 +366,7 @@ class EpisodeSampler:
             )
         self.top_z = t([ctx_top + p.p[2] for p in ctx_poses])
         self.table = _Region.of(self._posed(ctx_shrunk, ctx_poses), self.top_z)
+        self.top = _Region.of(self._posed(ctx_hull, ctx_poses), self.top_z)  # whole top
         self.robot_xy = t([r.p[:2] for r in robots])
         self.robot_yaw = t([r.yaw for r in robots])
         self._init_goals(base, ctx, ctx_poses, layouts)

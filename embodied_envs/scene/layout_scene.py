@@ -12,7 +12,7 @@ from mani_skill.utils.structs.pose import Pose
 
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.limits import GoalRegion, PlacementLimits
-from embodied_envs.layout.placement import derive_seed, place
+from embodied_envs.layout.placement import derive_seed, floor_height, place
 from embodied_envs.layout.schema import LayoutInfo
 from embodied_envs.scene.builder import build_asset_actor
 from embodied_envs.scene.episode import EpisodeSampler
@@ -34,6 +34,7 @@ class LayoutScene:
         target_actor: the graded object of each env merged over envs.
         robot_poses: robot base raw pose per env, ``(num_envs, 7)``.
         episodes: per-episode object starts, goals and joint noise of every env.
+        floor_z: height of the floor (``placement.floor_height`` of the lowest env).
     """
 
     env_actors: dict[str, dict[str, Actor]]
@@ -43,6 +44,7 @@ class LayoutScene:
     target_actor: Actor
     robot_poses: torch.Tensor
     episodes: EpisodeSampler
+    floor_z: float
 
     def register_state(self, env) -> None:
         """Make each dynamic node one entry of ``env``'s state dict, over all envs (its per-env
@@ -62,6 +64,13 @@ class LayoutScene:
             actor.set_pose(Pose.create(pose))
             actor.set_linear_velocity(zeros)
             actor.set_angular_velocity(zeros)
+
+    def off_table(self, points: torch.Tensor, drop: float) -> torch.Tensor:
+        """``(n,)`` bool: each env's point (``points (n, 3)``) is more than ``drop`` below its
+        table's top or outside the top's footprint (the whole top hull, seen from above)."""
+        top = self.episodes.top
+        inside = top.contains(points[:, None, :2])[:, 0]
+        return (points[:, 2] < top.z - drop) | ~inside
 
     @property
     def top_z(self) -> torch.Tensor:
@@ -136,4 +145,5 @@ def load_layout_scene(
         target_actor=target_actor,
         robot_poses=t(robot_poses),
         episodes=EpisodeSampler(layouts, limits, goal_region, objs_z_offset, device),
+        floor_z=min(floor_height(layout) for layout in layouts),
     )

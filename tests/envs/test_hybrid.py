@@ -87,7 +87,7 @@ def test_foreground_is_the_simulated_render_and_background_the_splat(env):
     fg = torch.isin(seg, torch.tensor(foreground_ids(u), dtype=seg.dtype))
     fg &= depth <= bg.surface_depth(0.5)
     assert 0.1 < fg.float().mean() < 0.9, "the view should hold both robot/table and room"
-    rgb_array = u.render_rgb_array()[0]  # the plain render of the same state
+    rgb_array = u.render_simulated()[0]  # the plain render of the same state
     assert torch.equal(rgb_array, data["rgb"][0])
     assert torch.equal(hybrid[0][fg], rgb_array[fg])
     # the background is the splat posed by the layout (rendered here by posing the splat; the
@@ -150,7 +150,7 @@ def test_hybrid_obs_is_its_own_switch(render_mode, hybrid_obs):
             assert torch.equal(rgb, raw)
         if render_mode == "hybrid":
             frame = e.render()[0]
-            assert (frame != u.render_rgb_array()[0]).any(-1).float().mean() > 0.2
+            assert (frame != u.render_simulated()[0]).any(-1).float().mean() > 0.2
     finally:
         e.close()
 
@@ -277,7 +277,9 @@ def test_compositing_is_per_env_with_its_own_ids_background_and_depth(tmp_path):
     seg[:, :, 16:] = 7
     depth_mm = torch.full((2, 24, 32, 1), 1500, dtype=torch.int16)  # 1.5 m: behind the wall
     hybrid.configure(torch.tensor([[5], [7]]), torch.zeros((2, 0), dtype=torch.long), poses)
-    out = hybrid.composite("cam", rgb, seg, depth_mm, model, intrinsic, human=False)
+    images = dict(rgb=rgb, segmentation=seg, depth=depth_mm, position=torch.zeros((2, 24, 32, 3)))
+    full = hybrid.composite("cam", images, model, intrinsic, human=False)
+    out = full["rgb"]
     cached = hybrid.cached("cam")
     wall = type(cached)(cached.model[0], cached.intrinsic[0], cached.rgb[0], cached.depth[0], None)
     assert (wall.depth < 0.5).any() and torch.isinf(cached.depth[1]).all()
@@ -290,9 +292,24 @@ def test_compositing_is_per_env_with_its_own_ids_background_and_depth(tmp_path):
     assert torch.equal(out[0][~shown0], wall.rgb[~shown0])
     # env 1: only id 7 is foreground; its (empty) background is black
     assert (out[1][~left] == 77).all() and (out[1][left] == 0).all()
+    # one mask for every texture: where the splat shows, its depth, points and id 0
+    depth0, seg0, pos0 = (full[k][0] for k in ("depth", "segmentation", "position"))
+    assert (depth0[shown0] == 1500).all() and (seg0[shown0] == 5).all()
+    wall_mm = (wall.depth * 1000).round()
+    assert torch.equal(depth0[covered][:, 0], wall_mm[covered].to(torch.int16))
+    assert (seg0[~shown0] == 0).all() and (depth0[~shown0 & ~covered] == 0).all()
+    assert torch.equal(full["splat_points"][0], covered & ~shown0)
+    # the points lie on the camera rays of their pixels at the splat's depth (OpenGL frame)
+    v, u = torch.nonzero(covered, as_tuple=True)
+    z = -pos0[v, u, 2]
+    assert torch.allclose(z, wall_mm[v, u], atol=0.5)
+    px = pos0[v, u, 0] / z * cam.fx + cam.cx
+    py = -pos0[v, u, 1] / z * cam.fy + cam.cy
+    assert torch.allclose(px, u + 0.5, atol=0.05) and torch.allclose(py, v + 0.5, atol=0.05)
+    assert (full["depth"][1] == torch.where(left[..., None], 0, 1500)).all()
     # the depth test is what hides env 0's pixels behind the wall
     hybrid.depth_test = False
-    out = hybrid.composite("cam", rgb, seg, depth_mm, model, intrinsic, human=False)
+    out = hybrid.composite("cam", images, model, intrinsic, human=False)["rgb"]
     assert (out[0][left] == 77).all()
     assert hybrid.renders == 2, "one background per env, rendered once"
 
@@ -325,3 +342,113 @@ def test_backgrounds_of_many_envs_in_batched_calls_equal_the_posed_splat(monkeyp
         assert diff.max() <= 1 and (diff > 0).float().mean() < 1e-3, k
         assert want.alpha.mean() > 0.5  # the room fills the view
     assert not torch.equal(rgb[0], rgb[1])  # each env its own view
+
+
+def base_camera_truth(u):
+    """The base camera's raw simulated textures (with position), its sensor foreground and the
+    independently rendered splat (of env 0), and the camera."""
+    sensor = u.scene.sensors["base_camera"]
+    raw = sensor.get_obs(rgb=True, depth=True, segmentation=True, position=True)
+    seg = raw["segmentation"][0, ..., 0]
+    fg = torch.isin(seg, torch.tensor(foreground_ids(u, hidden=False), dtype=seg.dtype))
+    cam = PinholeCamera.from_opengl(
+        sensor.camera.get_model_matrix()[0].numpy(),
+        sensor.camera.get_intrinsic_matrix()[0].numpy(),
+        128,
+        128,
+    )
+    layout = u.layouts[0]
+    pose = layout.pose(layout.background)
+    q = quat_multiply_xyzw(pose.q_xyzw, (0.7071, 0.0, 0.0, 0.7071))
+    splat = pose_splat(
+        read_ply(layout.gs_model_path()), torch.tensor(pose.p), torch.tensor(q[[3, 0, 1, 2]])
+    )
+    bg = render(splat, cam, backend="torch")
+    fg &= raw["depth"][0, ..., 0].float() / 1000.0 <= bg.surface_depth(0.5)
+    return raw, fg, bg, cam
+
+
+@pytest.mark.parametrize("obs_mode", ["rgbd", "rgb+depth+segmentation", "pointcloud"])
+def test_hybrid_depth_points_and_segmentation_agree_with_the_splat(obs_mode):
+    """With hybrid_obs, every texture follows one mask: the simulator's values where it shows,
+    the splat's surface (depth, points at that depth on the pixel's ray, id 0) elsewhere."""
+    e = make(obs_mode=obs_mode, hybrid_obs=True, render_mode=None, replace_objs=False)
+    try:
+        obs, _ = e.reset(seed=0)
+        u = e.unwrapped
+        raw, fg, bg, cam = base_camera_truth(u)
+        bg_depth = bg.surface_depth(0.5)
+        surface = ~fg & torch.isfinite(bg_depth)
+        assert surface.float().mean() > 0.3 and fg.float().mean() > 0.05
+        raw_seg = raw["segmentation"][0, ..., 0]
+        if obs_mode == "pointcloud":
+            pc = obs["pointcloud"]
+            xyzw = pc["xyzw"][0].reshape(128, 128, 4)
+            seg = pc["segmentation"][0].reshape(128, 128)
+            rgb = pc["rgb"][0].reshape(128, 128, 3)
+            # splat points: on the pixel's ray at the splat's depth, in the world, valid
+            v, uu = torch.nonzero(surface, as_tuple=True)
+            d = bg_depth[v, uu].double()
+            p_cam = torch.stack(
+                [(uu + 0.5 - cam.cx) / cam.fx * d, (v + 0.5 - cam.cy) / cam.fy * d, d, d * 0 + 1],
+                -1,
+            )
+            world = (p_cam @ torch.tensor(np.linalg.inv(cam.world_to_cam)).T)[:, :3]
+            assert (xyzw[surface][:, :3].double() - world).abs().max() < 3e-3
+            assert (xyzw[surface][:, 3] == 1).all() and (seg[surface] == 0).all()
+            # simulator points: ManiSkill's own conversion of the raw textures
+            pos = raw["position"][0].double() / 1000.0
+            homo = torch.cat([pos, (raw_seg != 0)[..., None].double()], -1)
+            sim = homo @ obs["sensor_param"]["base_camera"]["cam2world_gl"][0].double().T
+            assert torch.allclose(xyzw[fg].double(), sim[fg], atol=1e-5)
+            assert torch.equal(seg[fg], raw_seg[fg])
+            # no surface at all: ManiSkill's empty point (w = 0)
+            assert (xyzw[~fg & ~surface][:, 3] == 0).all()
+            assert torch.equal(rgb[surface], bg.rgb_uint8()[surface])
+            return
+        data = obs["sensor_data"]["base_camera"]
+        depth = data["depth"][0, ..., 0]
+        assert torch.equal(depth[fg], raw["depth"][0, ..., 0][fg])
+        splat_mm = (bg_depth * 1000).round()
+        assert (depth[surface].double() - splat_mm[surface].double()).abs().max() <= 2
+        assert (depth[~fg & ~surface] == 0).all()
+        assert torch.equal(data["rgb"][0][surface], bg.rgb_uint8()[surface])
+        if "segmentation" in data:
+            seg = data["segmentation"][0, ..., 0]
+            assert torch.equal(seg[fg], raw_seg[fg]) and (seg[~fg] == 0).all()
+        # the composited depth is what the depth test decided: nothing nearer than the splat
+        # surface was dropped, and no simulator pixel shows behind it
+        assert ((depth[fg].double() / 1000) <= bg_depth[fg].double() + 1e-3).all()
+    finally:
+        e.close()
+
+
+def test_maniskill_cpu_wrapper_and_record_episode_write_hybrid_videos(tmp_path):
+    """ManiSkill's own CPUGymWrapper and RecordEpisode, unchanged, on render_mode="hybrid":
+    the video's frames are the composited ones, not the plain simulator's."""
+    import imageio.v3 as iio
+    from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
+    from mani_skill.utils.wrappers.record import RecordEpisode
+
+    env = RecordEpisode(
+        CPUGymWrapper(make(obs_mode="state", replace_objs=False)),
+        output_dir=str(tmp_path),
+        save_trajectory=False,
+        max_steps_per_video=4,
+        video_fps=20,
+    )
+    try:
+        assert env.render_mode == "rgb_array" and env.unwrapped.render_hybrid
+        env.reset(seed=0)
+        hybrid = env.render()
+        plain = env.unwrapped.render_simulated()[0].numpy()
+        assert hybrid.shape == (256, 256, 3) and hybrid.dtype == np.uint8
+        for _ in range(4):
+            env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    finally:
+        env.close()
+    videos = sorted(tmp_path.glob("*.mp4"))
+    assert videos, "RecordEpisode wrote no video"
+    first = iio.imread(videos[0], index=0).astype(float)
+    assert np.abs(first - hybrid).mean() < 6, "the video shows the hybrid frames"
+    assert np.abs(first - plain).mean() > 5 * np.abs(first - hybrid).mean()

@@ -7,6 +7,8 @@ from placement_checks import check_constraints
 
 import embodied_envs  # noqa: F401
 from embodied_envs.envs.pick_embodiedgen import REST_QPOS
+from mani_skill.utils.structs.pose import Pose
+
 from embodied_envs.layout import LayoutError, LayoutPose
 
 ENV_ID = "PickEmbodiedGen-v1"
@@ -195,3 +197,58 @@ def test_bad_arguments_fail_before_simulation(tmp_path, scene_copy):
     e.reset(seed=0)
     e.close()
     assert snapshot(scene_copy) == before  # nothing written beside the input
+
+
+def test_object_knocked_off_the_table_rests_on_the_floor_and_fails(env):
+    """The ground holds what falls; ``fail`` (and ManiSkill's ``terminated``) says so, and the
+    next reset clears it."""
+    u = env.unwrapped
+    for seed in range(12):  # a fresh episode is never failed, wherever the objects start
+        env.reset(seed=seed)
+        assert not bool(u.evaluate()["fail"][0]), seed
+    ls = u.layout_scene
+    assert ls.floor_z == pytest.approx(0.0, abs=0.05)
+    top = ls.episodes.top
+    # push the target just beyond the edge of its table, on the side away from the robot
+    centre = (top.lo[0] + top.hi[0]) / 2
+    away = centre - u.agent.robot.pose.p[0, :2]
+    away = away / torch.linalg.norm(away)
+    reach = float(torch.linalg.norm(top.hi[0] - top.lo[0]))
+    p = u.obj.pose.p.clone()
+    p[0, :2] = centre + away * reach
+    u.obj.set_pose(Pose.create_from_pq(p, u.obj.pose.q))
+    zero = np.zeros(env.action_space.shape, dtype=np.float32)
+    for _ in range(80):
+        _, _, terminated, truncated, info = env.step(zero)
+    z = float(u.obj.pose.p[0, 2])
+    assert ls.floor_z - 0.01 < z < ls.floor_z + 0.15, f"the object rests on the floor, z={z}"
+    assert bool(info["fail"][0]) and bool(terminated[0]) and not bool(info["success"][0])
+    # a fall straight down beside the table: below the top by more than fail_drop
+    assert z < float(ls.top_z[0]) - u.fail_drop
+    env.reset(seed=0)
+    info = u.evaluate()
+    assert not bool(info["fail"][0])
+
+
+def test_fail_is_the_table_footprint_and_height():
+    """``off_table`` on points: inside the top and at its height is not off; below it by more
+    than the drop, or outside its footprint at any height, is."""
+    e = gym.make(ENV_ID)
+    try:
+        e.reset(seed=0)
+        ls = e.unwrapped.layout_scene
+        top = ls.episodes.top
+        centre = (top.lo[0] + top.hi[0]) / 2
+        z = float(ls.top_z[0])
+        pts = torch.tensor(
+            [
+                [*centre.tolist(), z + 0.3],  # held above the table
+                [*centre.tolist(), z - 0.04],  # sunk a little: not yet fallen
+                [*centre.tolist(), z - 0.06],  # below the drop
+                [float(top.hi[0, 0]) + 0.05, float(centre[1]), z + 0.01],  # beside the top
+            ]
+        )
+        off = [bool(ls.off_table(p[None], 0.05)[0]) for p in pts]
+        assert off == [False, False, True, True]
+    finally:
+        e.close()

@@ -11,7 +11,9 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.utils.passive_env_checker import env_render_passive_checker
 
 import embodied_envs  # noqa: F401
-from embodied_envs.envs import CPUGymWrapper, PickEmbodiedGenEnv
+from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
+
+from embodied_envs.envs import PickEmbodiedGenEnv
 
 ENV_ID = "PickEmbodiedGen-v1"
 

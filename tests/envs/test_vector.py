@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import embodied_envs  # noqa: F401
-from embodied_envs.envs import CPUGymWrapper
+from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
 
 ENV_ID = "PickEmbodiedGen-v1"
 
@@ -61,3 +61,46 @@ def test_workers_step_independently(vec):
             rng.uniform(-1, 1, vec.action_space.shape).astype(np.float32)
         )
     assert obs.shape[0] == 2 and np.isfinite(obs).all() and reward.shape == (2,)
+
+
+def test_maniskill_eval_env_recipe_runs_hybrid(tmp_path):
+    """ManiSkill's baselines' CPU evaluation envs (FrameStack, CPUGymWrapper with metrics,
+    RecordEpisode, an async forkserver vector env), unchanged, with render_mode="hybrid"."""
+    from mani_skill.utils.wrappers.frame_stack import FrameStack
+    from mani_skill.utils.wrappers.record import RecordEpisode
+
+    def thunk(seed, video_dir):
+        def make():
+            # the module-qualified id: the forkserver worker imports the plugin itself
+            env = gym.make(
+                f"embodied_envs:{ENV_ID}", obs_mode="state", render_mode="hybrid", reconfiguration_freq=1,
+                max_episode_steps=6,
+            )  # fmt: skip
+            env = FrameStack(env, num_stack=2)
+            env = CPUGymWrapper(env, ignore_terminations=True, record_metrics=True)
+            if video_dir:
+                env = RecordEpisode(env, output_dir=video_dir, save_trajectory=False,
+                                    info_on_video=True)  # fmt: skip
+            env.action_space.seed(seed)
+            return env
+
+        return make
+
+    envs = gym.vector.AsyncVectorEnv(
+        [thunk(0, str(tmp_path)), thunk(1, None)], context="forkserver"
+    )
+    try:
+        obs, _ = envs.reset(seed=[0, 1])
+        assert obs.shape[:2] == (2, 2)  # two envs, two stacked frames
+        for _ in range(6):
+            obs, rew, term, trunc, info = envs.step(envs.action_space.sample())
+        assert trunc.all() and not term.any()
+        assert info["fail"].shape == (2,) and not info["success"].any()
+    finally:
+        envs.close()
+    videos = sorted(tmp_path.glob("*.mp4"))
+    assert len(videos) == 1
+    import imageio.v3 as iio
+
+    frame = iio.imread(videos[0], index=0)
+    assert frame.shape[:2] == (256, 256) and frame.mean() > 60, "the room is in the video"
