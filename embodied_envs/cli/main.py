@@ -12,7 +12,7 @@ from embodied_envs.splat import SplatFileError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from embodied_envs.cli import collect, demo, layout_cmds, replay, splat_cmds
+    from embodied_envs.cli import collect, demo, eval_cmd, layout_cmds, replay, splat_cmds
 
     parser = argparse.ArgumentParser(
         prog="embodied-envs", description="Layout-driven ManiSkill pick environments."
@@ -21,6 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     layout_cmds.add_parser(sub)
     demo.add_parser(sub)
     collect.add_parser(sub)
+    eval_cmd.add_parser(sub)
     replay.add_parser(sub)
     splat_cmds.add_parser(sub)
     return parser

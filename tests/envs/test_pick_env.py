@@ -3,12 +3,11 @@ import numpy as np
 import pytest
 import torch
 from conftest import LAYOUTS, ROOT, snapshot
+from mani_skill.utils.structs.pose import Pose
 from placement_checks import check_constraints
 
 import embodied_envs  # noqa: F401
 from embodied_envs.envs.pick_embodiedgen import REST_QPOS
-from mani_skill.utils.structs.pose import Pose
-
 from embodied_envs.layout import LayoutError, LayoutPose
 
 ENV_ID = "PickEmbodiedGen-v1"

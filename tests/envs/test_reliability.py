@@ -9,10 +9,9 @@ import torch
 from conftest import LAYOUTS, per_layout_env
 from gymnasium.utils.env_checker import check_env
 from gymnasium.utils.passive_env_checker import env_render_passive_checker
-
-import embodied_envs  # noqa: F401
 from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
 
+import embodied_envs  # noqa: F401
 from embodied_envs.envs import PickEmbodiedGenEnv
 
 ENV_ID = "PickEmbodiedGen-v1"

@@ -3,9 +3,9 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
 
 import embodied_envs  # noqa: F401
-from mani_skill.utils.wrappers.gymnasium import CPUGymWrapper
 
 ENV_ID = "PickEmbodiedGen-v1"
 
@@ -73,8 +73,8 @@ def test_maniskill_eval_env_recipe_runs_hybrid(tmp_path):
         def make():
             # the module-qualified id: the forkserver worker imports the plugin itself
             env = gym.make(
-                f"embodied_envs:{ENV_ID}", obs_mode="state", render_mode="hybrid", reconfiguration_freq=1,
-                max_episode_steps=6,
+                f"embodied_envs:{ENV_ID}", obs_mode="state", render_mode="hybrid",
+                reconfiguration_freq=1, max_episode_steps=6,
             )  # fmt: skip
             env = FrameStack(env, num_stack=2)
             env = CPUGymWrapper(env, ignore_terminations=True, record_metrics=True)

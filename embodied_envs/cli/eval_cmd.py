@@ -1,0 +1,111 @@
+"""``embodied-envs eval``: a policy on seeded episodes per layout, with a summary."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from embodied_envs.cli.args import (
+    add_config_argument,
+    env_config,
+    positive_int,
+    seed_int,
+    writable_dir,
+)
+
+# env keywords eval sets itself: a --config file may not set them
+OWNED_KEYS = {
+    "layout_file": "--layout",
+    "obs_mode": "--obs-mode",
+    "control_mode": "--control-mode",
+    "render_mode": "--video",
+    "num_envs": "--workers: one env per process",
+    "sim_backend": "one CPU env per process",
+    "max_episode_steps": "--max-episode-steps",
+}
+OBS_MODES = (
+    "state", "state_dict", "rgb", "depth", "rgbd", "pointcloud", "rgb+depth+segmentation",
+    "sensor_data", "none",
+)  # fmt: skip
+
+
+def add_parser(sub) -> None:
+    from embodied_envs.pipelines.evaluate import BUILTIN_POLICIES, VIDEO_CHOICES
+
+    p = sub.add_parser(
+        "eval",
+        help="evaluate a policy on seeded episodes: success rate with its interval, videos",
+        description=(
+            "Runs a policy on N seeded episodes per layout (seeds S .. S+N-1) and writes "
+            "OUT/episodes.json, OUT/summary.json (success rate and its 95%% Wilson interval, "
+            "overall and per layout), OUT/summary.png and videos. POLICY: "
+            f"{', '.join(BUILTIN_POLICIES)}, or module:factory / file.py:factory, where "
+            "factory(env) returns a callable obs -> action or a torch.nn.Module."
+        ),
+    )
+    p.add_argument("--policy", required=True, help="expert | random | zero | module:factory")
+    p.add_argument("--layout", type=Path, nargs="+", default=None, help="layout file(s)")
+    p.add_argument("--episodes", type=positive_int, default=10, help="episodes per layout")
+    p.add_argument("--seed", type=seed_int, default=0, help="first episode seed")
+    p.add_argument("--out", type=Path, default=Path("outputs/eval"))
+    p.add_argument("--obs-mode", choices=OBS_MODES, default="state")
+    p.add_argument("--control-mode", default=None, help="default: the env's (expert: pd_joint_pos)")
+    p.add_argument(
+        "--max-episode-steps",
+        type=positive_int,
+        default=None,
+        help="episode limit (default: the registered 300 control steps)",
+    )
+    p.add_argument("--video", choices=VIDEO_CHOICES, default="fail", help="which episodes to film")
+    p.add_argument("--workers", type=positive_int, default=1, help="processes")
+    add_config_argument(p)
+    p.set_defaults(func=cmd_eval)
+
+
+def cmd_eval(args) -> int:
+    from tqdm import tqdm
+
+    from embodied_envs.layout import load_layout
+    from embodied_envs.paths import default_layout
+    from embodied_envs.pipelines.evaluate import EvalError, EvalPlan, evaluate
+
+    config = env_config(args.config, OWNED_KEYS)
+    layouts = [p.resolve() for p in (args.layout or [default_layout()])]
+    for path in layouts:
+        load_layout(path)  # bad input fails here, before any simulation
+    if args.policy == "expert" and args.control_mode not in (None, "pd_joint_pos"):
+        raise SystemExit(
+            f"error: --policy expert drives pd_joint_pos, not --control-mode {args.control_mode}"
+        )
+    writable_dir(args.out)
+    if args.workers > (os.cpu_count() or 1):
+        print(f"note: --workers {args.workers} is more than this machine's {os.cpu_count()} cores")
+    plan = EvalPlan(
+        policy=args.policy,
+        layouts=tuple(str(p) for p in layouts),
+        episodes=args.episodes,
+        seed=args.seed,
+        obs_mode=args.obs_mode,
+        control_mode=args.control_mode,
+        video=args.video,
+        workers=args.workers,
+        env_kwargs=config
+        if args.max_episode_steps is None
+        else dict(config, max_episode_steps=args.max_episode_steps),
+    )
+    with tqdm(total=len(plan.tasks()), desc=f"eval {args.policy}", unit="episode") as bar:
+        try:
+            s = evaluate(plan, args.out, progress=lambda r: bar.update(1))
+        except EvalError as e:
+            bar.close()
+            print(f"error: {e}")
+            return 1
+    lo, hi = s["success_ci95"]
+    print(
+        f"{args.policy}: {s['successes']}/{s['episodes']} successful ({s['success_rate']:.0%}, "
+        f"95% interval {lo:.0%}-{hi:.0%}), fail {s['fail_rate']:.0%}, median "
+        f"{s['steps_median']:.0f} steps -> {args.out}"
+    )
+    for layout, b in s["per_layout"].items():
+        print(f"  {Path(layout).name}: {b['successes']}/{b['episodes']} ({b['success_rate']:.0%})")
+    return 0

@@ -1,0 +1,1 @@
+"""Data pipelines over the env: evaluation of policies."""

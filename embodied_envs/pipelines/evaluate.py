@@ -1,0 +1,477 @@
+"""Policy evaluation: seeded episodes per layout, success with its interval, videos, a plot.
+
+:func:`evaluate` runs a policy on ``episodes`` seeded episodes of every layout (seeds
+``seed .. seed + episodes - 1``, the same for each layout), in this process or in worker
+processes (one env per layout per worker, reused across its episodes), and writes under ``out``:
+
+- ``episodes.json``: per episode its layout, seed, success, fail, steps, return and video;
+- ``summary.json``: the success rate with its 95% Wilson interval overall and per layout, the
+  fail rate, mean and median episode length and return;
+- ``summary.png``: success per layout with its interval, and a histogram of episode lengths;
+- ``videos/<layout>_seed<seed>.mp4`` (``video="all"`` or ``"fail"``: unsuccessful episodes),
+  hybrid frames when the layout has a splat, the simulator's otherwise.
+
+Each file is written under a temporary name and renamed when complete. An episode ends on
+ManiSkill's ``terminated`` (``success`` or ``fail``) or at the env's episode limit; its
+success is ``evaluate()["success"]`` at its end, as ``collect`` grades demonstrations.
+
+Policies (:func:`load_policy`): ``expert`` (the scripted motion-planned solver, on
+``pd_joint_pos``), ``random`` (uniform over the action space, seeded by the episode), ``zero``,
+or ``module:factory`` / ``path/to/file.py:factory``: ``factory(env)`` (or ``factory()``)
+returns a callable from observations to actions or a ``torch.nn.Module`` (its ``reset(seed)``,
+if any, is called at each episode start). A policy receives
+the env's observation as ManiSkill returns it (torch tensors with a leading batch of 1, as from
+``ManiSkillVectorEnv``) and returns an action of shape ``(A,)`` or ``(1, A)``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import inspect
+import json
+import math
+import os
+import statistics
+import sys
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from embodied_envs.paths import atomic_output
+from embodied_envs.registration import CONTROL_FREQ, ENV_ID
+
+BUILTIN_POLICIES = ("expert", "random", "zero")
+VIDEO_CHOICES = ("all", "fail", "none")
+WILSON_Z = 1.959963984540054  # two-sided 95% normal quantile
+
+
+class EvalError(RuntimeError):
+    """An evaluation that cannot run (names the policy, the episode and the fix)."""
+
+
+@dataclass(frozen=True)
+class EvalPlan:
+    """What to evaluate.
+
+    Attributes:
+        policy: ``expert``, ``random``, ``zero`` or ``module:factory``.
+        layouts: layout files (absolute).
+        episodes: seeded episodes per layout.
+        seed: the first episode seed.
+        obs_mode: the env's observation mode (what the policy sees).
+        control_mode: the env's control mode (None: the env's default; ``expert``:
+            ``pd_joint_pos``).
+        video: ``all``, ``fail`` (unsuccessful episodes only) or ``none``.
+        workers: processes (1: in this process).
+        env_kwargs: further ``gym.make`` keywords (``--config`` files).
+    """
+
+    policy: str
+    layouts: tuple[str, ...]
+    episodes: int
+    seed: int = 0
+    obs_mode: str = "state"
+    control_mode: str | None = None
+    video: str = "fail"
+    workers: int = 1
+    env_kwargs: dict = field(default_factory=dict)
+
+    def env_make_kwargs(self, layout: str, render: bool) -> dict:
+        control = "pd_joint_pos" if self.policy == "expert" else self.control_mode
+        kwargs = dict(self.env_kwargs, layout_file=layout, obs_mode=self.obs_mode)
+        if control is not None:
+            kwargs["control_mode"] = control
+        if render:
+            kwargs["render_mode"] = "hybrid" if _has_splat(layout) else "rgb_array"
+        return kwargs | dict(sim_backend="physx_cpu")
+
+    def tasks(self) -> list[tuple[str, int]]:
+        return [(lay, self.seed + k) for lay in self.layouts for k in range(self.episodes)]
+
+
+@dataclass
+class EpisodeResult:
+    layout: str
+    seed: int
+    success: bool
+    fail: bool  # the target fell off the table at some step
+    steps: int
+    episode_return: float
+    video: str | None = None
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["return"] = d.pop("episode_return")
+        return d
+
+
+def wilson_interval(successes: int, n: int, z: float = WILSON_Z) -> tuple[float, float]:
+    """The Wilson score interval of a binomial proportion (95% by default); (0, 1) for n = 0."""
+    if n == 0:
+        return (0.0, 1.0)
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def _has_splat(layout: str) -> bool:
+    from embodied_envs.layout import load_layout
+
+    return load_layout(layout, check_poses=False).gs_model_path().is_file()
+
+
+# --- policies ------------------------------------------------------------------------------
+def _import_target(spec: str):
+    """The object named by ``module:attr`` or ``path/to/file.py:attr``."""
+    module_name, sep, attr = spec.rpartition(":")
+    if not sep or not module_name or not attr:
+        raise EvalError(
+            f"--policy {spec!r} is neither a built-in ({', '.join(BUILTIN_POLICIES)}) nor "
+            "module:factory. Fix: name a factory, e.g. --policy my_policy:make_policy"
+        )
+    try:
+        if module_name.endswith(".py"):
+            path = Path(module_name).resolve()
+            if not path.is_file():
+                raise FileNotFoundError(f"no such file {path}")
+            loaded = importlib.util.spec_from_file_location(path.stem, path)
+            module = importlib.util.module_from_spec(loaded)
+            loaded.loader.exec_module(module)
+        else:
+            if os.getcwd() not in sys.path:  # as `python -m` would: the user's own modules
+                sys.path.insert(0, os.getcwd())
+            module = importlib.import_module(module_name)
+    except Exception as e:  # whatever the user's module raises on import
+        raise EvalError(
+            f"--policy {spec}: cannot import {module_name!r} ({type(e).__name__}: {e}). Fix: "
+            "run from the folder that holds it, or give the file's path (file.py:factory)"
+        ) from None
+    if not hasattr(module, attr):
+        raise EvalError(f"--policy {spec}: {module_name!r} has no attribute {attr!r}")
+    return getattr(module, attr)
+
+
+class Policy:
+    """A policy for :class:`EpisodeRunner`: ``reset(seed)`` at each episode start, then
+    ``act(obs)`` each step."""
+
+    def __init__(self, act: Callable, reset: Callable[[int], None] | None = None):
+        self.act, self._reset = act, reset
+
+    def reset(self, seed: int) -> None:
+        if self._reset is not None:
+            self._reset(seed)
+
+
+def load_policy(spec: str, env) -> Policy | None:
+    """The :class:`Policy` named by ``spec``; ``None`` for ``expert`` (it drives the env
+    itself). A user policy with a ``reset(seed)`` method has it called at each episode start.
+
+    Raises:
+        EvalError: the policy cannot be imported or made.
+    """
+    if spec == "expert":
+        return None
+    space = env.action_space
+    shape = tuple(space.shape)
+    if spec == "zero":
+        return Policy(lambda obs: np.zeros(shape, np.float32))
+    if spec == "random":  # uniform over the action space, drawn from the episode's seed
+        low, high = np.asarray(space.low), np.asarray(space.high)
+        state = {"rng": np.random.default_rng(0)}
+
+        def reseed(seed: int) -> None:
+            state["rng"] = np.random.default_rng(seed)
+
+        return Policy(lambda obs: state["rng"].uniform(low, high).astype(np.float32), reseed)
+    factory = _import_target(spec)
+    if not callable(factory):
+        raise EvalError(f"--policy {spec}: {type(factory).__name__} is not callable")
+    try:
+        takes_env = bool(inspect.signature(factory).parameters)
+    except (TypeError, ValueError):
+        takes_env = False
+    try:
+        made = factory(env) if takes_env else factory()
+    except Exception as e:
+        raise EvalError(f"--policy {spec}: the factory raised {type(e).__name__}: {e}") from None
+    import torch
+
+    reset = getattr(made, "reset", None)
+    reset = reset if callable(reset) else None
+    if isinstance(made, torch.nn.Module):
+        module = made.eval()
+
+        def run_module(obs):
+            with torch.no_grad():
+                return module(obs)
+
+        return Policy(run_module, reset)
+    if not callable(made):
+        raise EvalError(
+            f"--policy {spec}: the factory returned a {type(made).__name__}, not a callable "
+            "from observations to actions or a torch.nn.Module"
+        )
+    return Policy(made, reset)
+
+
+def checked_action(action, shape: tuple[int, ...], spec: str, step: int, seed: int, layout: str):
+    """The policy's action as a float32 array of ``shape``, or a one-line EvalError."""
+    where = f"at step {step} of episode seed {seed} ({Path(layout).name})"
+    try:
+        if hasattr(action, "detach"):
+            action = action.detach().cpu().numpy()
+        arr = np.asarray(action, dtype=np.float32)
+    except (TypeError, ValueError) as e:
+        raise EvalError(f"--policy {spec} returned {type(action).__name__} {where}: {e}") from None
+    if arr.shape != shape and arr.shape != (1, *shape):
+        raise EvalError(
+            f"--policy {spec} returned an action of shape {arr.shape} {where}; the env's action "
+            f"space is {shape}. Fix: return (A,) or (1, A), or pass the --control-mode it was "
+            "trained with"
+        )
+    if not np.isfinite(arr).all():
+        raise EvalError(f"--policy {spec} returned a non-finite action (NaN or inf) {where}")
+    return arr.reshape(shape)
+
+
+# --- episodes -----------------------------------------------------------------------------
+class EpisodeRunner:
+    """One process's envs (one per layout, made on first use) and the policy."""
+
+    def __init__(self, plan: EvalPlan):
+        self.plan = plan
+        self.envs: dict[str, object] = {}
+        self.policies: dict[str, Policy | None] = {}
+
+    def env(self, layout: str):
+        if layout not in self.envs:
+            import gymnasium as gym
+
+            import embodied_envs  # noqa: F401  (registers the env id)
+
+            render = self.plan.video != "none"
+            env = gym.make(ENV_ID, **self.plan.env_make_kwargs(layout, render))
+            self.envs[layout] = env
+            self.policies[layout] = load_policy(self.plan.policy, env)
+        return self.envs[layout]
+
+    def run(self, layout: str, seed: int, video_dir: Path | None) -> EpisodeResult:
+        import torch
+
+        env = self.env(layout)
+        policy = self.policies[layout]
+        u = env.unwrapped
+        record = self.plan.video != "none"
+        frames: list[np.ndarray] = []
+
+        def frame():
+            if record:
+                frames.append(torch.as_tensor(env.render())[0].cpu().numpy())
+
+        obs, _ = env.reset(seed=seed)
+        frame()
+        steps, ret, fail = 0, 0.0, False
+        if policy is None:  # the expert: the scripted solver steps the env itself
+            from embodied_envs.solvers.pick_place import PickPlaceSolver
+
+            tally = _Tally(env, frame)
+            PickPlaceSolver(tally, seed=seed).solve()
+            steps, ret, fail = tally.steps, tally.ret, tally.fail
+        else:
+            shape = tuple(env.action_space.shape)
+            policy.reset(seed)
+            limit = env.spec.max_episode_steps if env.spec is not None else None
+            while limit is None or steps < limit:
+                action = checked_action(
+                    policy.act(obs), shape, self.plan.policy, steps, seed, layout
+                )
+                obs, reward, terminated, truncated, info = env.step(action)
+                steps += 1
+                ret += float(torch.as_tensor(reward).reshape(-1)[0])
+                fail |= bool(torch.as_tensor(info["fail"]).reshape(-1)[0])
+                frame()
+                if bool(torch.as_tensor(terminated | truncated).reshape(-1)[0]):
+                    break
+        success = bool(u.evaluate()["success"][0])
+        result = EpisodeResult(layout, seed, success, fail, steps, round(ret, 6))
+        keep = self.plan.video == "all" or (self.plan.video == "fail" and not success)
+        if record and keep and video_dir is not None:
+            result.video = write_video(frames, video_dir / f"{Path(layout).stem}_seed{seed}.mp4")
+        return result
+
+    def close(self) -> None:
+        for env in self.envs.values():
+            env.close()
+        self.envs.clear()
+
+
+class _Tally:
+    """Counts what the expert's steps earn (a pass-through of ``env``'s interface)."""
+
+    def __init__(self, env, on_step: Callable[[], None]):
+        self.env, self.on_step = env, on_step
+        self.steps, self.ret, self.fail = 0, 0.0, False
+
+    def __getattr__(self, name):
+        return getattr(self.env, name)
+
+    def step(self, action):
+        import torch
+
+        out = self.env.step(action)
+        self.steps += 1
+        self.ret += float(torch.as_tensor(out[1]).reshape(-1)[0])
+        self.fail |= bool(torch.as_tensor(out[4]["fail"]).reshape(-1)[0])
+        self.on_step()
+        return out
+
+
+def write_video(frames: list[np.ndarray], path: Path) -> str:
+    import imageio.v2 as imageio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_output(path) as tmp:
+        imageio.mimwrite(tmp, frames, fps=CONTROL_FREQ, macro_block_size=1)
+    return str(path.name)
+
+
+# --- worker processes ----------------------------------------------------------------------
+_RUNNER: EpisodeRunner | None = None
+
+
+def _init_worker(plan: EvalPlan) -> None:
+    global _RUNNER
+    os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+    from embodied_envs.workers import exit_with_parent
+
+    # the forkserver, which ends with the command: a killed eval leaves no worker running on
+    exit_with_parent(os.getppid())
+    _RUNNER = EpisodeRunner(plan)
+
+
+def _run_in_worker(layout: str, seed: int, video_dir: str | None) -> EpisodeResult:
+    return _RUNNER.run(layout, seed, Path(video_dir) if video_dir else None)
+
+
+# --- the whole evaluation ------------------------------------------------------------------
+def summarize(plan: EvalPlan, results: list[EpisodeResult]) -> dict:
+    """Success rate with its 95% Wilson interval, overall and per layout, and lengths."""
+
+    def block(rs: list[EpisodeResult]) -> dict:
+        n, k = len(rs), sum(r.success for r in rs)
+        steps = [r.steps for r in rs] or [0]
+        return {
+            "episodes": n,
+            "successes": k,
+            "success_rate": k / n if n else 0.0,
+            "success_ci95": list(wilson_interval(k, n)),
+            "fail_rate": sum(r.fail for r in rs) / n if n else 0.0,
+            "steps_mean": statistics.fmean(steps),
+            "steps_median": statistics.median(steps),
+            "return_mean": statistics.fmean([r.episode_return for r in rs] or [0.0]),
+        }
+
+    return {
+        "env_id": ENV_ID,
+        "policy": plan.policy,
+        "obs_mode": plan.obs_mode,
+        "control_mode": "pd_joint_pos" if plan.policy == "expert" else plan.control_mode,
+        "seeds": [plan.seed, plan.seed + plan.episodes - 1],
+        **block(results),
+        "per_layout": {lay: block([r for r in results if r.layout == lay]) for lay in plan.layouts},
+    }
+
+
+def plot_summary(summary: dict, results: list[EpisodeResult], path: Path) -> None:
+    """Success per layout with its interval, and the histogram of episode lengths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    per = summary["per_layout"]
+    names = [Path(lay).stem for lay in per]
+    rates = [b["success_rate"] for b in per.values()]
+    lo = [b["success_rate"] - b["success_ci95"][0] for b in per.values()]
+    hi = [b["success_ci95"][1] - b["success_rate"] for b in per.values()]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    left.bar(names, rates, yerr=[lo, hi], capsize=6, color="tab:blue")
+    left.set_ylim(0, 1.05)
+    left.set_ylabel("success rate (95% Wilson interval)")
+    left.set_title(f"{summary['policy']}: {summary['success_rate']:.0%} overall")
+    left.tick_params(axis="x", labelrotation=30)
+    right.hist([r.steps for r in results], bins=20, color="tab:gray")
+    right.set_xlabel("episode length (control steps)")
+    right.set_ylabel("episodes")
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+
+
+def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dict:
+    """Run the evaluation and write its files under ``out`` (see the module docstring).
+
+    Returns:
+        The summary (also ``out/summary.json``).
+
+    Raises:
+        EvalError: the policy cannot be used, a worker died, or ``out`` holds an earlier
+            evaluation.
+    """
+    out = Path(out)
+    if (out / "summary.json").exists():
+        raise EvalError(
+            f"{out} holds an earlier evaluation (summary.json). Fix: choose another --out, or "
+            "remove that folder"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+    video_dir = out / "videos"
+    tasks = plan.tasks()
+    results: list[EpisodeResult] = []
+    if plan.workers <= 1:
+        runner = EpisodeRunner(plan)
+        try:
+            for layout, seed in tasks:
+                results.append(runner.run(layout, seed, video_dir))
+                if progress is not None:
+                    progress(results[-1])
+        finally:
+            runner.close()
+    else:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("forkserver")
+        with ProcessPoolExecutor(
+            plan.workers, mp_context=ctx, initializer=_init_worker, initargs=(plan,)
+        ) as pool:
+            futures = [pool.submit(_run_in_worker, lay, s, str(video_dir)) for lay, s in tasks]
+            try:
+                for fut in as_completed(futures):
+                    results.append(fut.result())
+                    if progress is not None:
+                        progress(results[-1])
+            except BrokenProcessPool:
+                raise EvalError(
+                    "an evaluation worker died (killed, or out of memory). Fix: fewer --workers"
+                ) from None
+            finally:
+                for fut in futures:
+                    fut.cancel()
+    order = {lay: i for i, lay in enumerate(plan.layouts)}
+    results.sort(key=lambda r: (order[r.layout], r.seed))
+    summary = summarize(plan, results)
+    with atomic_output(out / "episodes.json") as tmp:
+        tmp.write_text(json.dumps([r.to_json() for r in results], indent=2))
+    plot_summary(summary, results, out / "summary.png")
+    with atomic_output(out / "summary.json") as tmp:  # last: its presence marks a complete run
+        tmp.write_text(json.dumps(summary, indent=2))
+    return summary

@@ -1,0 +1,147 @@
+"""`embodied-envs eval`: policies on seeded episodes, summaries with intervals, clear errors."""
+
+import json
+
+import pytest
+from conftest import DEFAULT_LAYOUT
+
+from embodied_envs.cli.main import main
+from embodied_envs.pipelines.evaluate import EvalError, EvalPlan, evaluate, wilson_interval
+
+POLICIES = '''
+import numpy as np
+import torch
+
+
+class Still(torch.nn.Module):
+    """A torch module: the zero action of the right shape, batched."""
+
+    def __init__(self, dim):
+        super().__init__()
+        self.dim = dim
+
+    def forward(self, obs):
+        return torch.zeros((obs.shape[0], self.dim))
+
+
+def module_policy(env):
+    return Still(env.action_space.shape[0])
+
+
+def wrong_shape():
+    return lambda obs: np.zeros(3, np.float32)
+
+
+def nan_after_two(env):
+    steps = []
+
+    def act(obs):
+        steps.append(1)
+        a = np.zeros(env.action_space.shape, np.float32)
+        return a if len(steps) <= 2 else a * np.nan
+
+    return act
+'''
+
+
+@pytest.fixture(scope="module")
+def policies(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("policies")
+    (folder / "user_policies.py").write_text(POLICIES)
+    return folder / "user_policies.py"
+
+
+def plan(policy, **kw):
+    kw.setdefault("layouts", (str(DEFAULT_LAYOUT),))
+    kw.setdefault("episodes", 2)
+    kw.setdefault("video", "none")
+    kw.setdefault("env_kwargs", dict(max_episode_steps=15))
+    return EvalPlan(policy=policy, **kw)
+
+
+@pytest.mark.parametrize(
+    "k, n, lo, hi",
+    [(0, 10, 0.0, 0.2775), (5, 10, 0.2366, 0.7634), (10, 10, 0.7225, 1.0), (1, 1, 0.2065, 1.0)],
+)
+def test_wilson_interval_of_known_counts(k, n, lo, hi):
+    got = wilson_interval(k, n)
+    assert got == pytest.approx((lo, hi), abs=1e-4)
+
+
+def test_zero_and_random_finish_without_success_and_random_is_seeded(tmp_path):
+    zero = evaluate(plan("zero"), tmp_path / "zero")
+    assert zero["successes"] == 0 and zero["episodes"] == 2
+    assert zero["success_ci95"] == pytest.approx(list(wilson_interval(0, 2)))
+    assert zero["steps_median"] == 15
+    episodes = json.loads((tmp_path / "zero" / "episodes.json").read_text())
+    assert [(e["seed"], e["success"], e["steps"]) for e in episodes] == [
+        (0, False, 15),
+        (1, False, 15),
+    ]
+    assert (tmp_path / "zero" / "summary.png").stat().st_size > 1000
+    a = evaluate(plan("random", seed=7), tmp_path / "a")
+    evaluate(plan("random", seed=7), tmp_path / "b")
+    ra = json.loads((tmp_path / "a" / "episodes.json").read_text())
+    rb = json.loads((tmp_path / "b" / "episodes.json").read_text())
+    assert a["successes"] == 0 and [e["seed"] for e in ra] == [7, 8]
+    assert [e["return"] for e in ra] == [e["return"] for e in rb], "the same seeds, the same run"
+    assert ra[0]["return"] != ra[1]["return"]
+    with pytest.raises(EvalError, match="holds an earlier evaluation"):
+        evaluate(plan("zero"), tmp_path / "zero")
+
+
+def test_expert_gives_the_successes_collect_gives_on_the_same_seeds(tmp_path):
+    from embodied_envs.solvers.collect import CollectPlan, collect
+
+    seeds = (5, 2)
+    collected = collect(CollectPlan(layout=str(DEFAULT_LAYOUT), num=2, seed=seeds[0]), tmp_path)
+    meta = json.loads((tmp_path / "default" / "trajectory.json").read_text())
+    s = evaluate(plan("expert", seed=seeds[0], env_kwargs={}), tmp_path / "eval")
+    episodes = json.loads((tmp_path / "eval" / "episodes.json").read_text())
+    assert [e["success"] for e in episodes] == [e["success"] for e in meta["episodes"]]
+    assert [e["steps"] for e in episodes] == [e["elapsed_steps"] for e in meta["episodes"]]
+    assert s["successes"] == collected.successes == 2, "the expert solves these seeds"
+    assert s["per_layout"][str(DEFAULT_LAYOUT)]["success_rate"] == 1.0
+
+
+def test_a_torch_module_policy_runs_and_is_graded(tmp_path, policies):
+    s = evaluate(plan(f"{policies}:module_policy", episodes=1), tmp_path)
+    assert s["episodes"] == 1 and s["successes"] == 0 and s["steps_mean"] == 15
+
+
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("{file}:wrong_shape", "returned an action of shape (3,) at step 0 of episode seed 0"),
+        ("{file}:nan_after_two", "non-finite action (NaN or inf) at step 2 of episode seed 0"),
+        ("no_such_module_here:make", "cannot import 'no_such_module_here'"),
+        ("{file}:missing", "has no attribute 'missing'"),
+        ("noplace", "neither a built-in"),
+    ],
+)
+def test_broken_policies_give_one_clear_line(tmp_path, policies, capsys, spec, message):
+    spec = spec.format(file=policies)
+    code = main(["eval", "--policy", spec, "--episodes", "1", "--max-episode-steps", "5",
+                 "--video", "none", "--out", str(tmp_path / "out")])  # fmt: skip
+    out = capsys.readouterr().out
+    assert code == 1
+    line = [x for x in out.splitlines() if x.startswith("error:")]
+    assert len(line) == 1 and message in line[0], out
+    assert not (tmp_path / "out" / "summary.json").exists()
+
+
+def test_cli_workers_videos_and_the_error_from_a_worker(tmp_path, policies, capsys):
+    args = ["eval", "--episodes", "2", "--max-episode-steps", "4", "--workers", "2"]
+    code = main([*args, "--policy", "zero", "--video", "all", "--out", str(tmp_path / "ok")])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "zero: 0/2 successful" in out
+    videos = sorted(p.name for p in (tmp_path / "ok" / "videos").iterdir())
+    assert videos == ["default_seed0.mp4", "default_seed1.mp4"]
+    import imageio.v3 as iio
+
+    frames = iio.imread(tmp_path / "ok" / "videos" / videos[0])
+    assert len(frames) == 5 and frames.shape[1:] == (256, 256, 3)  # reset + 4 steps
+    assert frames[0].mean() > 60, "hybrid frames: the room, not the simulator's black"
+    code = main([*args, "--policy", f"{policies}:wrong_shape", "--out", str(tmp_path / "bad")])
+    assert code == 1 and "returned an action of shape (3,)" in capsys.readouterr().out
