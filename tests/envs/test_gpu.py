@@ -131,3 +131,30 @@ def test_cuda_backends_match_the_cpu_rasterizer():
         for k in range(2):
             diff = (both.rgb[k].cpu() - cpu[k].rgb).abs()
             assert (diff > 2 / 255).float().mean() <= 0.01, (backend, k)
+
+
+@pytest.mark.parametrize("obs_mode", ["rgbd", "pointcloud"])
+def test_hybrid_depth_and_points_batched_on_cuda(obs_mode):
+    """hybrid_obs on the GPU sim: every env's splat pixels carry segmentation 0 and a depth
+    (rgbd) or a valid world point (pointcloud); the simulator's pixels keep theirs."""
+    e = gym.make(ENV_ID, num_envs=N, sim_backend="physx_cuda", obs_mode=obs_mode, hybrid_obs=True)
+    try:
+        obs, _ = e.reset(seed=0)
+        u = e.unwrapped
+        splat = u.hybrid.splat_points["base_camera"]
+        assert splat.shape == (N, 128, 128) and splat.device.type == "cuda"
+        assert (splat.float().mean((1, 2)) > 0.2).all(), "every env sees its room"
+        if obs_mode == "rgbd":
+            depth = obs["sensor_data"]["base_camera"]["depth"][..., 0]
+            assert (depth[splat] > 0).all()
+            return
+        pc = obs["pointcloud"]
+        xyzw = pc["xyzw"].reshape(N, 128, 128, 4)
+        seg = pc["segmentation"].reshape(N, 128, 128)
+        assert (xyzw[splat][:, 3] == 1).all() and (seg[splat] == 0).all()
+        # splat points are in the room, not at the camera or the origin
+        eye = obs["sensor_param"]["base_camera"]["cam2world_gl"][:, :3, 3]
+        dist = torch.linalg.norm(xyzw[..., :3] - eye[:, None, None], dim=-1)
+        assert (dist[splat] > 0.05).all()
+    finally:
+        e.close()
