@@ -7,12 +7,14 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+# the shipped layouts, assets and splat are package data: found the same way in a source
+# checkout (where ./layouts and ./assets link here) and in an installed wheel
+PACKAGE_DATA = Path(__file__).resolve().parent / "data"
 
 
 def data_root() -> Path:
     """Folder holding ``layouts/`` and ``assets/`` (override with ``EMBODIED_ENVS_DATA``)."""
-    return Path(os.environ.get("EMBODIED_ENVS_DATA", REPO_ROOT))
+    return Path(os.environ.get("EMBODIED_ENVS_DATA", PACKAGE_DATA))
 
 
 def default_layout() -> Path:

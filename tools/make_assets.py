@@ -305,7 +305,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent.parent / "assets")
+    data = Path(__file__).resolve().parent.parent / "embodied_envs" / "data"  # package data
+    ap.add_argument("--out", type=Path, default=data / "assets")
     args = ap.parse_args()
     for make in ASSETS:
         asset = make()

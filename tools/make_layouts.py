@@ -18,6 +18,7 @@ from embodied_envs.layout import LayoutInfo
 from embodied_envs.layout.placement import place
 
 ROOT = Path(__file__).resolve().parent.parent
+DATA = ROOT / "embodied_envs" / "data"  # package data; ./layouts and ./assets link here
 
 SCENES = {
     "default": dict(
@@ -52,7 +53,7 @@ def base_layout(name: str, spec: dict, out_dir: Path) -> LayoutInfo:
     mapping = {"background": "background", spec["context"]: "context"}
     mapping.update({o: "manipulated_objs" for o in spec["manipulated"]})
     mapping.update({o: "distractor_objs" for o in spec["distractors"]})
-    rel = Path("..") / ROOT.joinpath("assets").relative_to(out_dir.parent)
+    rel = Path("..") / DATA.joinpath("assets").relative_to(out_dir.parent)
     data = {
         "tree": {
             "background": [[spec["context"], "FLOOR"], ["franka", "IN"]],
@@ -78,7 +79,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--out", type=Path, default=ROOT / "layouts")
+    ap.add_argument("--out", type=Path, default=DATA / "layouts")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     for name, spec in SCENES.items():

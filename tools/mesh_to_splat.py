@@ -20,7 +20,8 @@ import trimesh
 from embodied_envs.splat import mesh_to_splat, write_ply
 
 ROOT = Path(__file__).resolve().parent.parent
-BACKGROUND = ROOT / "assets" / "background"
+DATA = ROOT / "embodied_envs" / "data"  # package data; ./layouts and ./assets link here
+BACKGROUND = DATA / "assets" / "background"
 
 
 def main() -> None:

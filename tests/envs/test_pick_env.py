@@ -1,14 +1,17 @@
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import LAYOUTS, ROOT, snapshot
+from conftest import LAYOUTS, snapshot
 from mani_skill.utils.structs.pose import Pose
 from placement_checks import check_constraints
 
 import embodied_envs  # noqa: F401
 from embodied_envs.envs.pick_embodiedgen import REST_QPOS
 from embodied_envs.layout import LayoutError, LayoutPose
+from embodied_envs.paths import default_layout
 
 ENV_ID = "PickEmbodiedGen-v1"
 
@@ -23,7 +26,8 @@ def env(request):
 def test_make_without_arguments_uses_default_layout():
     e = gym.make(ENV_ID)
     try:
-        assert e.unwrapped.layout_file == ROOT / "layouts" / "default.json"
+        assert e.unwrapped.layout_file == default_layout()
+        assert default_layout().is_relative_to(Path(embodied_envs.__file__).parent / "data")
         assert e.unwrapped.layouts[0].target_node == "can"
         from mani_skill.utils.registration import REGISTERED_ENVS
 
