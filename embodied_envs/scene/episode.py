@@ -20,7 +20,9 @@ ManiSkill episode RNG, and every uniform is a hash of (key, stream, index). The 
 the same start, and a partial reset draws nothing for the other envs. Small batches cost as
 much as large ones (per-operation overhead dominates), so with few envs :meth:`EpisodeSampler.
 draw` prepares a block of each env's next episode starts at once (keys drawn in blocks from
-its RNG); a block is dropped when ManiSkill reseeds that env's RNG (:meth:`invalidate`).
+its RNG); a block is dropped when ManiSkill reseeds that env's RNG (:meth:`invalidate`), and
+the draw after a reseed makes only the start the seeded reset uses: seeded resets
+(evaluation, ``collect``, replays) pay for one start, not a block.
 """
 
 from __future__ import annotations
@@ -373,7 +375,11 @@ class EpisodeSampler:
         # prepared starts: per env a block of its next episodes, and which one comes next
         self.block = max(1, STARTS_PER_DRAW // len(layouts))
         self._queue: EpisodeStart | None = None
-        self._next = torch.full((len(layouts),), self.block, device=self.device)
+        n = len(layouts)
+        self._next = torch.zeros(n, dtype=torch.long, device=self.device)  # next start to use
+        self._end = torch.zeros(n, dtype=torch.long, device=self.device)  # prepared starts
+        # reseeded: the next draw makes only the start its seeded reset uses
+        self._fresh = torch.zeros(n, dtype=torch.bool, device=self.device)
 
     def _posed(self, local: np.ndarray, poses) -> torch.Tensor:
         """A polygon in an asset's frame, posed per env (yaw and XY): ``(num_envs, m, 2)``."""
@@ -431,8 +437,11 @@ class EpisodeSampler:
 
     # --- draws ---------------------------------------------------------------------------
     def invalidate(self, env_idx: torch.Tensor | None = None) -> None:
-        """Drop the prepared starts of ``env_idx`` (all when None): their RNG was reseeded."""
-        self._next[slice(None) if env_idx is None else env_idx] = self.block
+        """Drop the prepared starts of ``env_idx`` (all when None): their RNG was reseeded, and
+        the next draw of each makes only the start its seeded reset uses."""
+        rows = slice(None) if env_idx is None else env_idx
+        self._next[rows] = self._end[rows] = 0
+        self._fresh[rows] = True
 
     def reseeded(self, seed, env_idx, enhanced_determinism: bool) -> None:
         """After ManiSkill's ``_set_episode_rng(seed, env_idx)``: a seed re-creates every env's
@@ -450,26 +459,13 @@ class EpisodeSampler:
             rngs: ManiSkill's ``BatchedRNG`` of all envs (``_batched_episode_rng``); only the
                 envs whose block of starts ran out are read.
         """
-        empty = self._next[env_idx] >= self.block
+        if bool(self._fresh[env_idx].all()):  # a seeded reset: its starts alone, none queued
+            self._fresh[env_idx] = False
+            keys = np.asarray(rngs[env_idx.cpu().numpy()].randint(0, 2**31, size=1))
+            return self._starts(env_idx, torch.as_tensor(keys.reshape(-1), device=self.device))
+        empty = self._next[env_idx] >= self._end[env_idx]
         if bool(empty.any()):
-            refill = env_idx[empty]
-            keys = np.asarray(rngs[refill.cpu().numpy()].randint(0, 2**31, size=self.block))
-            keys = torch.as_tensor(keys.reshape(-1), device=self.device)
-            flat = refill.repeat_interleave(self.block)
-            start = EpisodeStart(
-                self.objects(flat, keys),
-                self.goals(flat, keys),
-                normals(keys, NOISE_STREAM, NOISE_DIMS),
-            )
-            if self._queue is None:
-                self._queue = EpisodeStart(
-                    {k: _blocks(v, len(self._next), self.block) for k, v in start.objects.items()},
-                    _blocks(start.goal, len(self._next), self.block),
-                    _blocks(start.joint_noise, len(self._next), self.block),
-                )
-            for queue, new in zip(_fields(self._queue), _fields(start), strict=True):
-                queue[refill] = new.view(len(refill), self.block, -1)
-            self._next[refill] = 0
+            self._refill(env_idx[empty], rngs)
         take = self._next[env_idx]
         self._next[env_idx] = take + 1
         q = self._queue
@@ -477,6 +473,47 @@ class EpisodeSampler:
             {k: v[env_idx, take] for k, v in q.objects.items()},
             q.goal[env_idx, take],
             q.joint_noise[env_idx, take],
+        )
+
+    def _refill(self, refill: torch.Tensor, rngs) -> None:
+        """Prepare the next starts of the envs ``refill``: one for a just reseeded env (reset
+        together with envs that were not), a block for the others. The keys are the RNG's
+        next numbers either way (a size-k draw of NumPy's ``RandomState`` begins with its
+        size-j draws, j < k), so how starts are prepared never changes which an env gets."""
+        fresh = self._fresh[refill]
+        groups = [(refill[fresh], 1), (refill[~fresh], self.block)]
+        keys, flat = [], []
+        for envs, size in groups:
+            if len(envs):
+                drawn = np.asarray(rngs[envs.cpu().numpy()].randint(0, 2**31, size=size))
+                keys.append(torch.as_tensor(drawn.reshape(-1), device=self.device))
+                flat.append(envs.repeat_interleave(size))
+        start = self._starts(torch.cat(flat), torch.cat(keys))
+        n = len(self._next)
+        if self._queue is None:
+            self._queue = EpisodeStart(
+                {k: _blocks(v, n, self.block) for k, v in start.objects.items()},
+                _blocks(start.goal, n, self.block),
+                _blocks(start.joint_noise, n, self.block),
+            )
+        offset = 0
+        for envs, size in groups:
+            if not len(envs):
+                continue
+            rows = slice(offset, offset + len(envs) * size)
+            for queue, new in zip(_fields(self._queue), _fields(start), strict=True):
+                queue[envs, :size] = new[rows].view(len(envs), size, -1)
+            self._end[envs] = size
+            offset += len(envs) * size
+        self._next[refill] = 0
+        self._fresh[refill] = False
+
+    def _starts(self, env_idx: torch.Tensor, keys: torch.Tensor) -> EpisodeStart:
+        """The episode starts of the keys ``(b,)`` of the envs ``env_idx (b,)``."""
+        return EpisodeStart(
+            self.objects(env_idx, keys),
+            self.goals(env_idx, keys),
+            normals(keys, NOISE_STREAM, NOISE_DIMS),
         )
 
     def objects(self, env_idx: torch.Tensor, keys: torch.Tensor) -> dict[str, torch.Tensor]:

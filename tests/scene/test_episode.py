@@ -166,6 +166,37 @@ def test_partial_draws_only_touch_env_idx():
     assert torch.equal(again.joint_noise[0], first.joint_noise[1])
 
 
+def test_a_seeded_reset_draws_one_start_and_the_stream_is_unchanged():
+    """After a reseed only the start in use is made (one key from the RNG), yet every env
+    gets the same starts, in the same order, as when they are prepared in blocks."""
+    from mani_skill.envs.utils.randomization.batched_rng import BatchedRNG
+
+    configs = configurations(LAYOUTS[0], 2)
+    seeded = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
+    blocks = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
+    rng_s, rng_b = BatchedRNG.from_seeds([7, 8]), BatchedRNG.from_seeds([7, 8])
+    seeded.invalidate()  # as ManiSkill's reset(seed=...) does
+    first = seeded.draw(torch.arange(2), rng_s)
+    one_key = [np.random.RandomState(s) for s in (7, 8)]
+    for r in one_key:
+        r.randint(0, 2**31, size=1)
+    assert rng_states(rng_s) == rng_states(BatchedRNG.from_rngs(one_key)), "one key each"
+    starts_s = [first] + [seeded.draw(torch.arange(2), rng_s) for _ in range(9)]
+    starts_b = [blocks.draw(torch.arange(2), rng_b) for _ in range(10)]
+    for a, b in zip(starts_s, starts_b, strict=True):
+        for x, y in zip(a.objects.values(), b.objects.values(), strict=True):
+            assert torch.equal(x, y)
+        assert torch.equal(a.goal, b.goal) and torch.equal(a.joint_noise, b.joint_noise)
+    # one env reseeded, reset together with one that was not: each gets its own next start
+    seeded.invalidate(torch.tensor([0]))
+    rng_s[0] = np.random.RandomState(7)
+    mixed = seeded.draw(torch.arange(2), rng_s)
+    extra = blocks.draw(torch.arange(2), rng_b)
+    for node in mixed.objects:
+        assert torch.equal(mixed.objects[node][0], first.objects[node][0])
+        assert torch.equal(mixed.objects[node][1], extra.objects[node][1])
+
+
 def goal_region_polygon(config, region: GoalRegion, limits: PlacementLimits):
     """The goal region of a configuration, built with shapely from the layout alone: the
     table top shrunk by the margin, within the robot's reach (placement's band and heading)
