@@ -1,12 +1,41 @@
-"""Worker processes end with the command that started them."""
+"""The commands' one process runner: :func:`run` (``layout generate``, ``demo``, ``collect``,
+``eval``).
+
+Tasks run in this process (``workers=1``) or in a pool of worker processes (forkserver by
+default: safe with torch and SAPIEN). A worker exits as soon as the command that started it is
+gone, even after SIGKILL, so no orphan keeps writing outputs. A worker that dies (killed, out
+of memory) is noticed within ``POLL_SECONDS``: :func:`run` stops the others and raises
+:class:`WorkerError`; an exception raised by a task stops the run the same way and is raised
+again in the parent as it was. Tasks send progress with :func:`report`.
+"""
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
+import queue as queue_module
 import threading
 import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
 
 PARENT_CHECK_SECONDS = 0.5  # how often a worker looks whether its parent is still there
+POLL_SECONDS = 0.1  # how often the parent looks at results, progress and dead workers
+
+
+class WorkerError(RuntimeError):
+    """A worker process died without finishing its task."""
+
+
+_report: Callable[[Any], None] | None = None  # where report() sends progress
+
+
+def report(message: Any) -> None:
+    """From inside a task: hand ``message`` to the parent's ``on_progress`` (picklable)."""
+    if _report is not None:
+        _report(message)
 
 
 def exit_with_parent(parent_pid: int) -> None:
@@ -19,3 +48,99 @@ def exit_with_parent(parent_pid: int) -> None:
         os._exit(1)
 
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+def _init_worker(progress, initializer, initargs) -> None:
+    global _report
+    os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+    # the parent here is the command itself (fork) or its forkserver, which ends with it
+    exit_with_parent(os.getppid())
+    _report = None if progress is None else progress.put
+    if initializer is not None:
+        initializer(*initargs)
+
+
+def run(
+    fn: Callable,
+    tasks: Sequence[tuple],
+    workers: int = 1,
+    *,
+    initializer: Callable | None = None,
+    initargs: tuple = (),
+    on_result: Callable[[Any], None] | None = None,
+    on_progress: Callable[[Any], None] | None = None,
+    context: str = "forkserver",
+) -> list:
+    """``fn(*task)`` for every task; the results in task order.
+
+    Args:
+        fn: a module-level function (pickled by name for worker processes).
+        tasks: argument tuples.
+        workers: processes; 1 runs every task here, in order.
+        initializer: called with ``initargs`` once per process before its first task.
+        on_result: called in the parent with each result as it arrives.
+        on_progress: called in the parent with each :func:`report` message.
+        context: the multiprocessing start method of the workers.
+
+    Raises:
+        WorkerError: a worker process died.
+        Exception: whatever a task raised, as it raised it.
+    """
+    global _report
+    if workers <= 1:
+        previous, _report = _report, on_progress
+        try:
+            if initializer is not None:
+                initializer(*initargs)
+            results = []
+            for task in tasks:
+                results.append(fn(*task))
+                if on_result is not None:
+                    on_result(results[-1])
+            return results
+        finally:
+            _report = previous
+    ctx = mp.get_context(context)
+    progress = ctx.Queue() if on_progress is not None else None
+
+    def drain() -> None:
+        while progress is not None:
+            try:
+                on_progress(progress.get_nowait())
+            except queue_module.Empty:
+                return
+
+    pool = ProcessPoolExecutor(
+        min(workers, max(1, len(tasks))),
+        mp_context=ctx,
+        initializer=_init_worker,
+        initargs=(progress, initializer, initargs),
+    )
+    ok = False
+    try:
+        futures = {pool.submit(fn, *task): k for k, task in enumerate(tasks)}
+        results: list = [None] * len(tasks)
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, timeout=POLL_SECONDS, return_when=FIRST_COMPLETED)
+            drain()
+            for fut in done:
+                results[futures[fut]] = fut.result()
+                if on_result is not None:
+                    on_result(results[futures[fut]])
+        drain()
+        ok = True
+        return results
+    except BrokenProcessPool:
+        raise WorkerError(
+            "a worker process died (killed, or out of memory). Fix: fewer --workers, or see "
+            "the system log for the killer"
+        ) from None
+    finally:
+        if ok:
+            pool.shutdown(wait=True)
+        else:  # stop the others now, not when their tasks end
+            processes = list((pool._processes or {}).values())  # the stdlib keeps no public list
+            pool.shutdown(wait=False, cancel_futures=True)
+            for p in processes:
+                p.terminate()

@@ -9,8 +9,9 @@ import pytest
 os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
 
 ROOT = Path(__file__).resolve().parent.parent
-LAYOUTS = sorted((ROOT / "layouts").glob("*.json"))
-DEFAULT_LAYOUT = ROOT / "layouts" / "default.json"
+DATA = ROOT / "embodied_envs" / "data"  # the shipped data (./layouts and ./assets link here)
+LAYOUTS = sorted((DATA / "layouts").glob("*.json"))
+DEFAULT_LAYOUT = DATA / "layouts" / "default.json"
 
 
 @pytest.fixture
@@ -21,8 +22,8 @@ def layout_dict():
 @pytest.fixture
 def scene_copy(tmp_path):
     """A copy of the shipped layouts and assets in a temporary folder (same relative layout)."""
-    shutil.copytree(ROOT / "assets", tmp_path / "assets")
-    shutil.copytree(ROOT / "layouts", tmp_path / "layouts")
+    shutil.copytree(DATA / "assets", tmp_path / "assets")
+    shutil.copytree(DATA / "layouts", tmp_path / "layouts")
     return tmp_path
 
 

@@ -12,7 +12,7 @@ import stat
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import ROOT, snapshot
+from conftest import DATA, ROOT, snapshot
 
 import embodied_envs  # noqa: F401
 from embodied_envs.cli.main import main as cli
@@ -54,7 +54,7 @@ def no_simulation(monkeypatch):
 @pytest.fixture
 def untouched():
     """Asserts afterwards that neither the corpus nor the shipped data changed."""
-    folders = [CORPUS, ROOT / "assets", ROOT / "layouts"]
+    folders = [CORPUS, DATA / "assets", DATA / "layouts"]
     before = [snapshot(f) for f in folders]
     yield
     assert [snapshot(f) for f in folders] == before

@@ -19,7 +19,7 @@ from pathlib import Path
 os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
 
 from embodied_envs.paths import default_layout  # noqa: E402
-from embodied_envs.solvers.collect import CollectPlan, collect  # noqa: E402
+from embodied_envs.pipelines.collect import CollectPlan, collect  # noqa: E402
 
 
 def main() -> None:

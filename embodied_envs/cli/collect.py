@@ -65,7 +65,7 @@ def cmd_collect(args) -> int:
 
     from embodied_envs.layout import load_layout
     from embodied_envs.paths import default_layout
-    from embodied_envs.solvers.collect import CollectError, CollectPlan, collect
+    from embodied_envs.pipelines.collect import CollectError, CollectPlan, collect
 
     config = env_config(args.config, OWNED_KEYS)
     layouts = [p.resolve() for p in (args.layout or [default_layout()])]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing as mp
+import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -29,6 +29,7 @@ from embodied_envs.layout import load_layout
 from embodied_envs.layout.placement import derive_seed, place
 from embodied_envs.paths import atomic_output, default_layout
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
+from embodied_envs.workers import run
 
 # env keywords the demo sets itself: a --config file may not set them
 OWNED_KEYS = {
@@ -216,17 +217,10 @@ def cmd_demo(args) -> int:
     ]
     t0 = time.perf_counter()
     bar = tqdm(total=args.num_envs * args.episodes, desc="episodes (env x episode)")
-    if args.num_envs == 1:
-        results = [_run_env(jobs[0])]
-        bar.update(args.episodes)
-    else:
-        workers = args.workers or min(args.num_envs, mp.cpu_count())
-        ctx = mp.get_context("forkserver")
-        with ctx.Pool(workers) as pool:
-            results = []
-            for r in pool.imap(_run_env, jobs):
-                results.append(r)
-                bar.update(len(r))
+    workers = 1 if args.num_envs == 1 else args.workers or min(args.num_envs, os.cpu_count() or 1)
+    results = run(
+        _run_env, [(job,) for job in jobs], workers, on_result=lambda r: bar.update(len(r))
+    )
     bar.close()
     fps = max(1, int(round(CONTROL_FREQ / args.frame_every)))
     summary = dict(

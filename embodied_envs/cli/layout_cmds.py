@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +23,7 @@ from embodied_envs.layout.placement import (
 )
 from embodied_envs.paths import atomic_output
 from embodied_envs.splat import SplatFileError, check_ply
-from embodied_envs.workers import exit_with_parent
+from embodied_envs.workers import run
 
 
 def add_parser(sub) -> None:
@@ -91,18 +89,7 @@ def cmd_generate(args) -> int:
     claim_stem(args.out, args.layout)
     jobs = [(str(args.layout), args.seed + i, str(args.out)) for i in range(args.num)]
     bar = tqdm(total=args.num, desc="placing", unit="layout")
-    if args.workers == 1:
-        for job in jobs:
-            _generate_one(job)
-            bar.update()
-    else:
-        with ProcessPoolExecutor(
-            args.workers, initializer=exit_with_parent, initargs=(os.getpid(),)
-        ) as pool:
-            for _ in pool.map(
-                _generate_one, jobs, chunksize=max(1, args.num // (4 * args.workers))
-            ):
-                bar.update()
+    run(_generate_one, [(job,) for job in jobs], args.workers, on_result=lambda _: bar.update())
     bar.close()
     print(f"wrote {args.num} layouts to {args.out}")
     return 0

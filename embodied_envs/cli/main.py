@@ -9,6 +9,7 @@ import sys
 from embodied_envs.config import ConfigError
 from embodied_envs.layout import LayoutError, PlacementError
 from embodied_envs.splat import SplatFileError
+from embodied_envs.workers import WorkerError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -37,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ConfigError, LayoutError, PlacementError, SplatFileError) as e:
+    except (ConfigError, LayoutError, PlacementError, SplatFileError, WorkerError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
     except OSError as e:  # a full disk, a read-only folder, a vanished file: one line

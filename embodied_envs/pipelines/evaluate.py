@@ -35,8 +35,6 @@ import os
 import statistics
 import sys
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -44,6 +42,7 @@ import numpy as np
 
 from embodied_envs.paths import atomic_output
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
+from embodied_envs.workers import WorkerError, run
 
 BUILTIN_POLICIES = ("expert", "random", "zero")
 VIDEO_CHOICES = ("all", "fail", "none")
@@ -344,21 +343,16 @@ def write_video(frames: list[np.ndarray], path: Path) -> str:
 
 
 # --- worker processes ----------------------------------------------------------------------
-_RUNNER: EpisodeRunner | None = None
+_RUNNER: EpisodeRunner | None = None  # this process's envs (workers.run's initializer)
 
 
-def _init_worker(plan: EvalPlan) -> None:
+def _init_runner(plan: EvalPlan) -> None:
     global _RUNNER
-    os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
-    from embodied_envs.workers import exit_with_parent
-
-    # the forkserver, which ends with the command: a killed eval leaves no worker running on
-    exit_with_parent(os.getppid())
     _RUNNER = EpisodeRunner(plan)
 
 
-def _run_in_worker(layout: str, seed: int, video_dir: str | None) -> EpisodeResult:
-    return _RUNNER.run(layout, seed, Path(video_dir) if video_dir else None)
+def _run_episode(layout: str, seed: int, video_dir: str) -> EpisodeResult:
+    return _RUNNER.run(layout, seed, Path(video_dir))
 
 
 # --- the whole evaluation ------------------------------------------------------------------
@@ -436,36 +430,20 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
     out.mkdir(parents=True, exist_ok=True)
     video_dir = out / "videos"
     tasks = plan.tasks()
-    results: list[EpisodeResult] = []
-    if plan.workers <= 1:
-        runner = EpisodeRunner(plan)
-        try:
-            for layout, seed in tasks:
-                results.append(runner.run(layout, seed, video_dir))
-                if progress is not None:
-                    progress(results[-1])
-        finally:
-            runner.close()
-    else:
-        import multiprocessing as mp
-
-        ctx = mp.get_context("forkserver")
-        with ProcessPoolExecutor(
-            plan.workers, mp_context=ctx, initializer=_init_worker, initargs=(plan,)
-        ) as pool:
-            futures = [pool.submit(_run_in_worker, lay, s, str(video_dir)) for lay, s in tasks]
-            try:
-                for fut in as_completed(futures):
-                    results.append(fut.result())
-                    if progress is not None:
-                        progress(results[-1])
-            except BrokenProcessPool:
-                raise EvalError(
-                    "an evaluation worker died (killed, or out of memory). Fix: fewer --workers"
-                ) from None
-            finally:
-                for fut in futures:
-                    fut.cancel()
+    try:
+        results = run(
+            _run_episode,
+            [(lay, seed, str(video_dir)) for lay, seed in tasks],
+            plan.workers,
+            initializer=_init_runner,
+            initargs=(plan,),
+            on_result=progress,
+        )
+    except WorkerError as e:
+        raise EvalError(f"evaluation stopped: {e}") from None
+    finally:
+        if plan.workers <= 1 and _RUNNER is not None:  # this process's envs
+            _RUNNER.close()
     order = {lay: i for i, lay in enumerate(plan.layouts)}
     results.sort(key=lambda r: (order[r.layout], r.seed))
     summary = summarize(plan, results)

@@ -1,5 +1,5 @@
 import pytest
-from conftest import ROOT
+from conftest import DATA
 
 from embodied_envs.layout import LayoutError, asset_geometry, parse_urdf
 
@@ -19,7 +19,7 @@ COLLISION = """<collision><geometry><mesh filename="mesh/thing_collision.obj"/><
 
 def make_asset(tmp_path, collision=COLLISION, gazebo="", inertial="", mesh_text=None):
     (tmp_path / "mesh").mkdir(exist_ok=True)
-    cube = (ROOT / "assets" / "cracker_box" / "mesh" / "cracker_box_collision.obj").read_text()
+    cube = (DATA / "assets" / "cracker_box" / "mesh" / "cracker_box_collision.obj").read_text()
     (tmp_path / "mesh" / "thing.obj").write_text(cube)
     (tmp_path / "mesh" / "thing_collision.obj").write_text(
         mesh_text if mesh_text is not None else cube
@@ -30,7 +30,7 @@ def make_asset(tmp_path, collision=COLLISION, gazebo="", inertial="", mesh_text=
 
 
 def test_parse_shipped_urdf_friction_clipped_and_mass():
-    spec = parse_urdf(ROOT / "assets" / "can" / "can.urdf")
+    spec = parse_urdf(DATA / "assets" / "can" / "can.urdf")
     assert spec.static_friction == 0.7 and spec.dynamic_friction == 0.6
     assert spec.mass == pytest.approx(0.15)
     assert spec.visual.rpy == pytest.approx((1.5708, 0, 0))
@@ -87,7 +87,7 @@ def test_heavy_collision_mesh_is_warned_about_once_with_its_cost(tmp_path):
     from embodied_envs.layout.assets import HEAVY_COLLISION_FACES
 
     asset = tmp_path / "mug"
-    shutil.copytree(ROOT / "assets" / "mug", asset)
+    shutil.copytree(DATA / "assets" / "mug", asset)
     sphere = trimesh.creation.icosphere(subdivisions=6, radius=0.04)  # 81,920 faces
     assert len(sphere.faces) > HEAVY_COLLISION_FACES
     sphere.export(asset / "mesh" / "mug_collision.obj")

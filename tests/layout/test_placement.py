@@ -4,7 +4,7 @@ import sys
 import time
 
 import pytest
-from conftest import LAYOUTS, ROOT, write_layout
+from conftest import DATA, LAYOUTS, write_layout
 from placement_checks import check_constraints
 
 from embodied_envs.layout import PlacementError, load_layout
@@ -45,8 +45,8 @@ def test_same_seed_same_layout_across_processes():
 
 
 def test_impossible_request_fails_fast_naming_object(tmp_path):
-    data = json.loads((ROOT / "layouts" / "default.json").read_text())
-    data["assets"] = {k: str((ROOT / "layouts" / v).resolve()) for k, v in data["assets"].items()}
+    data = json.loads((DATA / "layouts" / "default.json").read_text())
+    data["assets"] = {k: str((DATA / "layouts" / v).resolve()) for k, v in data["assets"].items()}
     for i in range(40):  # forty bowls do not fit on the table
         name = f"bowl{i}"
         data["objs_mapping"][name] = "distractor_objs"
@@ -58,7 +58,7 @@ def test_impossible_request_fails_fast_naming_object(tmp_path):
     import shutil
 
     for i in range(40):
-        shutil.copytree(ROOT / "assets" / "bowl", d / f"bowl{i}")
+        shutil.copytree(DATA / "assets" / "bowl", d / f"bowl{i}")
         (d / f"bowl{i}" / "bowl.urdf").rename(d / f"bowl{i}" / f"bowl{i}.urdf")
         data["assets"][f"bowl{i}"] = str(d / f"bowl{i}")
     layout = load_layout(write_layout(tmp_path, data), check_poses=False)  # all re-drawn

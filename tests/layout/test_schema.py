@@ -2,7 +2,7 @@ import json
 import math
 
 import pytest
-from conftest import DEFAULT_LAYOUT, ROOT, deep, snapshot, write_layout
+from conftest import DATA, DEFAULT_LAYOUT, deep, snapshot, write_layout
 
 from embodied_envs.layout import LayoutError, LayoutInfo, load_layout
 
@@ -12,7 +12,7 @@ def test_round_trip_is_lossless_with_unknown_keys(tmp_path, layout_dict):
     data["my_extra"] = {"nested": [1, 2, 3]}
     data["relation"]["my_relation_key"] = "kept"
     data["quality"] = {"can": "good"}
-    data["assets"] = {k: str((ROOT / "layouts" / v).resolve()) for k, v in data["assets"].items()}
+    data["assets"] = {k: str((DATA / "layouts" / v).resolve()) for k, v in data["assets"].items()}
     src = write_layout(tmp_path, data)
     info = load_layout(src)
     out = info.save(tmp_path / "out" / "again.json")
@@ -28,21 +28,21 @@ def test_round_trip_is_lossless_with_unknown_keys(tmp_path, layout_dict):
 
 def test_assets_resolve_relative_to_layout_folder():
     info = load_layout(DEFAULT_LAYOUT)
-    assert info.asset_dir("can") == (ROOT / "assets" / "can").resolve()
+    assert info.asset_dir("can") == (DATA / "assets" / "can").resolve()
     assert info.target_node == "can"
     assert info.urdf_path("can").name == "can.urdf"
 
 
 def test_quaternion_within_tolerance_is_normalised(tmp_path, layout_dict):
     data = deep(layout_dict)
-    data["assets"] = {k: str((ROOT / "layouts" / v).resolve()) for k, v in data["assets"].items()}
+    data["assets"] = {k: str((DATA / "layouts" / v).resolve()) for k, v in data["assets"].items()}
     data["position"]["can"][3:] = [0, 0, 0, 1.0005]
     info = load_layout(write_layout(tmp_path, data))
     assert math.isclose(sum(v * v for v in info.position["can"][3:]), 1.0, abs_tol=1e-9)
 
 
 def _abs_assets(data):
-    data["assets"] = {k: str((ROOT / "layouts" / v).resolve()) for k, v in data["assets"].items()}
+    data["assets"] = {k: str((DATA / "layouts" / v).resolve()) for k, v in data["assets"].items()}
     return data
 
 

@@ -91,7 +91,7 @@ def test_zero_and_random_finish_without_success_and_random_is_seeded(tmp_path):
 
 
 def test_expert_gives_the_successes_collect_gives_on_the_same_seeds(tmp_path):
-    from embodied_envs.solvers.collect import CollectPlan, collect
+    from embodied_envs.pipelines.collect import CollectPlan, collect
 
     seeds = (5, 2)
     collected = collect(CollectPlan(layout=str(DEFAULT_LAYOUT), num=2, seed=seeds[0]), tmp_path)

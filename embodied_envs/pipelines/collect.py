@@ -14,7 +14,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import multiprocessing as mp
 import os
 import shutil
 import tempfile
@@ -22,6 +21,8 @@ import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+from embodied_envs.workers import report, run
 
 ENV_ID = "PickEmbodiedGen-v1"
 SOURCE_DESC = (
@@ -103,18 +104,17 @@ class LayoutSummary:
     files: list[str] = field(default_factory=list)
 
 
-def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name: str, queue):
-    """One process: one env recorded by ManiSkill's RecordEpisode; a record per episode goes
-    to ``queue`` (the parent's progress bar); ends when its parent has ended."""
+def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name: str) -> list:
+    """One worker's block of seeds: one env recorded by ManiSkill's RecordEpisode into
+    ``out_dir/name.h5``; a record per episode is reported (the parent's progress bar) and all
+    are returned."""
     os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
     import gymnasium as gym
     from mani_skill.utils.wrappers.record import RecordEpisode
 
     import embodied_envs  # noqa: F401
     from embodied_envs.solvers.pick_place import PickPlaceSolver
-    from embodied_envs.workers import exit_with_parent
 
-    exit_with_parent(os.getppid())  # a killed collect leaves no worker writing on
     env = gym.make(
         ENV_ID,
         **plan.env_kwargs,
@@ -136,7 +136,7 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         source_desc=SOURCE_DESC,
         video_fps=int(round(1 / env.unwrapped.control_timestep)),
     )
-    kept = 0
+    kept, records = 0, []
     try:
         for seed in seeds:
             t0 = time.perf_counter()
@@ -150,18 +150,16 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
             kept += keep
             failures = result.reports[0].plan_failures
             failure = None if success else (failures[0].split(":")[0] if failures else "execution")
-            queue.put(
-                asdict(
-                    EpisodeRecord(
-                        seed, success, keep, result.steps, failure, time.perf_counter() - t0
-                    )
-                )
+            record = EpisodeRecord(
+                seed, success, keep, result.steps, failure, time.perf_counter() - t0
             )
+            records.append(record)
+            report(asdict(record))
             if kept >= quota:
                 break
     finally:
         env.close()
-        queue.put(None)  # this worker is done
+    return records
 
 
 def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
@@ -194,32 +192,18 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
     work = Path(tempfile.mkdtemp(prefix=f".{layout.stem}.", dir=out))
     t0 = time.perf_counter()
     try:
-        ctx = mp.get_context("forkserver")
-        queue = ctx.Queue()
-        blocks = plan.blocks()
-        procs = []
-        for k, (seeds, quota) in enumerate(blocks):
-            p = ctx.Process(
-                target=_worker,
-                args=(dataclasses.replace(plan, layout=str(layout)), seeds, quota,
-                      str(work), f"part{k:03d}", queue),
-                daemon=True,
-            )  # fmt: skip
-            p.start()
-            procs.append(p)
-        records, running = [], len(procs)
-        while running:
-            rec = queue.get()
-            if rec is None:
-                running -= 1
-                continue
-            records.append(EpisodeRecord(**rec))
-            if progress is not None:
-                progress(records[-1])
-        for p in procs:
-            p.join()
-            if p.exitcode != 0:
-                raise CollectError(f"a collection worker failed (exit code {p.exitcode})")
+        layout_plan = dataclasses.replace(plan, layout=str(layout))
+        tasks = [
+            (layout_plan, seeds, quota, str(work), f"part{k:03d}")
+            for k, (seeds, quota) in enumerate(plan.blocks())
+        ]
+        parts = run(
+            _worker,
+            tasks,
+            len(tasks) if plan.workers > 1 else 1,
+            on_progress=None if progress is None else lambda rec: progress(EpisodeRecord(**rec)),
+        )
+        records = [r for part in parts for r in part]
         records.sort(key=lambda r: r.seed)
         kept = [r for r in records if r.kept]
         successes = sum(r.success for r in records)
