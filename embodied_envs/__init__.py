@@ -15,6 +15,7 @@ __version__ = "0.1.0"
 
 def __getattr__(name: str):
     if name == "PickEmbodiedGenEnv":
+        # the simulator loads on first use, not on `import embodied_envs`
         from embodied_envs.envs import PickEmbodiedGenEnv
 
         return PickEmbodiedGenEnv

@@ -22,6 +22,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+import yaml
+
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.limits import GoalRegion, PlacementLimits
 
@@ -118,23 +120,6 @@ class ConfigError(ValueError):
     """A config file that cannot be used; names the file, the key and the fix."""
 
 
-def env_keywords() -> tuple[str, ...]:
-    """Every keyword ``gym.make("PickEmbodiedGen-v1", ...)`` accepts (imports the env)."""
-    import inspect
-
-    from mani_skill.envs.sapien_env import BaseEnv
-
-    from embodied_envs.envs.pick_embodiedgen import PickEmbodiedGenEnv
-
-    names = [
-        p.name
-        for cls in (PickEmbodiedGenEnv, BaseEnv)
-        for p in inspect.signature(cls.__init__).parameters.values()
-        if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD
-    ]
-    return tuple(sorted(set(names) - {"self"}))
-
-
 def read_config_file(path: str | os.PathLike) -> dict:
     """One config file (``.yaml``/``.yml`` or ``.json``) as a dict.
 
@@ -146,8 +131,6 @@ def read_config_file(path: str | os.PathLike) -> dict:
         text = path.read_text()
     except OSError as e:
         raise ConfigError(f"{path}: cannot read the config file ({e.strerror or e})") from None
-    import yaml
-
     try:
         data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as e:
@@ -201,15 +184,13 @@ def merge_config(base: Mapping, override: Mapping) -> dict:
 
 
 def load_config(
-    paths: str | os.PathLike | Sequence[str | os.PathLike] | None,
-    known: Sequence[str] | None = None,
+    paths: str | os.PathLike | Sequence[str | os.PathLike] | None, known: Sequence[str]
 ) -> dict:
     """Merge config files in order (later overrides earlier), checking every key.
 
     Args:
         paths: one file or a list; None gives ``{}``.
-        known: accepted top-level keys (default: every keyword of the env, see
-            :func:`env_keywords`).
+        known: accepted top-level keys (the env's: ``PickEmbodiedGenEnv.keywords()``).
 
     Raises:
         ConfigError: naming the file and the key.
@@ -218,7 +199,6 @@ def load_config(
         return {}
     if isinstance(paths, str | os.PathLike):
         paths = [paths]
-    known = env_keywords() if known is None else known
     merged: dict = {}
     for path in paths:
         data = read_config_file(path)

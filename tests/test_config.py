@@ -11,6 +11,7 @@ from conftest import DEFAULT_LAYOUT, ROOT
 import embodied_envs  # noqa: F401
 from embodied_envs.cli.main import main
 from embodied_envs.config import ConfigError, load_config, merge_config
+from embodied_envs.envs import PickEmbodiedGenEnv
 from embodied_envs.layout.limits import GoalRegion, PlacementLimits
 
 KNOWN = ["robot_init_qpos_noise", "placement_limits", "goal_region", "camera_cfg", "obs_mode"]
@@ -71,7 +72,7 @@ def test_bad_files_name_the_file_and_the_key(tmp_path, text, words):
 def test_the_known_keys_are_the_envs_keywords(tmp_path):
     path = write(tmp_path / "c.yaml", "num_env: 2\n")
     with pytest.raises(ConfigError) as e:
-        load_config([path])
+        load_config([path], PickEmbodiedGenEnv.keywords())
     for name in ("layout_file", "placement_limits", "goal_region", "num_envs", "obs_mode"):
         assert f"'{name}'" in str(e.value)
 

@@ -6,6 +6,8 @@ import argparse
 import os
 from pathlib import Path
 
+from embodied_envs.config import ConfigError, load_config
+
 
 def _parse(text: str, convert, what: str):
     try:
@@ -84,9 +86,10 @@ def env_config(paths: list[Path] | None, owned: dict[str, str]) -> dict:
     Raises:
         embodied_envs.config.ConfigError
     """
-    from embodied_envs.config import ConfigError, load_config
+    # the env class (torch, SAPIEN) only for commands that run it, not for --help
+    from embodied_envs.envs.pick_embodiedgen import PickEmbodiedGenEnv
 
-    config = load_config(paths)
+    config = load_config(paths, PickEmbodiedGenEnv.keywords())
     taken = sorted(set(config) & set(owned))
     if taken:
         key = taken[0]

@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from tqdm import tqdm
+
 from embodied_envs.cli.args import (
     add_config_argument,
     env_config,
@@ -12,6 +14,8 @@ from embodied_envs.cli.args import (
     seed_int,
     writable_dir,
 )
+from embodied_envs.layout import load_layout
+from embodied_envs.paths import default_layout
 
 # env keywords collect sets itself: a --config file may not set them
 OWNED_KEYS = {
@@ -61,10 +65,7 @@ def add_parser(sub) -> None:
 
 
 def cmd_collect(args) -> int:
-    from tqdm import tqdm
-
-    from embodied_envs.layout import load_layout
-    from embodied_envs.paths import default_layout
+    # the pipeline imports the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.collect import CollectError, CollectPlan, collect
 
     config = env_config(args.config, OWNED_KEYS)

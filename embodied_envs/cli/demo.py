@@ -7,14 +7,8 @@ written under ``--out`` (never beside the input), as on the GPU simulation.
 
 from __future__ import annotations
 
-import json
-import math
-import os
-import time
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
 from embodied_envs.cli.args import (
@@ -26,10 +20,7 @@ from embodied_envs.cli.args import (
 )
 from embodied_envs.config import CameraSpec, merge_config
 from embodied_envs.layout import load_layout
-from embodied_envs.layout.placement import derive_seed, place
-from embodied_envs.paths import atomic_output, default_layout
-from embodied_envs.registration import CONTROL_FREQ, ENV_ID
-from embodied_envs.workers import run
+from embodied_envs.paths import default_layout
 
 # env keywords the demo sets itself: a --config file may not set them
 OWNED_KEYS = {
@@ -45,7 +36,13 @@ OWNED_KEYS = {
 def add_parser(sub) -> None:
     p = sub.add_parser("demo", help="run the scripted pick-and-place and write videos")
     p.add_argument("--layout", type=Path, default=None, help="layout file (default: shipped)")
-    p.add_argument("--num-envs", type=positive_int, default=1)
+    p.add_argument(
+        "--num-envs",
+        type=positive_int,
+        default=1,
+        help="envs tiled side by side in the video, each a process of its own (on CPU, "
+        "ManiSkill holds one env per process; see --workers)",
+    )
     p.add_argument("--episodes", type=positive_int, default=1)
     p.add_argument("--seed", type=seed_int, default=0)
     p.add_argument(
@@ -72,122 +69,10 @@ def add_parser(sub) -> None:
     p.set_defaults(func=cmd_demo)
 
 
-@dataclass
-class EnvEpisode:
-    episode: int
-    env: int
-    seed: int
-    layout: str
-    success: bool
-    steps: int
-    plan_failures: list[str]
-    wall_time_s: float
-    frames: list = field(default_factory=list, repr=False)
-
-
-def _run_env(job: dict) -> list[EnvEpisode]:
-    """All episodes of one env, in its own process."""
-    import gymnasium as gym
-
-    import embodied_envs  # noqa: F401
-    from embodied_envs.solvers import PickPlaceSolver
-
-    env = gym.make(
-        ENV_ID,
-        **job["env_kwargs"],
-        layout_file=job["layout"],
-        replace_objs=False,
-        render_mode=job["render_mode"],
-        control_mode="pd_joint_pos",
-    )
-    out = []
-    every = job["frame_every"]
-    try:
-        for e, seed in enumerate(job["seeds"]):
-            t0 = time.perf_counter()
-            env.reset(seed=seed)
-            frames = [_frame(env)]
-            recorder = _Recorder(env, frames, every)
-            result = PickPlaceSolver(recorder, seed=seed).solve()
-            frames.append(_frame(env))
-            out.append(
-                EnvEpisode(
-                    episode=e,
-                    env=job["env"],
-                    seed=seed,
-                    layout=job["layout"],
-                    success=bool(result.success[0]),
-                    steps=result.steps,
-                    plan_failures=result.reports[0].plan_failures,
-                    wall_time_s=round(time.perf_counter() - t0, 3),
-                    frames=frames,
-                )
-            )
-    finally:
-        env.close()
-    return out
-
-
-def _frame(env) -> np.ndarray:
-    img = env.render()
-    img = img.cpu().numpy() if hasattr(img, "cpu") else np.asarray(img)
-    return img[0] if img.ndim == 4 else img
-
-
-class _Recorder:
-    """Passes steps through to the env and keeps every k-th rendered frame."""
-
-    def __init__(self, env, frames: list, every: int):
-        self.env, self.frames, self.every, self.t = env, frames, every, 0
-        self.unwrapped = env.unwrapped
-        self.action_space = env.action_space
-
-    def step(self, action):
-        res = self.env.step(action)
-        self.t += 1
-        if self.t % self.every == 0:
-            self.frames.append(_frame(self.env))
-        return res
-
-
-def tile(frames: list[np.ndarray]) -> np.ndarray:
-    """Tile equally sized frames into a near-square grid."""
-    n = len(frames)
-    cols = math.ceil(math.sqrt(n))
-    rows = math.ceil(n / cols)
-    h, w, c = frames[0].shape
-    grid = np.zeros((rows * h, cols * w, c), np.uint8)
-    for i, f in enumerate(frames):
-        r, col = divmod(i, cols)
-        grid[r * h : (r + 1) * h, col * w : (col + 1) * w] = f
-    return grid
-
-
-def write_video(path: Path, per_env_frames: list[list[np.ndarray]], fps: int) -> int:
-    """Tile the envs' frames over time (shorter episodes hold their last frame); returns #frames."""
-    import imageio.v2 as imageio
-
-    n = max(len(f) for f in per_env_frames)
-    with (
-        atomic_output(path) as tmp,
-        imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7, macro_block_size=1) as w,
-    ):
-        for t in range(n):
-            w.append_data(tile([f[min(t, len(f) - 1)] for f in per_env_frames]))
-    return n
-
-
-def env_layouts(layout_path: Path, num_envs: int, seed: int, out: Path) -> list[str]:
-    """Env 0: the file itself; env k > 0: a placed variant written under ``out``."""
-    base = load_layout(layout_path)
-    paths = [str(layout_path.resolve())]
-    for k in range(1, num_envs):
-        placed = place(base, derive_seed(seed, k))
-        paths.append(str(placed.save(out / "layouts" / f"env{k}.json")))
-    return paths
-
-
 def cmd_demo(args) -> int:
+    # the pipeline imports the simulator: only when the command runs, not for --help
+    from embodied_envs.pipelines.demo import DemoPlan, run_demo
+
     layout_path = (args.layout or default_layout()).resolve()
     if args.num_envs < 1 or args.episodes < 1:
         raise SystemExit("error: --num-envs and --episodes must be at least 1")
@@ -202,57 +87,26 @@ def cmd_demo(args) -> int:
         config, dict(camera_cfg={k: v for k, v in camera.items() if v is not None})
     )
     CameraSpec.from_cfg(env_kwargs["camera_cfg"])  # a bad camera fails before any output
-    args.out.mkdir(parents=True, exist_ok=True)
-    layouts = env_layouts(layout_path, args.num_envs, args.seed, args.out)
-    jobs = [
-        dict(
-            env=k,
-            layout=layouts[k],
-            render_mode=args.render_mode,
-            env_kwargs=env_kwargs,
-            frame_every=args.frame_every,
-            seeds=[args.seed + e * args.num_envs + k for e in range(args.episodes)],
-        )
-        for k in range(args.num_envs)
-    ]
-    t0 = time.perf_counter()
-    bar = tqdm(total=args.num_envs * args.episodes, desc="episodes (env x episode)")
-    workers = 1 if args.num_envs == 1 else args.workers or min(args.num_envs, os.cpu_count() or 1)
-    results = run(
-        _run_env, [(job,) for job in jobs], workers, on_result=lambda r: bar.update(len(r))
-    )
-    bar.close()
-    fps = max(1, int(round(CONTROL_FREQ / args.frame_every)))
-    summary = dict(
-        layout=str(layout_path),
+    load_layout(layout_path)  # bad input fails here, before any simulation
+    plan = DemoPlan(
+        layout=layout_path,
         num_envs=args.num_envs,
+        episodes=args.episodes,
         seed=args.seed,
         render_mode=args.render_mode,
-        fps=fps,
-        episodes=[],
+        env_kwargs=env_kwargs,
+        frame_every=args.frame_every,
+        workers=args.workers,
     )
-    for e in range(args.episodes):
-        eps = [results[k][e] for k in range(args.num_envs)]
-        video = args.out / f"episode_{e:03d}.mp4"
-        n_frames = write_video(video, [ep.frames for ep in eps], fps)
-        envs = [{k: v for k, v in asdict(ep).items() if k != "frames"} for ep in eps]
-        summary["episodes"].append(
-            dict(
-                episode=e,
-                video=str(video),
-                frames=n_frames,
-                success_rate=float(np.mean([ep.success for ep in eps])),
-                envs=envs,
-            )
-        )
-        ok = sum(ep.success for ep in eps)
-        fails = sum(bool(ep.plan_failures) for ep in eps)
+    with tqdm(total=args.num_envs * args.episodes, desc="episodes (env x episode)") as bar:
+        summary = run_demo(plan, args.out, progress=bar.update)
+    for ep in summary["episodes"]:
+        envs = ep["envs"]
+        ok = sum(e["success"] for e in envs)
+        fails = sum(bool(e["plan_failures"]) for e in envs)
         print(
-            f"episode {e}: success {ok}/{len(eps)}, plan failures {fails}, "
-            f"steps {[ep.steps for ep in eps]}, video {video}"
+            f"episode {ep['episode']}: success {ok}/{len(envs)}, plan failures {fails}, "
+            f"steps {[e['steps'] for e in envs]}, video {ep['video']}"
         )
-    summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
-    with atomic_output(args.out / "summary.json") as tmp:
-        tmp.write_text(json.dumps(summary, indent=2) + "\n")
     print(f"wrote {args.out / 'summary.json'}")
     return 0

@@ -5,12 +5,23 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from tqdm import tqdm
+
 from embodied_envs.cli.args import (
     add_config_argument,
     env_config,
     positive_int,
     seed_int,
     writable_dir,
+)
+from embodied_envs.layout import load_layout
+from embodied_envs.paths import default_layout
+from embodied_envs.pipelines.evaluate import (
+    BUILTIN_POLICIES,
+    VIDEO_CHOICES,
+    EvalError,
+    EvalPlan,
+    evaluate,
 )
 
 # env keywords eval sets itself: a --config file may not set them
@@ -30,8 +41,6 @@ OBS_MODES = (
 
 
 def add_parser(sub) -> None:
-    from embodied_envs.pipelines.evaluate import BUILTIN_POLICIES, VIDEO_CHOICES
-
     p = sub.add_parser(
         "eval",
         help="evaluate a policy on seeded episodes: success rate with its interval, videos",
@@ -63,12 +72,6 @@ def add_parser(sub) -> None:
 
 
 def cmd_eval(args) -> int:
-    from tqdm import tqdm
-
-    from embodied_envs.layout import load_layout
-    from embodied_envs.paths import default_layout
-    from embodied_envs.pipelines.evaluate import EvalError, EvalPlan, evaluate
-
     config = env_config(args.config, OWNED_KEYS)
     layouts = [p.resolve() for p in (args.layout or [default_layout()])]
     for path in layouts:

@@ -6,10 +6,13 @@ import json
 import math
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
+from PIL import Image, ImageDraw
 from tqdm import tqdm
 
 from embodied_envs.cli.args import image_side, positive_int, seed_int, writable_dir
+from embodied_envs.config import resolve_robot
 from embodied_envs.layout import LayoutError, LayoutInfo, PlacementError, load_layout
 from embodied_envs.layout.placement import (
     PlacementLimits,
@@ -103,8 +106,6 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
         return e.problems
     except OSError as e:  # unreadable file, permission, a folder given as file, ...
         return [f"{path}: {e.strerror or e} ({e.filename or path}). Fix: check the path."]
-    from embodied_envs.config import resolve_robot
-
     problems = []
     try:
         resolve_robot(layout.robot, None, str(path))
@@ -140,8 +141,6 @@ def cmd_validate(args) -> int:
 
 def draw_top_down(layout: LayoutInfo, size: int = 640, limits: PlacementLimits | None = None):
     """A top-down PIL image: table hull, labelled footprints, robot base, heading, reach band."""
-    from PIL import Image, ImageDraw
-
     lim = limits or PlacementLimits()
     ctx = layout.context
     ctx_world = world_vertices(node_geometry(layout, ctx), layout.pose(ctx))
@@ -190,15 +189,9 @@ def draw_top_down(layout: LayoutInfo, size: int = 640, limits: PlacementLimits |
 
 
 def cmd_preview(args) -> int:
-    from PIL import Image
-
     layout = load_layout(args.layout)
     img = draw_top_down(layout, args.size)
     if args.render:
-        import gymnasium as gym
-
-        import embodied_envs  # noqa: F401  (registers the env)
-
         env = gym.make(
             "PickEmbodiedGen-v1",
             layout_file=str(args.layout),

@@ -6,6 +6,7 @@ import argparse
 import os
 import sys
 
+from embodied_envs.cli import collect, demo, eval_cmd, layout_cmds, replay, splat_cmds
 from embodied_envs.config import ConfigError
 from embodied_envs.layout import LayoutError, PlacementError
 from embodied_envs.splat import SplatFileError
@@ -13,8 +14,6 @@ from embodied_envs.workers import WorkerError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from embodied_envs.cli import collect, demo, eval_cmd, layout_cmds, replay, splat_cmds
-
     parser = argparse.ArgumentParser(
         prog="embodied-envs", description="Layout-driven ManiSkill pick environments."
     )
@@ -32,9 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["replay"]:  # every option after it is ManiSkill's replay_trajectory's
-        from embodied_envs.cli.replay import cmd_replay
-
-        return cmd_replay(argparse.Namespace(options=argv[1:]))
+        return replay.cmd_replay(argparse.Namespace(options=argv[1:]))
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)

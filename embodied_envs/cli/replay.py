@@ -11,6 +11,7 @@ frame (ManiSkill's own converter assumes an unrotated robot base).
 from __future__ import annotations
 
 import argparse
+from unittest import mock
 
 
 def add_parser(sub) -> None:
@@ -24,13 +25,14 @@ def add_parser(sub) -> None:
 
 
 def cmd_replay(args) -> int:
+    # ManiSkill's replay tool imports the simulator: only when the command runs
     from mani_skill.trajectory import replay_trajectory
     from mani_skill.trajectory.utils.actions import conversion
 
-    import embodied_envs  # noqa: F401  (registers PickEmbodiedGen-v1 for gym.make)
     from embodied_envs.solvers.ee_actions import joint_pos_to_ee
 
-    conversion.from_pd_joint_pos_to_ee = joint_pos_to_ee  # root-frame end-effector actions
-
-    replay_trajectory.main(replay_trajectory.parse_args(args.options or ["--help"]))
+    # ManiSkill's replay_trajectory takes no converter argument and looks its end-effector
+    # converter up as a module global: ours (root-frame actions) is set for this call only
+    with mock.patch.object(conversion, "from_pd_joint_pos_to_ee", joint_pos_to_ee):
+        replay_trajectory.main(replay_trajectory.parse_args(args.options or ["--help"]))
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 
 from embodied_envs.cli.args import image_side, unit_float
@@ -51,8 +52,7 @@ def add_parser(sub) -> None:
 
 
 def cmd_render(args) -> int:
-    import imageio.v3 as iio
-
+    # the rasterizer imports torch: only when a splat is rendered, not for --help
     from embodied_envs.splat import PinholeCamera, read_ply, render
 
     camera = PinholeCamera.look_at(

@@ -10,6 +10,7 @@ sensor parameters per call, and ``render_mode="human"`` without a display.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import os
 from pathlib import Path
 
@@ -18,6 +19,7 @@ import torch
 from gymnasium.utils import seeding
 from mani_skill.envs.sapien_env import BaseEnv
 
+from embodied_envs.config import load_config, merge_config
 from embodied_envs.envs.arguments import check_action, check_env_idx, check_num_envs, check_seed
 
 
@@ -47,13 +49,32 @@ class CheckedEnv(BaseEnv):
         # absolute there and the config files' values spelled out, so a recorded dataset
         # re-creates the env from any working directory
         if spec is not None:
-            from embodied_envs.registration import env_kwargs
-
-            kwargs = env_kwargs(**spec.kwargs)
+            kwargs = self.env_kwargs(**spec.kwargs)
             if kwargs.get("layout_file") is not None:
                 kwargs["layout_file"] = str(Path(kwargs["layout_file"]).resolve())
             spec = dataclasses.replace(spec, kwargs=kwargs)
         self.__dict__["_spec"] = spec
+
+    @classmethod
+    def keywords(cls) -> tuple[str, ...]:
+        """Every keyword the env's constructor accepts, its own and ManiSkill's."""
+        names = {
+            p.name
+            for klass in cls.__mro__
+            if "__init__" in vars(klass) and issubclass(klass, BaseEnv)
+            for p in inspect.signature(klass.__init__).parameters.values()
+            if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD
+        }
+        return tuple(sorted(names - {"self"}))
+
+    @classmethod
+    def env_kwargs(cls, config=None, **kwargs) -> dict:
+        """The env's keywords: the ``config`` files merged in order, then ``kwargs`` over them.
+
+        Raises:
+            embodied_envs.config.ConfigError: a file that cannot be read, or an unknown key.
+        """
+        return merge_config(load_config(config, cls.keywords()), kwargs)
 
     def _reconfigure(self, options: dict | None = None):
         options = {} if options is None else options

@@ -7,14 +7,20 @@ stored Y-up and reach Z-up through the URDF ``<origin rpy="1.5708 0 0">``.
 
 from __future__ import annotations
 
-import functools
+import collections
+import dataclasses
 import math
+import os
 import warnings
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import trimesh
+from scipy.spatial import ConvexHull, QhullError
 
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.pose import rpy_to_matrix, rpy_to_quat_wxyz
@@ -50,7 +56,7 @@ class MeshRef:
         return v @ rpy_to_matrix(self.rpy).T + np.asarray(self.xyz)
 
     def sapien_pose(self):
-        import sapien
+        import sapien  # only for the simulator: layout commands start without SAPIEN
 
         return sapien.Pose(p=list(self.xyz), q=list(rpy_to_quat_wxyz(self.rpy)))
 
@@ -218,8 +224,6 @@ class AssetGeometry:
 
 def convex_hull_2d(points: np.ndarray) -> np.ndarray:
     """Counter-clockwise convex hull ``(m, 2)`` of 2D points (qhull)."""
-    from scipy.spatial import ConvexHull, QhullError
-
     # micrometre rounding drops the near-duplicates that floating-point rotation creates
     pts = np.unique(np.round(np.asarray(points, dtype=np.float64), 6), axis=0)
     if len(pts) < 3:
@@ -247,8 +251,6 @@ def _load_parts(mesh: MeshRef) -> list:
 def _load_parts_checked(mesh: MeshRef, collision: bool = True):
     """The mesh file as one trimesh, refused when unreadable, empty or not finite; a heavy
     collision mesh is warned about once."""
-    import trimesh
-
     try:
         loaded = trimesh.load(mesh.path, force="mesh", process=False, skip_materials=True)
     except Exception as e:  # trimesh raises many types for unreadable files
@@ -284,8 +286,61 @@ def _load_parts_checked(mesh: MeshRef, collision: bool = True):
 _WARNED_HEAVY: set = set()
 
 
-@functools.lru_cache(maxsize=256)
-def _geometry_cached(collision: MeshRef, mtime: float) -> AssetGeometry:
+@dataclass(frozen=True)
+class FileVersion:
+    """One version of a file: its path, size and modification time (ns)."""
+
+    path: Path
+    size: int
+    mtime_ns: int
+
+    @classmethod
+    def of(cls, path: str | os.PathLike) -> FileVersion:
+        st = Path(path).stat()
+        return cls(Path(path), st.st_size, st.st_mtime_ns)
+
+
+def _read_only(value):
+    """``value`` with every NumPy array in it (tuples, lists, dataclass fields) read-only."""
+    if isinstance(value, np.ndarray):
+        value.flags.writeable = False
+    elif isinstance(value, tuple | list):
+        for v in value:
+            _read_only(v)
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        for f in dataclasses.fields(value):
+            _read_only(getattr(value, f.name))
+    return value
+
+
+class FileCache:
+    """Values computed from files, each kept under a key that holds the :class:`FileVersion`
+    of every file it was read from: an edited file is read again, an unchanged one costs a
+    ``stat``. Values are shared, so their arrays are made read-only. Least recently used
+    values go beyond ``maxsize``."""
+
+    def __init__(self, maxsize: int = 1024):
+        self.maxsize = maxsize
+        self._values: collections.OrderedDict = collections.OrderedDict()
+
+    def get(self, key: tuple, compute: Callable[[], Any]) -> Any:
+        """The value under ``key``, computed (once) by ``compute`` when missing."""
+        if key in self._values:
+            self._values.move_to_end(key)
+            return self._values[key]
+        value = self._values[key] = _read_only(compute())
+        while len(self._values) > self.maxsize:
+            self._values.popitem(last=False)
+        return value
+
+    def clear(self) -> None:
+        self._values.clear()
+
+
+ASSET_FILES = FileCache()  # this process's values read from asset files (URDFs, meshes)
+
+
+def _geometry(collision: MeshRef) -> AssetGeometry:
     parts = []
     volume = 0.0
     for part in _load_parts(collision):
@@ -294,8 +349,6 @@ def _geometry_cached(collision: MeshRef, mtime: float) -> AssetGeometry:
             continue
         parts.append(verts)
         try:
-            from scipy.spatial import ConvexHull
-
             volume += float(ConvexHull(verts).volume)
         except Exception:  # a flat part has no volume; it still collides
             pass
@@ -315,20 +368,17 @@ def _geometry_cached(collision: MeshRef, mtime: float) -> AssetGeometry:
     return AssetGeometry(vertices, tuple(parts), volume)
 
 
-@functools.lru_cache(maxsize=256)
-def _visual_checked(visual: MeshRef, mtime: float) -> None:
-    _load_parts_checked(visual, collision=False)
-
-
 def check_visual_mesh(spec: AssetSpec) -> None:
     """The visual mesh loads and holds finite vertices (it is rendered as it is).
 
     Raises:
         LayoutError: naming the file and the first bad vertex.
     """
-    _visual_checked(spec.visual, spec.visual.path.stat().st_mtime)
+    key = ("visual checked", FileVersion.of(spec.visual.path), spec.visual)
+    ASSET_FILES.get(key, lambda: _load_parts_checked(spec.visual, collision=False) and True)
 
 
 def asset_geometry(spec: AssetSpec) -> AssetGeometry:
     """Collision geometry of an asset in its Z-up actor frame (cached per file version)."""
-    return _geometry_cached(spec.collision, spec.collision.path.stat().st_mtime)
+    key = ("geometry", FileVersion.of(spec.collision.path), spec.collision)
+    return ASSET_FILES.get(key, lambda: _geometry(spec.collision))

@@ -9,15 +9,15 @@ rejected the most candidates.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from embodied_envs.layout.assets import (
+    ASSET_FILES,
     AssetGeometry,
+    FileVersion,
     asset_geometry,
     convex_hull_2d,
     parse_urdf,
@@ -26,65 +26,61 @@ from embodied_envs.layout.assets import (
 from embodied_envs.layout.errors import PlacementError
 from embodied_envs.layout.limits import PlacementLimits
 from embodied_envs.layout.pose import LayoutPose, wrap_angle
-from embodied_envs.layout.schema import LayoutInfo
+from embodied_envs.layout.schema import MAX_INTERPENETRATION, REST_TOLERANCE, LayoutInfo
 
 SUPPORT_RELATIONS = ("ON", "IN", "INSIDE")
 
 
-@functools.lru_cache(maxsize=256)
-def _geometry_for(urdf: Path, stamp: tuple[float, float]) -> AssetGeometry:
-    return asset_geometry(_spec_for(urdf, stamp[0]))
+AssetKey = tuple[FileVersion, FileVersion]  # (URDF, collision mesh) of a node's asset
 
 
-@functools.lru_cache(maxsize=256)
-def _spec_for(urdf: Path, urdf_mtime: float):
-    return parse_urdf(urdf)
+def asset_key(layout: LayoutInfo, node: str) -> AssetKey:
+    """The versions of a node's URDF and collision mesh: the key of every value derived from
+    its geometry (``ASSET_FILES``), so an edited file is read again."""
+    urdf = FileVersion.of(urdf_path_for(layout.asset_base / layout.assets[node], node))
+    return urdf, FileVersion.of(_spec(urdf).collision.path)
 
 
-@functools.lru_cache(maxsize=1024)
-def _urdf_for(root: Path, asset: str, node: str) -> Path:
-    return urdf_path_for((root / asset).resolve(), node)
+def _spec(urdf: FileVersion):
+    return ASSET_FILES.get(("urdf", urdf), lambda: parse_urdf(urdf.path))
 
 
-def asset_key(layout: LayoutInfo, node: str) -> tuple[Path, tuple[float, float]]:
-    """(URDF path, (URDF, collision mesh) modification times) of a node's asset: the key of
-    every geometry cache, so a change of either file is re-read while unchanged ones cost two
-    ``stat`` calls."""
-    urdf = _urdf_for(layout.asset_base, layout.assets[node], node)
-    urdf_mtime = urdf.stat().st_mtime
-    collision = _spec_for(urdf, urdf_mtime).collision.path
-    return urdf, (urdf_mtime, collision.stat().st_mtime)
+def _geometry(key: AssetKey) -> AssetGeometry:
+    return asset_geometry(_spec(key[0]))
 
 
 def node_geometry(layout: LayoutInfo, node: str) -> AssetGeometry:
     """Collision geometry of a node's asset (parsed once per file version)."""
-    return _geometry_for(*asset_key(layout, node))
+    return _geometry(asset_key(layout, node))
 
 
-@functools.lru_cache(maxsize=256)
-def _footprint_cached(urdf: Path, stamp: tuple[float, float]) -> np.ndarray:
-    return _geometry_for(urdf, stamp).footprint()
+def _footprint(key: AssetKey) -> np.ndarray:
+    return ASSET_FILES.get(("footprint", key), lambda: _geometry(key).footprint())
 
 
-@functools.lru_cache(maxsize=256)
-def _bottom_cached(urdf: Path, stamp: tuple[float, float], percentile: float) -> float:
-    return float(np.percentile(_geometry_for(urdf, stamp).vertices[:, 2], percentile))
+def _bottom(key: AssetKey, percentile: float) -> float:
+    return ASSET_FILES.get(
+        ("bottom", key, percentile),
+        lambda: float(np.percentile(_geometry(key).vertices[:, 2], percentile)),
+    )
 
 
-@functools.lru_cache(maxsize=256)
-def _top_cached(urdf: Path, stamp: tuple[float, float], band: float, margin: float):
-    geom = _geometry_for(urdf, stamp)
-    hull = geom.top_hull(band)
-    try:
-        shrunk = shrink_polygon(hull, margin)
-    except ValueError:
-        shrunk = None
-    return hull, geom.max_z, shrunk
+def _top(key: AssetKey, band: float, margin: float):
+    def compute():
+        geom = _geometry(key)
+        hull = geom.top_hull(band)
+        try:
+            shrunk = shrink_polygon(hull, margin)
+        except ValueError:
+            shrunk = None
+        return hull, geom.max_z, shrunk
+
+    return ASSET_FILES.get(("top", key, band, margin), compute)
 
 
 def local_top(layout: LayoutInfo, node: str, band: float, margin: float):
     """The top of a node's asset in its own actor frame: ``(hull, top_z, shrunk hull or None)``."""
-    return _top_cached(*asset_key(layout, node), band, margin)
+    return _top(asset_key(layout, node), band, margin)
 
 
 def support_order(layout: LayoutInfo) -> list[tuple[str, str]]:
@@ -103,13 +99,13 @@ def support_order(layout: LayoutInfo) -> list[tuple[str, str]]:
     return order
 
 
-def _surface_at(key: tuple[Path, float], pose: LayoutPose, band: float, margin: float) -> Surface:
+def _surface_at(key: AssetKey, pose: LayoutPose, band: float, margin: float) -> Surface:
     """The top surface of an asset (``asset_key``) standing upright at ``pose`` (yaw only).
 
     Shrinking commutes with rotation and translation, so the shrunk hull is computed once per
     asset in its own frame.
     """
-    hull, top_z, shrunk = _top_cached(*key, band, margin)
+    hull, top_z, shrunk = _top(key, band, margin)
     rot = rotation_2d(np.float64(pose.yaw)).T
     xy = np.asarray(pose.p[:2])
     return Surface(
@@ -119,7 +115,7 @@ def _surface_at(key: tuple[Path, float], pose: LayoutPose, band: float, margin: 
 
 def node_footprint(layout: LayoutInfo, node: str) -> np.ndarray:
     """2D convex footprint ``(m, 2)`` of a node in its own actor frame (counter-clockwise)."""
-    return _footprint_cached(*asset_key(layout, node))
+    return _footprint(asset_key(layout, node))
 
 
 def polygon_area(poly: np.ndarray) -> float:
@@ -268,9 +264,9 @@ class _Placer:
         self.regions: dict[str, tuple] = {}  # parent -> (shrunk hull, normals, offsets)
         # resolve each node's asset once per call (file lookups are the slow part)
         self.keys = {n: asset_key(layout, n) for n in layout.object_nodes()}
-        self.foot = {n: _footprint_cached(*k) for n, k in self.keys.items()}
+        self.foot = {n: _footprint(k) for n, k in self.keys.items()}
         self.foot_normals = {n: edge_normals(f) for n, f in self.foot.items()}
-        self.min_z = {n: _geometry_for(*k).min_z for n, k in self.keys.items()}
+        self.min_z = {n: _geometry(k).min_z for n, k in self.keys.items()}
 
     def add_obstacle(self, node: str, poly: np.ndarray) -> None:
         """Record a placed footprint with its edge normals and bounding circle."""
@@ -391,7 +387,7 @@ class _Placer:
         )
         # 2. context: random yaw, centred, lowest point at z = 0
         ctx = layout.context
-        z0 = -_bottom_cached(*self.keys[ctx], lim.bottom_percentile)
+        z0 = -_bottom(self.keys[ctx], lim.bottom_percentile)
         ctx_pose = LayoutPose.from_xyz_yaw([0, 0, z0], rng.uniform(-np.pi, np.pi))
         self.poses[ctx] = ctx_pose
         surfaces = {ctx: _surface_at(self.keys[ctx], ctx_pose, lim.top_band, lim.hull_margin)}
@@ -447,8 +443,6 @@ def check_file_poses(layout: LayoutInfo) -> list[str]:
       between the parent's bottom and top; a ``FLOOR`` object on z = 0;
     - footprints of objects on the same parent overlap at most ``MAX_INTERPENETRATION`` deep.
     """
-    from embodied_envs.layout.schema import MAX_INTERPENETRATION, REST_TOLERANCE
-
     f = layout.source or "<layout>"
     tol = REST_TOLERANCE
     problems = []

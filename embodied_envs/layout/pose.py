@@ -71,7 +71,7 @@ class LayoutPose:
 
     def to_sapien(self):
         """A ``sapien.Pose`` (scalar-first quaternion)."""
-        import sapien
+        import sapien  # only for the simulator: layout commands start without SAPIEN
 
         return sapien.Pose(p=list(self.p), q=list(self.q_wxyz))
 

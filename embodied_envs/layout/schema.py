@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from embodied_envs.layout.assets import AssetSpec, node_stem, parse_urdf, urdf_path_for
+from embodied_envs.layout.assets import AssetSpec, parse_urdf, urdf_path_for
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE, LayoutPose
 from embodied_envs.paths import atomic_output
@@ -128,7 +128,7 @@ class LayoutInfo:
         Raises:
             LayoutError: listing every problem found.
         """
-        problems = _check_structure(data, _label(source))
+        problems = _check_structure(data, label(source))
         if problems:
             raise LayoutError(problems)
         data = copy.deepcopy(data)
@@ -192,7 +192,7 @@ def _relpath(target: Path, start: Path) -> str:
     return os.path.relpath(target, start)
 
 
-def _label(source: Path | str | None) -> str:
+def label(source: Path | str | None) -> str:
     return str(source) if source else "<layout>"
 
 
@@ -415,108 +415,3 @@ def _check_tree(data: dict, f: str) -> list[str]:
                 f' ["{node}", "ON"] under "{rel["context"]}" (or under an object on it).'
             )
     return problems
-
-
-def check_asset_files(info: LayoutInfo) -> list[str]:
-    """File checks: every asset folder exists and holds a loadable URDF with its meshes."""
-    from embodied_envs.layout.assets import asset_geometry, check_visual_mesh
-
-    f = _label(info.source)
-    problems = []
-    for node, cat in info.objs_mapping.items():
-        d = info.asset_dir(node)
-        if not d.is_dir():
-            problems.append(
-                f'{f}: assets["{node}"] folder {info.assets[node]} does not exist (looked at {d}).'
-                " Fix: make the path relative to the layout file's folder."
-            )
-            continue
-        if cat == "background":
-            continue
-        urdf = info.urdf_path(node)
-        if not urdf.is_file():
-            found = sorted(p.name for p in d.glob("*.urdf"))
-            problems.append(
-                f'{f}: assets["{node}"]: {node_stem(node)}.urdf not found in {d} (found {found}).'
-                " Fix: name the URDF after the node, spaces replaced by underscores."
-            )
-            continue
-        try:
-            spec = parse_urdf(urdf)
-            asset_geometry(spec)
-            check_visual_mesh(spec)
-        except LayoutError as e:
-            problems.extend(f'{f}: assets["{node}"]: {p}' for p in e.problems)
-    return problems
-
-
-class DuplicateKeyError(ValueError):
-    def __init__(self, key: str, values: tuple):
-        super().__init__(key)
-        self.key, self.values = key, values
-
-
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict:
-    out: dict = {}
-    for key, value in pairs:
-        if key in out:
-            raise DuplicateKeyError(key, (out[key], value))
-        out[key] = value
-    return out
-
-
-def load_layout(path: Path | str, check_files: bool = True, check_poses: bool = True) -> LayoutInfo:
-    """Read, parse and validate a layout file.
-
-    Args:
-        path: the ``layout.json``.
-        check_files: also check every asset folder and its URDF and meshes.
-        check_poses: with ``check_files``, also check that the file's own poses can be
-            simulated (``placement.check_file_poses``); off where every pose is re-drawn.
-
-    Returns:
-        The validated layout; its ``source`` and ``asset_root`` point at the file.
-
-    Raises:
-        LayoutError: naming the file, node and field of every problem found.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise LayoutError(f"{path}: layout file does not exist. Fix: check the path.")
-    try:
-        data = json.loads(path.read_text(), object_pairs_hook=_unique_keys)
-    except DuplicateKeyError as e:
-        raise LayoutError(
-            f'{path}: the key "{e.key}" appears twice in one JSON object (with values '
-            f"{e.values[0]!r} and {e.values[1]!r}); a JSON reader would silently keep the last."
-            " Fix: keep one."
-        ) from None
-    except json.JSONDecodeError as e:
-        raise LayoutError(
-            f"{path}: not valid JSON ({e.msg} at line {e.lineno}, column {e.colno})."
-            " Fix: repair the JSON syntax."
-        ) from e
-    except UnicodeDecodeError as e:
-        raise LayoutError(f"{path}: not a UTF-8 text file ({e}).") from e
-    try:
-        info = LayoutInfo.from_dict(data, source=path)
-    except LayoutError as e:
-        # report missing asset folders too, so that one run lists every problem
-        if check_files and isinstance(data, dict) and isinstance(data.get("assets"), dict):
-            for node, folder in data["assets"].items():
-                if isinstance(folder, str) and not (path.parent / folder).is_dir():
-                    e.problems.append(
-                        f'{path}: assets["{node}"] folder {folder} does not exist.'
-                        " Fix: make the path relative to the layout file's folder."
-                    )
-            raise LayoutError(e.problems) from None
-        raise
-    if check_files:
-        from embodied_envs.layout.placement import check_file_poses
-
-        problems = check_asset_files(info)
-        if not problems and check_poses:
-            problems = check_file_poses(info)
-        if problems:
-            raise LayoutError(problems)
-    return info

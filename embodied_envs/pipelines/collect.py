@@ -14,7 +14,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import shutil
 import tempfile
 import time
@@ -22,9 +21,14 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import gymnasium as gym
+from mani_skill.trajectory.merge_trajectory import merge_trajectories
+from mani_skill.utils.wrappers.record import RecordEpisode
+
+from embodied_envs.registration import ENV_ID
+from embodied_envs.solvers.pick_place import PickPlaceSolver
 from embodied_envs.workers import report, run
 
-ENV_ID = "PickEmbodiedGen-v1"
 SOURCE_DESC = (
     "embodied_envs PickPlaceSolver (embodied_envs/solvers/pick_place.py): mplib screw and "
     "RRTConnect joint plans, top-down grasp across the target's narrow side, carry to the goal, "
@@ -108,13 +112,6 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
     """One worker's block of seeds: one env recorded by ManiSkill's RecordEpisode into
     ``out_dir/name.h5``; a record per episode is reported (the parent's progress bar) and all
     are returned."""
-    os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
-    import gymnasium as gym
-    from mani_skill.utils.wrappers.record import RecordEpisode
-
-    import embodied_envs  # noqa: F401
-    from embodied_envs.solvers.pick_place import PickPlaceSolver
-
     env = gym.make(
         ENV_ID,
         **plan.env_kwargs,
@@ -177,8 +174,6 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
         CollectError: with ``only_success``, when the attempts run out before ``num``
             successes (nothing is written then).
     """
-    from mani_skill.trajectory.merge_trajectory import merge_trajectories
-
     layout = Path(plan.layout).resolve()
     target = out / layout.stem
     out.mkdir(parents=True, exist_ok=True)

@@ -38,8 +38,12 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import gymnasium as gym
+import imageio.v2 as imageio
+import matplotlib
 import numpy as np
 
+from embodied_envs.layout import load_layout
 from embodied_envs.paths import atomic_output
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 from embodied_envs.workers import WorkerError, run
@@ -47,6 +51,8 @@ from embodied_envs.workers import WorkerError, run
 BUILTIN_POLICIES = ("expert", "random", "zero")
 VIDEO_CHOICES = ("all", "fail", "none")
 WILSON_Z = 1.959963984540054  # two-sided 95% normal quantile
+matplotlib.use("Agg")  # files only, no display
+import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
 
 
 class EvalError(RuntimeError):
@@ -121,8 +127,6 @@ def wilson_interval(successes: int, n: int, z: float = WILSON_Z) -> tuple[float,
 
 
 def _has_splat(layout: str) -> bool:
-    from embodied_envs.layout import load_layout
-
     return load_layout(layout, check_poses=False).gs_model_path().is_file()
 
 
@@ -201,7 +205,7 @@ def load_policy(spec: str, env) -> Policy | None:
         made = factory(env) if takes_env else factory()
     except Exception as e:
         raise EvalError(f"--policy {spec}: the factory raised {type(e).__name__}: {e}") from None
-    import torch
+    import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
 
     reset = getattr(made, "reset", None)
     reset = reset if callable(reset) else None
@@ -252,10 +256,6 @@ class EpisodeRunner:
 
     def env(self, layout: str):
         if layout not in self.envs:
-            import gymnasium as gym
-
-            import embodied_envs  # noqa: F401  (registers the env id)
-
             render = self.plan.video != "none"
             env = gym.make(ENV_ID, **self.plan.env_make_kwargs(layout, render))
             self.envs[layout] = env
@@ -263,7 +263,7 @@ class EpisodeRunner:
         return self.envs[layout]
 
     def run(self, layout: str, seed: int, video_dir: Path | None) -> EpisodeResult:
-        import torch
+        import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
 
         env = self.env(layout)
         policy = self.policies[layout]
@@ -279,6 +279,7 @@ class EpisodeRunner:
         frame()
         steps, ret, fail = 0, 0.0, False
         if policy is None:  # the expert: the scripted solver steps the env itself
+            # the solver (torch, SAPIEN, mplib) only where the expert runs, not for --help
             from embodied_envs.solvers.pick_place import PickPlaceSolver
 
             tally = _Tally(env, frame)
@@ -323,7 +324,7 @@ class _Tally:
         return getattr(self.env, name)
 
     def step(self, action):
-        import torch
+        import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
 
         out = self.env.step(action)
         self.steps += 1
@@ -334,8 +335,6 @@ class _Tally:
 
 
 def write_video(frames: list[np.ndarray], path: Path) -> str:
-    import imageio.v2 as imageio
-
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_output(path) as tmp:
         imageio.mimwrite(tmp, frames, fps=CONTROL_FREQ, macro_block_size=1)
@@ -386,11 +385,6 @@ def summarize(plan: EvalPlan, results: list[EpisodeResult]) -> dict:
 
 def plot_summary(summary: dict, results: list[EpisodeResult], path: Path) -> None:
     """Success per layout with its interval, and the histogram of episode lengths."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     per = summary["per_layout"]
     names = [Path(lay).stem for lay in per]
     rates = [b["success_rate"] for b in per.values()]

@@ -131,8 +131,10 @@ class Shapes:
             verts.append(np.concatenate([p, np.repeat(p[-1:], size - len(p), 0)]))
             angles.append(np.concatenate([a, np.repeat(a[-1:], size - len(p))]))
 
-        def t(x, dtype=torch.float32):
-            return torch.as_tensor(np.asarray(x), dtype=dtype, device=device)
+        def t(x, dtype=torch.float32):  # copies: cached arrays are read-only
+            return torch.tensor(
+                np.array(x), dtype=dtype, device=device
+            )  # a copy: cached arrays are read-only
 
         vertices = t(verts)
         return cls(
@@ -302,7 +304,7 @@ class EpisodeSampler:
         ctx = self.context = base.context
 
         def t(x) -> torch.Tensor:
-            return torch.as_tensor(np.asarray(x), dtype=torch.float32, device=self.device)
+            return torch.tensor(np.array(x), dtype=torch.float32, device=self.device)
 
         order = support_order(base)
         parents = {parent for _, parent in order}
@@ -385,7 +387,7 @@ class EpisodeSampler:
         """A polygon in an asset's frame, posed per env (yaw and XY): ``(num_envs, m, 2)``."""
         yaw = torch.tensor([p.yaw for p in poses], dtype=torch.float32, device=self.device)
         xy = torch.tensor([p.p[:2] for p in poses], dtype=torch.float32, device=self.device)
-        poly = torch.as_tensor(local, dtype=torch.float32, device=self.device)
+        poly = torch.tensor(np.array(local), dtype=torch.float32, device=self.device)
         return rotate(poly, yaw) + xy[:, None]
 
     def _init_goals(self, base: LayoutInfo, ctx: str, ctx_poses, layouts) -> None:

@@ -14,6 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from mani_skill.utils import common
+from mani_skill.utils.geometry.rotation_conversions import (
+    matrix_to_euler_angles,
+    quaternion_invert,
+    quaternion_multiply,
+    quaternion_to_matrix,
+)
 
 
 def _root_pose_of_target(pin_model, qpos: np.ndarray, ee_index: int):
@@ -33,13 +40,6 @@ def ee_action(arm, target_p: np.ndarray, target_q: np.ndarray) -> tuple[torch.Te
         The action ``(1, d)`` and whether it had to be clipped (the target is farther than one
         step of the controller allows).
     """
-    from mani_skill.utils.geometry.rotation_conversions import (
-        matrix_to_euler_angles,
-        quaternion_invert,
-        quaternion_multiply,
-        quaternion_to_matrix,
-    )
-
     device = arm.device
     p = torch.as_tensor(target_p, dtype=torch.float32, device=device)[None]
     q = torch.as_tensor(target_q, dtype=torch.float32, device=device)[None]
@@ -79,8 +79,6 @@ def joint_pos_to_ee(
     Returns:
         The last step's info.
     """
-    from mani_skill.utils import common
-
     controller = env.unwrapped.agent.controller
     arm = controller.controllers["arm"]
     robot = env.unwrapped.agent.robot

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import mplib
 import numpy as np
 import sapien
 import torch
+import trimesh
 
-from embodied_envs.layout.assets import asset_geometry
+from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
 
 GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
@@ -68,8 +70,6 @@ class SolveResult:
 
 
 def _sample_surface(vertices_parts: tuple[np.ndarray, ...], n: int, rng: np.random.Generator):
-    import trimesh
-
     points = []
     per = max(n // max(len(vertices_parts), 1), 50)
     for verts in vertices_parts:
@@ -88,8 +88,6 @@ def grasp_frame(
     The closing direction is the narrow side of the minimum-area rectangle around the object's
     XY footprint; its sign is the one closest to the gripper's current closing axis.
     """
-    from embodied_envs.layout.assets import convex_hull_2d
-
     hull = convex_hull_2d(vertices_world[:, :2])
     best = None
     for i in range(len(hull)):
@@ -124,8 +122,6 @@ class PickPlaceSolver:
     """
 
     def __init__(self, env, config: SolverConfig | None = None, seed: int = 0):
-        import mplib
-
         self.env = env
         self.base = env.unwrapped
         self.cfg = config or SolverConfig()

@@ -48,7 +48,7 @@ def _rasterize_gsplat(
     splat: GaussianSplat, cameras: CameraBatch, background: tuple[float, float, float]
 ) -> SplatImage:
     """All cameras in one gsplat call; returns ``(C, H, W, ...)`` images."""
-    from gsplat import rasterization
+    from gsplat import rasterization  # an optional dependency (the gsplat extra)
 
     dev, c = splat.device, len(cameras)
     k = torch.zeros((c, 3, 3), dtype=torch.float32, device=dev)

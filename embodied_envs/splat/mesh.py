@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from embodied_envs.splat.model import GaussianSplat
 from embodied_envs.splat.sh import SH_C0
@@ -49,8 +50,6 @@ def _frames_to_quats_wxyz(normals: np.ndarray, rng: np.random.Generator) -> np.n
     t2 = np.cross(normals, t1)
     phi = rng.uniform(0.0, 2.0 * math.pi, len(normals))[:, None]
     a, b = np.cos(phi) * t1 + np.sin(phi) * t2, -np.sin(phi) * t1 + np.cos(phi) * t2
-    from scipy.spatial.transform import Rotation
-
     mats = np.stack([a, b, normals], axis=2)
     xyzw = Rotation.from_matrix(mats).as_quat()
     return xyzw[:, [3, 0, 1, 2]]

@@ -255,6 +255,7 @@ def read_ply(path: str | os.PathLike) -> GaussianSplat:
     Raises:
         SplatFileError: as :func:`read_ply_arrays`.
     """
+    # torch only here: checking a PLY (layout validate) is numpy-only and starts without it
     import torch
 
     from embodied_envs.splat.model import GaussianSplat

@@ -1,4 +1,5 @@
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -90,3 +91,47 @@ def test_editing_only_the_collision_mesh_is_seen_by_placement(scene_copy):
     os.utime(mesh, (later, later))
     after = polygon_area(node_footprint(layout, "mug"))
     assert after == pytest.approx(4 * before, rel=1e-6)
+
+
+def test_cached_geometry_is_read_only_and_keyed_on_size_too(scene_copy):
+    """The asset cache hands out shared arrays (read-only) and re-reads a file whose size
+    changed even when its modification time was put back."""
+    import os
+
+    from embodied_envs.layout.placement import node_footprint, node_geometry, polygon_area
+
+    layout = load_layout(scene_copy / "layouts" / "default.json")
+    foot = node_footprint(layout, "mug")
+    with pytest.raises(ValueError, match="read-only"):
+        foot[0, 0] = 1.0
+    with pytest.raises(ValueError, match="read-only"):
+        node_geometry(layout, "mug").vertices[0, 0] = 1.0
+    before = polygon_area(foot)
+    mesh = scene_copy / "assets" / "mug" / "mesh" / "mug_collision.obj"
+    stat = mesh.stat()
+    lines = [
+        "v " + " ".join(f"{3 * float(v):.9f}" for v in line.split()[1:4])
+        if line.startswith("v ") else line
+        for line in mesh.read_text().splitlines()
+    ]  # fmt: skip
+    mesh.write_text("\n".join(lines) + "\n")
+    os.utime(mesh, ns=(stat.st_atime_ns, stat.st_mtime_ns))  # the old time, a new size
+    assert mesh.stat().st_size != stat.st_size
+    assert polygon_area(node_footprint(layout, "mug")) == pytest.approx(9 * before, rel=1e-5)
+
+
+def test_a_urdf_pointing_to_another_mesh_is_seen(scene_copy):
+    """No stale URDF lookup: the collision mesh the URDF names now is the one used."""
+    from embodied_envs.layout.placement import node_footprint, polygon_area
+
+    layout = load_layout(scene_copy / "layouts" / "default.json")
+    mug = polygon_area(node_footprint(layout, "mug"))
+    box = polygon_area(node_footprint(layout, "cracker_box"))
+    urdf = scene_copy / "assets" / "mug" / "mug.urdf"
+    shutil.copy(
+        scene_copy / "assets" / "cracker_box" / "mesh" / "cracker_box_collision.obj",
+        scene_copy / "assets" / "mug" / "mesh" / "other.obj",
+    )
+    urdf.write_text(urdf.read_text().replace("mug_collision.obj", "other.obj"))
+    got = polygon_area(node_footprint(layout, "mug"))
+    assert got == pytest.approx(box, rel=1e-6) and got != pytest.approx(mug, rel=1e-3)

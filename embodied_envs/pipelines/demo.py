@@ -1,0 +1,215 @@
+"""The demo: the scripted solver on a layout, its episodes tiled into MP4 videos + a summary.
+
+On CPU each env runs in its own process (ManiSkill's CPU simulation holds one env per process).
+Env 0 uses the layout file's poses; env k > 0 uses ``place(layout, derive_seed(seed, k))``,
+written under the output folder (never beside the input), as on the GPU simulation.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import gymnasium as gym
+import imageio.v2 as imageio
+import numpy as np
+
+from embodied_envs.layout import load_layout
+from embodied_envs.layout.placement import derive_seed, place
+from embodied_envs.paths import atomic_output
+from embodied_envs.registration import CONTROL_FREQ, ENV_ID
+from embodied_envs.solvers import PickPlaceSolver
+from embodied_envs.workers import run
+
+
+@dataclass(frozen=True)
+class DemoPlan:
+    """What the demo runs.
+
+    Attributes:
+        layout: the layout file (absolute).
+        num_envs: envs shown side by side, each in its own process on CPU.
+        episodes: episodes per env; env k's episode e has seed ``seed + e * num_envs + k``.
+        seed: the first seed (and the placement seed of envs k > 0).
+        render_mode: ``hybrid`` or ``rgb_array``.
+        env_kwargs: further ``gym.make`` keywords (camera, config files).
+        frame_every: record every k-th control step.
+        workers: processes (None: min(envs, cores)).
+    """
+
+    layout: Path
+    num_envs: int = 1
+    episodes: int = 1
+    seed: int = 0
+    render_mode: str = "hybrid"
+    env_kwargs: dict = field(default_factory=dict)
+    frame_every: int = 2
+    workers: int | None = None
+
+
+@dataclass
+class EnvEpisode:
+    episode: int
+    env: int
+    seed: int
+    layout: str
+    success: bool
+    steps: int
+    plan_failures: list[str]
+    wall_time_s: float
+    frames: list = field(default_factory=list, repr=False)
+
+
+def _run_env(job: dict) -> list[EnvEpisode]:
+    """All episodes of one env (a process of its own when there are several)."""
+    env = gym.make(
+        ENV_ID,
+        **job["env_kwargs"],
+        layout_file=job["layout"],
+        replace_objs=False,
+        render_mode=job["render_mode"],
+        control_mode="pd_joint_pos",
+    )
+    out = []
+    every = job["frame_every"]
+    try:
+        for e, seed in enumerate(job["seeds"]):
+            t0 = time.perf_counter()
+            env.reset(seed=seed)
+            frames = [_frame(env)]
+            recorder = _Recorder(env, frames, every)
+            result = PickPlaceSolver(recorder, seed=seed).solve()
+            frames.append(_frame(env))
+            out.append(
+                EnvEpisode(
+                    episode=e,
+                    env=job["env"],
+                    seed=seed,
+                    layout=job["layout"],
+                    success=bool(result.success[0]),
+                    steps=result.steps,
+                    plan_failures=result.reports[0].plan_failures,
+                    wall_time_s=round(time.perf_counter() - t0, 3),
+                    frames=frames,
+                )
+            )
+    finally:
+        env.close()
+    return out
+
+
+def _frame(env) -> np.ndarray:
+    img = env.render()
+    img = img.cpu().numpy() if hasattr(img, "cpu") else np.asarray(img)
+    return img[0] if img.ndim == 4 else img
+
+
+class _Recorder:
+    """Passes steps through to the env and keeps every k-th rendered frame."""
+
+    def __init__(self, env, frames: list, every: int):
+        self.env, self.frames, self.every, self.t = env, frames, every, 0
+        self.unwrapped = env.unwrapped
+        self.action_space = env.action_space
+
+    def step(self, action):
+        res = self.env.step(action)
+        self.t += 1
+        if self.t % self.every == 0:
+            self.frames.append(_frame(self.env))
+        return res
+
+
+def tile(frames: list[np.ndarray]) -> np.ndarray:
+    """Tile equally sized frames into a near-square grid."""
+    n = len(frames)
+    cols = math.ceil(math.sqrt(n))
+    rows = math.ceil(n / cols)
+    h, w, c = frames[0].shape
+    grid = np.zeros((rows * h, cols * w, c), np.uint8)
+    for i, f in enumerate(frames):
+        r, col = divmod(i, cols)
+        grid[r * h : (r + 1) * h, col * w : (col + 1) * w] = f
+    return grid
+
+
+def write_video(path: Path, per_env_frames: list[list[np.ndarray]], fps: int) -> int:
+    """Tile the envs' frames over time (shorter episodes hold their last frame); returns #frames."""
+    n = max(len(f) for f in per_env_frames)
+    with (
+        atomic_output(path) as tmp,
+        imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7, macro_block_size=1) as w,
+    ):
+        for t in range(n):
+            w.append_data(tile([f[min(t, len(f) - 1)] for f in per_env_frames]))
+    return n
+
+
+def env_layouts(layout_path: Path, num_envs: int, seed: int, out: Path) -> list[str]:
+    """Env 0: the file itself; env k > 0: a placed variant written under ``out``."""
+    base = load_layout(layout_path)
+    paths = [str(layout_path.resolve())]
+    for k in range(1, num_envs):
+        placed = place(base, derive_seed(seed, k))
+        paths.append(str(placed.save(out / "layouts" / f"env{k}.json")))
+    return paths
+
+
+def run_demo(plan: DemoPlan, out: Path, progress: Callable[[int], None] | None = None) -> dict:
+    """Run the demo, write ``out/episode_XXX.mp4`` and ``out/summary.json``; the summary.
+
+    ``progress`` is called with the number of episodes each finished env ran.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    layouts = env_layouts(plan.layout, plan.num_envs, plan.seed, out)
+    jobs = [
+        dict(
+            env=k,
+            layout=layouts[k],
+            render_mode=plan.render_mode,
+            env_kwargs=plan.env_kwargs,
+            frame_every=plan.frame_every,
+            seeds=[plan.seed + e * plan.num_envs + k for e in range(plan.episodes)],
+        )
+        for k in range(plan.num_envs)
+    ]
+    t0 = time.perf_counter()
+    workers = 1 if plan.num_envs == 1 else plan.workers or min(plan.num_envs, os.cpu_count() or 1)
+    results = run(
+        _run_env,
+        [(job,) for job in jobs],
+        workers,
+        on_result=None if progress is None else lambda r: progress(len(r)),
+    )
+    fps = max(1, int(round(CONTROL_FREQ / plan.frame_every)))
+    summary = dict(
+        layout=str(plan.layout),
+        num_envs=plan.num_envs,
+        seed=plan.seed,
+        render_mode=plan.render_mode,
+        fps=fps,
+        episodes=[],
+    )
+    for e in range(plan.episodes):
+        eps = [results[k][e] for k in range(plan.num_envs)]
+        video = out / f"episode_{e:03d}.mp4"
+        n_frames = write_video(video, [ep.frames for ep in eps], fps)
+        envs = [{k: v for k, v in asdict(ep).items() if k != "frames"} for ep in eps]
+        summary["episodes"].append(
+            dict(
+                episode=e,
+                video=str(video),
+                frames=n_frames,
+                success_rate=float(np.mean([ep.success for ep in eps])),
+                envs=envs,
+            )
+        )
+    summary["wall_time_s"] = round(time.perf_counter() - t0, 2)
+    with atomic_output(out / "summary.json") as tmp:
+        tmp.write_text(json.dumps(summary, indent=2) + "\n")
+    return summary

@@ -1,0 +1,154 @@
+"""The package's dependency direction: which subpackages each one pulls in, no import cycles,
+and function-local imports only where they keep a command free of the simulator (said in a
+comment)."""
+
+import ast
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+PACKAGE = ROOT / "embodied_envs"
+# importing embodied_envs registers the env id: every import pulls in registration
+ALWAYS = {"registration"}
+# what importing each part may pull in (STYLE.md: layout -> scene -> envs -> solvers ->
+# pipelines -> cli; splat, paths, workers stand alone)
+ALLOWED = {
+    "paths": set(),
+    "workers": set(),
+    "registration": set(),
+    "splat": set(),
+    "layout": {"paths"},
+    "config": {"layout", "paths"},
+    "scene": {"layout", "paths"},
+    "envs": {"layout", "paths", "scene", "splat", "config"},
+    "solvers": {"layout", "paths"},
+    "pipelines": {"layout", "paths", "scene", "splat", "config", "envs", "solvers", "workers"},
+    "cli": {"layout", "paths", "splat", "config", "workers", "pipelines"},
+}
+HEAVY = ("torch", "sapien", "mani_skill")  # the simulator: not for --help or layout commands
+
+
+def imported_by(part: str) -> tuple[set[str], set[str]]:
+    code = (
+        "import importlib, json, sys\n"
+        f"importlib.import_module('embodied_envs.{part}')\n"
+        "print(json.dumps(sorted(sys.modules)))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT)  # fmt: skip
+    modules = json.loads(out.stdout.strip().splitlines()[-1])
+    parts = {m.split(".")[1] for m in modules if m.startswith("embodied_envs.")}
+    heavy = {h for h in HEAVY if h in modules}
+    return parts - {part} - ALWAYS, heavy
+
+
+@pytest.mark.parametrize("part", sorted(ALLOWED))
+def test_each_part_pulls_in_only_what_is_below_it(part):
+    parts, heavy = imported_by(part)
+    assert parts <= ALLOWED[part], f"{part} imports {sorted(parts - ALLOWED[part])}"
+    if part in ("paths", "workers", "registration", "splat", "layout", "config"):
+        assert not heavy, f"{part} imports {sorted(heavy)}"
+
+
+def test_the_command_line_starts_without_the_simulator():
+    _, heavy = imported_by("cli.main")
+    assert not heavy, heavy
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = list(rel.parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def package_imports(path: Path) -> set[str]:
+    """The package's modules a module imports, at the top or inside functions (a deferred
+    import is still a dependency), not in ``if TYPE_CHECKING`` blocks."""
+    tree = ast.parse(path.read_text())
+    skip = {
+        id(n)
+        for block in ast.walk(tree)
+        if isinstance(block, ast.If) and "TYPE_CHECKING" in ast.unparse(block.test)
+        for n in ast.walk(block)
+    }
+    found = set()
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            if node.module.startswith("embodied_envs"):
+                for alias in node.names:  # `from pkg import module` imports the module
+                    sub = f"{node.module}.{alias.name}"
+                    where = ROOT / sub.replace(".", "/")
+                    found.add(sub if where.with_suffix(".py").is_file() or where.is_dir()
+                              else node.module)  # fmt: skip
+        elif isinstance(node, ast.Import):
+            found |= {a.name for a in node.names if a.name.startswith("embodied_envs")}
+    return found
+
+
+def test_no_import_cycles_between_modules():
+    modules = {module_name(p): p for p in PACKAGE.rglob("*.py")}
+    graph = {m: {d for d in package_imports(p) if d in modules and d != m}
+             for m, p in modules.items()}  # fmt: skip
+    state: dict[str, int] = {}
+
+    def visit(m, stack):
+        state[m] = 1
+        for d in sorted(graph[m]):
+            if state.get(d) == 1:
+                cycle = stack[stack.index(d) :] + [d]
+                raise AssertionError(f"import cycle: {' -> '.join(cycle)}")
+            if d not in state:
+                visit(d, stack + [d])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [m])
+
+
+def says_why(line: str) -> bool:
+    """A comment with words beyond a linter's ``noqa`` code."""
+    comment = line.partition("#")[2]
+    words = re.sub(r"noqa(: *[A-Z]+[0-9]+(, *[A-Z]+[0-9]+)*)?", "", comment)
+    return any(c.isalpha() for c in words)
+
+
+def local_imports(path: Path):
+    """``(line, text)`` of every import inside a function, with whether a comment explains
+    it (on its line, or on a comment line right above the import block)."""
+    lines = path.read_text().splitlines()
+    tree = ast.parse(path.read_text())
+    for fn in ast.walk(tree):
+        if not isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        for node in ast.walk(fn):
+            if isinstance(node, ast.Import | ast.ImportFrom):
+                k = node.lineno - 1
+                explained = says_why(lines[k])
+                j = k - 1
+                while (
+                    not explained
+                    and j >= 0
+                    and lines[j].strip().startswith(("import ", "from ", "#", ")"))
+                    or (j >= 0 and lines[j].strip() == "" and j == k - 1)
+                ):
+                    explained = lines[j].strip().startswith("#") and says_why(lines[j])
+                    j -= 1
+                yield node.lineno, lines[k].strip(), explained
+
+
+def test_every_function_local_import_says_why():
+    unexplained = [
+        f"{p.relative_to(ROOT)}:{line}: {text}"
+        for p in sorted(PACKAGE.rglob("*.py"))
+        for line, text, explained in local_imports(p)
+        if not explained
+    ]
+    assert not unexplained, "\n".join(unexplained)
