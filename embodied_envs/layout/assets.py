@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
 from embodied_envs.layout.errors import LayoutError
@@ -251,6 +250,9 @@ def _load_parts(mesh: MeshRef) -> list:
 def _load_parts_checked(mesh: MeshRef, collision: bool = True):
     """The mesh file as one trimesh, refused when unreadable, empty or not finite; a heavy
     collision mesh is warned about once."""
+    # trimesh (0.4 s to import) only where a mesh is read: `embodied-envs --help` starts without
+    import trimesh
+
     try:
         loaded = trimesh.load(mesh.path, force="mesh", process=False, skip_materials=True)
     except Exception as e:  # trimesh raises many types for unreadable files

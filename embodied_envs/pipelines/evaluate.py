@@ -40,7 +40,6 @@ from pathlib import Path
 
 import gymnasium as gym
 import imageio.v2 as imageio
-import matplotlib
 import numpy as np
 
 from embodied_envs.layout import load_layout
@@ -51,8 +50,6 @@ from embodied_envs.workers import WorkerError, run
 BUILTIN_POLICIES = ("expert", "random", "zero")
 VIDEO_CHOICES = ("all", "fail", "none")
 WILSON_Z = 1.959963984540054  # two-sided 95% normal quantile
-matplotlib.use("Agg")  # files only, no display
-import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
 
 
 class EvalError(RuntimeError):
@@ -385,6 +382,12 @@ def summarize(plan: EvalPlan, results: list[EpisodeResult]) -> dict:
 
 def plot_summary(summary: dict, results: list[EpisodeResult], path: Path) -> None:
     """Success per layout with its interval, and the histogram of episode lengths."""
+    # matplotlib (0.2 s to import) only where a summary is plotted, not for `--help`
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only, no display
+    import matplotlib.pyplot as plt
+
     per = summary["per_layout"]
     names = [Path(lay).stem for lay in per]
     rates = [b["success_rate"] for b in per.values()]
