@@ -386,7 +386,7 @@ def plot_summary(summary: dict, results: list[EpisodeResult], path: Path) -> Non
     import matplotlib
 
     matplotlib.use("Agg")  # files only, no display
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # after choosing the backend
 
     per = summary["per_layout"]
     names = [Path(lay).stem for lay in per]
