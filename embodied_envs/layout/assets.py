@@ -292,14 +292,14 @@ _WARNED_HEAVY: set = set()
 class FileVersion:
     """One version of a file: its path, size and modification time (ns)."""
 
-    path: Path
+    path: str  # a string: keys are hashed and compared often
     size: int
     mtime_ns: int
 
     @classmethod
     def of(cls, path: str | os.PathLike) -> FileVersion:
-        st = Path(path).stat()
-        return cls(Path(path), st.st_size, st.st_mtime_ns)
+        st = os.stat(path)
+        return cls(os.fspath(path), st.st_size, st.st_mtime_ns)
 
 
 def _read_only(value):
@@ -380,7 +380,9 @@ def check_visual_mesh(spec: AssetSpec) -> None:
     ASSET_FILES.get(key, lambda: _load_parts_checked(spec.visual, collision=False) and True)
 
 
-def asset_geometry(spec: AssetSpec) -> AssetGeometry:
-    """Collision geometry of an asset in its Z-up actor frame (cached per file version)."""
-    key = ("geometry", FileVersion.of(spec.collision.path), spec.collision)
+def asset_geometry(spec: AssetSpec, version: FileVersion | None = None) -> AssetGeometry:
+    """Collision geometry of an asset in its Z-up actor frame (cached per file version;
+    ``version``: the collision mesh's, when the caller has just read it)."""
+    version = FileVersion.of(spec.collision.path) if version is None else version
+    key = ("geometry", version, spec.collision)
     return ASSET_FILES.get(key, lambda: _geometry(spec.collision))

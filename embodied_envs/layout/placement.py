@@ -10,7 +10,9 @@ rejected the most candidates.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -20,8 +22,8 @@ from embodied_envs.layout.assets import (
     FileVersion,
     asset_geometry,
     convex_hull_2d,
+    node_stem,
     parse_urdf,
-    urdf_path_for,
 )
 from embodied_envs.layout.errors import PlacementError
 from embodied_envs.layout.limits import PlacementLimits
@@ -37,16 +39,17 @@ AssetKey = tuple[FileVersion, FileVersion]  # (URDF, collision mesh) of a node's
 def asset_key(layout: LayoutInfo, node: str) -> AssetKey:
     """The versions of a node's URDF and collision mesh: the key of every value derived from
     its geometry (``ASSET_FILES``), so an edited file is read again."""
-    urdf = FileVersion.of(urdf_path_for(layout.asset_base / layout.assets[node], node))
+    folder = os.path.join(layout.asset_base, layout.assets[node])
+    urdf = FileVersion.of(os.path.join(folder, f"{node_stem(node)}.urdf"))
     return urdf, FileVersion.of(_spec(urdf).collision.path)
 
 
 def _spec(urdf: FileVersion):
-    return ASSET_FILES.get(("urdf", urdf), lambda: parse_urdf(urdf.path))
+    return ASSET_FILES.get(("urdf", urdf), lambda: parse_urdf(Path(urdf.path)))
 
 
 def _geometry(key: AssetKey) -> AssetGeometry:
-    return asset_geometry(_spec(key[0]))
+    return asset_geometry(_spec(key[0]), key[1])
 
 
 def node_geometry(layout: LayoutInfo, node: str) -> AssetGeometry:
