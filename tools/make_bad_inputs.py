@@ -285,9 +285,18 @@ def main() -> None:
     )
     write_case(
         "objects_cannot_be_placed",
-        "the target cannot be placed within an empty reach band",
+        "the target cannot be placed within a reach band beyond the table",
         "PlacementError",
         ["layout.json", "cannot place", "can", "m of the robot base"],
+        env_kwargs={"placement_limits": {"reach_min": 1.7, "reach_max": 1.95}},
+        validate=False,
+        layout=b,
+    )
+    write_case(
+        "empty_reach_band",
+        "an empty reach band is a range error before anything is placed",
+        "ValueError",
+        ["placement_limits.reach_max=0.3", "outside (0.3, 2.0]"],
         env_kwargs={"placement_limits": {"reach_min": 0.3, "reach_max": 0.3}},
         validate=False,
         layout=b,

@@ -6,7 +6,7 @@ import argparse
 import os
 from pathlib import Path
 
-from embodied_envs.config import ConfigError, load_config
+from embodied_envs.config import MAX_IMAGE_SIDE, ConfigError, load_config
 
 
 def _parse(text: str, convert, what: str):
@@ -31,8 +31,6 @@ def seed_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"seed {value} is outside [0, 2**63)")
     return value
 
-
-MAX_IMAGE_SIDE = 8192  # pixels: larger images are refused (memory), not attempted
 
 
 def image_side(text: str) -> int:

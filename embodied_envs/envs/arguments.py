@@ -7,10 +7,13 @@ what it got and what is accepted, before the simulator sees the value.
 from __future__ import annotations
 
 import dataclasses
+import math
 import numbers
 
 import numpy as np
 import torch
+
+from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE
 
 MAX_SEED = 2**32 - 1  # ManiSkill seeds numpy RandomStates, which take seeds in [0, 2**32)
 
@@ -28,6 +31,48 @@ def dataclass_arg(cls, value, name: str):
             raise ValueError(f"{name}: unknown keys {unknown}; known: {sorted(known)}")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
     raise ValueError(f"{name} must be a dict of {cls.__name__} fields, got {type(value).__name__}")
+
+
+def check_flag(name: str, value) -> bool:
+    """A boolean keyword: True or False only (a YAML ``"false"`` string would be true)."""
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    raise ValueError(
+        f"{name}={value!r} must be True or False (in a config file: true/false, not a string)"
+    )
+
+
+def check_quaternion(name: str, value) -> tuple[float, float, float, float]:
+    """Four finite numbers (x, y, z, w) of unit norm within ``QUAT_NORM_TOLERANCE``."""
+    try:
+        q = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        q = ()
+    norm = math.sqrt(sum(v * v for v in q)) if len(q) == 4 else float("nan")
+    if len(q) != 4 or not all(map(math.isfinite, q)) or abs(norm - 1) > QUAT_NORM_TOLERANCE:
+        raise ValueError(
+            f"{name}={value!r} must be a unit quaternion (x, y, z, w) of 4 finite numbers, "
+            f"|q| within {QUAT_NORM_TOLERANCE} of 1"
+        )
+    return q
+
+
+RESET_OPTIONS = ("env_idx", "reconfigure")  # what reset(options=...) reads
+
+
+def check_reset_options(options) -> None:
+    """``reset(options=...)``: a dict of the known keys; ``reconfigure`` is a bool."""
+    if options is None:
+        return
+    if not isinstance(options, dict):
+        raise ValueError(f"reset(options={options!r}): options is a dict, e.g. {{'env_idx': [0]}}")
+    unknown = sorted(set(options) - set(RESET_OPTIONS))
+    if unknown:
+        raise ValueError(
+            f"reset(options=...): unknown keys {unknown}; known: {list(RESET_OPTIONS)}"
+        )
+    if "reconfigure" in options:
+        check_flag("reset(options=...): reconfigure", options["reconfigure"])
 
 
 def check_num_envs(num_envs, sim_backend: str) -> None:

@@ -20,7 +20,13 @@ from gymnasium.utils import seeding
 from mani_skill.envs.sapien_env import BaseEnv
 
 from embodied_envs.config import load_config, merge_config
-from embodied_envs.envs.arguments import check_action, check_env_idx, check_num_envs, check_seed
+from embodied_envs.envs.arguments import (
+    check_action,
+    check_env_idx,
+    check_num_envs,
+    check_reset_options,
+    check_seed,
+)
 
 
 def has_display() -> bool:
@@ -96,6 +102,7 @@ class CheckedEnv(BaseEnv):
     def reset(self, seed: int | list[int] | None = None, options: dict | None = None):
         self._check_open("reset")
         check_seed(seed, self.num_envs)
+        check_reset_options(options)
         options = check_env_idx(options, self.num_envs, self.device)
         if seed is not None:
             # gymnasium's own generator follows the reset seed too, as gymnasium's checker and

@@ -23,10 +23,11 @@ from embodied_envs.config import (
     CameraSpec,
     resolve_robot,
 )
-from embodied_envs.envs.arguments import dataclass_arg
+from embodied_envs.envs.arguments import check_flag, check_quaternion, dataclass_arg
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
 from embodied_envs.layout import GoalRegion, LayoutInfo, PlacementLimits, load_layout
+from embodied_envs.layout.limits import check_number
 from embodied_envs.layout.placement import place
 from embodied_envs.paths import default_layout
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID, MAX_EPISODE_STEPS
@@ -97,6 +98,12 @@ class PickEmbodiedGenEnv(CheckedEnv):
     base_camera_eye = (0.95, 0.0, 0.55)  # base_camera eye in the robot base frame, m
     base_camera_target = (0.30, 0.0, 0.0)  # base_camera target in the robot base frame, m
 
+    number_ranges = {  # numeric keywords: (low, high), checked before any simulation object
+        "robot_init_qpos_noise": (0.0, 0.5),  # rad, std of the arm joints' start noise
+        "objs_z_offset": (0.0, 0.1),  # m, objects start this far above their rest
+        "robot_z_offset": (0.0, 0.1),  # m, the robot base stands this far above its spot
+    }
+
     def __init__(
         self,
         *args,
@@ -125,6 +132,21 @@ class PickEmbodiedGenEnv(CheckedEnv):
         robot = resolve_robot(self.base_layout.robot, robot_uids, str(self.layout_file))
         self.placement_limits = dataclass_arg(PlacementLimits, placement_limits, "placement_limits")
         self.goal_region = dataclass_arg(GoalRegion, goal_region, "goal_region")
+        self.goal_region.check_reach(self.placement_limits)
+        for name, value in (
+            ("robot_init_qpos_noise", robot_init_qpos_noise),
+            ("objs_z_offset", objs_z_offset),
+            ("robot_z_offset", robot_z_offset),
+        ):
+            check_number(name, value, *self.number_ranges[name])
+        for name, value in (
+            ("replace_objs", replace_objs),
+            ("enable_grasp", enable_grasp),
+            ("hybrid_obs", hybrid_obs),
+            ("hybrid_depth_test", hybrid_depth_test),
+        ):
+            check_flag(name, value)
+        init_3dgs_quat = check_quaternion("init_3dgs_quat", init_3dgs_quat)
         self.replace_objs = bool(replace_objs)
         if self.replace_objs:  # an impossible layout fails here, not mid-simulation
             place(self.base_layout, 0, self.placement_limits)

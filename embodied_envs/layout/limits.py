@@ -9,35 +9,107 @@ same reach, kept :attr:`GoalRegion.inset` away from its edges. Both are set thro
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass
+
+
+def check_number(
+    where: str,
+    value,
+    lo: float,
+    hi: float,
+    *,
+    integer: bool = False,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> None:
+    """Refuse a value that is not a (finite) number in its range, naming it and the range.
+
+    Raises:
+        ValueError: ``where=value`` is not a number, not an integer when ``integer``, or
+            outside ``[lo, hi]`` (``(`` / ``)`` when open).
+    """
+    kind = "an integer" if integer else "a number"
+    ok_type = isinstance(value, numbers.Integral if integer else numbers.Real) and not isinstance(
+        value, bool
+    )
+    span = f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
+    if not ok_type:
+        raise ValueError(f"{where}={value!r} must be {kind} in {span}")
+    v = float(value)
+    if not (
+        math.isfinite(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+    ):
+        raise ValueError(f"{where}={value!r} is outside {span}. Fix: give {kind} in {span}")
 
 
 @dataclass(frozen=True)
 class PlacementLimits:
-    """Tunable limits of placement (per configuration and per episode)."""
+    """Tunable limits of placement (per configuration and per episode); each field's range
+    follows its comment and is checked on construction."""
 
-    reach_min: float = 0.20  # m, manipulated object centre to robot base, exclusive
-    reach_max: float = 0.78  # m, exclusive: the Panda's top-down grasps fail from ~0.80 m
-    max_heading_deg: float = 60.0  # manipulated objects within this angle of the robot heading
-    hull_margin: float = 0.02  # m, the parent's top hull is shrunk by this much
-    clearance: float = 0.01  # m, minimum gap between footprints
-    robot_footprint: float = 0.12  # m, side of the robot base's square footprint
-    top_band: float = 0.05  # m, vertices this close to the highest point form the top
-    bottom_percentile: float = 1.0  # the context's lowest point is this percentile of its z
-    floor_radius: float = 1.5  # m, FLOOR objects are placed within this distance of the origin
-    max_attempts: int = 4096  # candidates per object before giving up
-    batch: int = 96  # candidates drawn per vectorised batch
-    episode_candidates: int = 128  # per object and env in each per-episode draw (one batch)
+    reach_min: float = 0.20  # m in [0, 2), manipulated object centre to robot base, exclusive
+    reach_max: float = 0.78  # m in (reach_min, 2], exclusive: top-down grasps fail from ~0.80 m
+    max_heading_deg: float = 60.0  # in (0, 180]: manipulated objects within this of the heading
+    hull_margin: float = 0.02  # m in [0, 0.5], the parent's top hull is shrunk by this much
+    clearance: float = 0.01  # m in [0, 0.5], minimum gap between footprints
+    robot_footprint: float = 0.12  # m in (0, 1], side of the robot base's square footprint
+    top_band: float = 0.05  # m in (0, 0.5], vertices this close to the highest point: the top
+    bottom_percentile: float = 1.0  # in [0, 100]: the context's lowest point, a z percentile
+    floor_radius: float = 1.5  # m in (0, 20], FLOOR objects stand this close to the origin
+    max_attempts: int = 4096  # in [1, 1e6], candidates per object before giving up
+    batch: int = 96  # in [1, 1e5], candidates drawn per vectorised batch
+    episode_candidates: int = 128  # in [1, 4096], per object and env in each episode's draw
+
+    def __post_init__(self):
+        w = "placement_limits."
+        check_number(w + "reach_min", self.reach_min, 0.0, 2.0, hi_open=True)
+        check_number(w + "reach_max", self.reach_max, float(self.reach_min), 2.0, lo_open=True)
+        check_number(w + "max_heading_deg", self.max_heading_deg, 0.0, 180.0, lo_open=True)
+        check_number(w + "hull_margin", self.hull_margin, 0.0, 0.5)
+        check_number(w + "clearance", self.clearance, 0.0, 0.5)
+        check_number(w + "robot_footprint", self.robot_footprint, 0.0, 1.0, lo_open=True)
+        check_number(w + "top_band", self.top_band, 0.0, 0.5, lo_open=True)
+        check_number(w + "bottom_percentile", self.bottom_percentile, 0.0, 100.0)
+        check_number(w + "floor_radius", self.floor_radius, 0.0, 20.0, lo_open=True)
+        check_number(w + "max_attempts", self.max_attempts, 1, 1_000_000, integer=True)
+        check_number(w + "batch", self.batch, 1, 100_000, integer=True)
+        check_number(w + "episode_candidates", self.episode_candidates, 1, 4096, integer=True)
 
 
 @dataclass(frozen=True)
 class GoalRegion:
     """Where goals are drawn: above the table top, inside the robot's reach."""
 
-    inset: float = 0.10  # m kept from both ends of the reach band (a held object reaches past)
-    margin: float = 0.05  # m inside the table top's hull
-    height: tuple[float, float] = (0.05, 0.25)  # m above the table top
-    candidates: int = 64  # per env in each draw; the region fills >= ~20% of their box
+    inset: float = 0.10  # m in [0, 1), kept from both ends of the reach band
+    margin: float = 0.05  # m in [0, 0.5], inside the table top's hull
+    height: tuple[float, float] = (0.05, 0.25)  # m above the table top, 0 <= low <= high <= 1
+    candidates: int = 64  # in [1, 1e5], per env in each draw (the region fills >= ~20%)
+
+    def __post_init__(self):
+        check_number("goal_region.inset", self.inset, 0.0, 1.0, hi_open=True)
+        check_number("goal_region.margin", self.margin, 0.0, 0.5)
+        check_number("goal_region.candidates", self.candidates, 1, 100_000, integer=True)
+        h = self.height
+        if not isinstance(h, tuple | list) or len(h) != 2:
+            raise ValueError(f"goal_region.height={h!r} must be [low, high] in metres")
+        check_number("goal_region.height[0]", h[0], 0.0, 1.0)
+        check_number("goal_region.height[1]", h[1], float(h[0]), 1.0)
+
+    def check_reach(self, limits: PlacementLimits) -> None:
+        """The goal band (the reach band shrunk by ``inset``) must be non-empty.
+
+        Raises:
+            ValueError: naming both settings.
+        """
+        lo, hi = self.distance_band(limits)
+        if lo >= hi:
+            raise ValueError(
+                f"goal_region.inset={self.inset} leaves no goal band of the reach "
+                f"[{limits.reach_min}, {limits.reach_max}] m ({lo:.3f} >= {hi:.3f}). Fix: a "
+                "smaller inset, or a wider placement_limits reach"
+            )
 
     def distance_band(self, limits: PlacementLimits) -> tuple[float, float]:
         """Goal distances from the robot base: the reach band shrunk by ``inset`` at both ends."""

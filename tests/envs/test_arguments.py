@@ -1,6 +1,8 @@
 """Runtime arguments (seeds, env_idx, actions, num_envs, a closed env) fail with messages that
 name the argument and what is accepted, before the simulator sees them."""
 
+import time
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -89,3 +91,48 @@ def test_several_envs_without_cuda_point_to_the_async_vector_env():
         gym.make(ENV_ID, num_envs=2, sim_backend="physx_cpu")
     with pytest.raises(ValueError, match="num_envs=0 must be a positive integer"):
         gym.make(ENV_ID, num_envs=0)
+
+
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        (dict(placement_limits=dict(batch=0)), ["placement_limits.batch=0", "[1, 100000]"]),
+        (dict(placement_limits=dict(reach_min=0.7, reach_max=0.4)), ["reach_max=0.4"]),
+        (dict(placement_limits=dict(episode_candidates=2.5)), ["must be an integer"]),
+        (dict(goal_region=dict(height=[50, 51])), ["goal_region.height[0]=50", "[0.0, 1.0]"]),
+        (dict(goal_region=dict(height=[0.2, 0.1])), ["goal_region.height[1]=0.1"]),
+        (dict(goal_region=dict(inset=-0.1)), ["goal_region.inset=-0.1"]),
+        (dict(goal_region=dict(inset=0.4)), ["leaves no goal band"]),
+        (dict(robot_init_qpos_noise=1000), ["robot_init_qpos_noise=1000", "[0.0, 0.5]"]),
+        (dict(objs_z_offset=-1.0), ["objs_z_offset=-1.0"]),
+        (dict(robot_z_offset=float("nan")), ["robot_z_offset=nan"]),
+        (dict(init_3dgs_quat=(0, 0, 0, 0)), ["init_3dgs_quat", "unit quaternion"]),
+        (dict(init_3dgs_quat=(float("nan"), 0, 0, 1)), ["init_3dgs_quat", "unit quaternion"]),
+        (dict(replace_objs="false"), ["replace_objs='false'", "True or False"]),
+        (dict(hybrid_obs="no"), ["hybrid_obs='no'"]),
+        (dict(enable_grasp=[1] * 10), ["enable_grasp="]),
+        (dict(camera_cfg=dict(image_hw=[16384, 16384])), ["image_hw=[16384, 16384]", "8192"]),
+    ],
+)
+def test_numeric_and_flag_keywords_are_range_checked_before_simulation(kwargs, words):
+    t = time.perf_counter()
+    with pytest.raises(ValueError) as e:
+        gym.make(ENV_ID, **kwargs)
+    for w in words:
+        assert w in str(e.value), str(e.value)
+    assert time.perf_counter() - t < 5, "refused before the scene is built"
+
+
+@pytest.mark.parametrize(
+    "options, words",
+    [
+        (dict(reconfigure="no"), ["reconfigure='no'", "True or False"]),
+        (dict(reconfig=True), ["unknown keys ['reconfig']", "env_idx", "reconfigure"]),
+        ("reconfigure", ["options is a dict"]),
+    ],
+)
+def test_reset_options_are_checked(env, options, words):
+    with pytest.raises(ValueError) as e:
+        env.reset(seed=0, options=options)
+    for w in words:
+        assert w in str(e.value), str(e.value)
