@@ -40,6 +40,7 @@ SUPPORTED_ROBOTS = sorted(set(ROBOT_REGISTRY.values()))
 # init_3dgs_quat's default (x y z w): +90 deg about x, turning a splat stored Y-up (as 3DGS and
 # EmbodiedGen store them) Z-up; applied before the layout's background pose
 SPLAT_Y_UP_TO_Z_UP = (0.7071, 0.0, 0.0, 0.7071)
+MAX_SEED = 2**32 - 1  # ManiSkill seeds NumPy RandomStates, which take seeds in [0, 2**32)
 MAX_IMAGE_SIDE = 8192  # pixels a side of any rendered image: larger ones are refused (memory)
 
 
@@ -98,8 +99,7 @@ class CameraSpec:
         if math.dist(eye, target) < 1e-6:
             raise ValueError("camera_cfg: camera_eye equals camera_target_pt. Fix: move the eye.")
         if len(hw) != 2 or not all(
-            isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_IMAGE_SIDE
-            for v in hw
+            isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_IMAGE_SIDE for v in hw
         ):
             raise ValueError(
                 f"camera_cfg: image_hw={list(hw)} must be two integers [height, width] in "

@@ -6,7 +6,7 @@ import argparse
 import os
 from pathlib import Path
 
-from embodied_envs.config import MAX_IMAGE_SIDE, ConfigError, load_config
+from embodied_envs.config import MAX_IMAGE_SIDE, MAX_SEED, ConfigError, load_config
 
 
 def _parse(text: str, convert, what: str):
@@ -25,12 +25,21 @@ def positive_int(text: str) -> int:
 
 
 def seed_int(text: str) -> int:
-    """A seed: an integer in [0, 2**63)."""
+    """A seed: an integer in [0, MAX_SEED] (ManiSkill's episode seeds)."""
     value = _parse(text, int, "an integer seed")
-    if not 0 <= value < 2**63:
-        raise argparse.ArgumentTypeError(f"seed {value} is outside [0, 2**63)")
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"seed {value} is outside [0, {MAX_SEED}]")
     return value
 
+
+def check_seed_span(first: int, count: int, what: str) -> None:
+    """Every seed a command will use, ``first .. first + count - 1``, is a valid seed."""
+    last = first + count - 1
+    if last > MAX_SEED:
+        raise SystemExit(
+            f"error: --seed {first} with {count} {what} reaches seed {last}, over {MAX_SEED}. "
+            f"Fix: --seed {MAX_SEED - count + 1} or lower"
+        )
 
 
 def image_side(text: str) -> int:

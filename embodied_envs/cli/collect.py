@@ -9,6 +9,7 @@ from tqdm import tqdm
 
 from embodied_envs.cli.args import (
     add_config_argument,
+    check_seed_span,
     env_config,
     positive_int,
     seed_int,
@@ -72,8 +73,15 @@ def cmd_collect(args) -> int:
     layouts = [p.resolve() for p in (args.layout or [default_layout()])]
     for path in layouts:
         load_layout(path)  # bad input fails here, before any simulation
-    writable_dir(args.out)
     workers = args.workers or 1
+    # the seeds every worker will use (the same for every layout) are valid seeds
+    blocks = CollectPlan(
+        layout="", num=args.num, seed=args.seed, only_success=args.only_success,
+        max_attempts=args.max_attempts, workers=workers,
+    ).blocks()  # fmt: skip
+    last = max(s for seeds, _ in blocks for s in seeds)
+    check_seed_span(args.seed, last - args.seed + 1, "episode seeds")
+    writable_dir(args.out)
     if workers > (os.cpu_count() or 1):
         print(f"note: --workers {workers} is more than this machine's {os.cpu_count()} cores")
     failed = 0

@@ -13,6 +13,7 @@ from tqdm import tqdm
 
 from embodied_envs.cli.args import (
     add_config_argument,
+    check_seed_span,
     env_config,
     image_side,
     positive_int,
@@ -88,6 +89,7 @@ def cmd_demo(args) -> int:
     )
     CameraSpec.from_cfg(env_kwargs["camera_cfg"])  # a bad camera fails before any output
     load_layout(layout_path)  # bad input fails here, before any simulation
+    check_seed_span(args.seed, args.num_envs * args.episodes, "env episodes")
     plan = DemoPlan(
         layout=layout_path,
         num_envs=args.num_envs,

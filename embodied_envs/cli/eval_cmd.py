@@ -9,6 +9,7 @@ from tqdm import tqdm
 
 from embodied_envs.cli.args import (
     add_config_argument,
+    check_seed_span,
     env_config,
     positive_int,
     seed_int,
@@ -80,6 +81,7 @@ def cmd_eval(args) -> int:
         raise SystemExit(
             f"error: --policy expert drives pd_joint_pos, not --control-mode {args.control_mode}"
         )
+    check_seed_span(args.seed, args.episodes, "episodes")
     writable_dir(args.out)
     if args.workers > (os.cpu_count() or 1):
         print(f"note: --workers {args.workers} is more than this machine's {os.cpu_count()} cores")

@@ -13,9 +13,8 @@ import numbers
 import numpy as np
 import torch
 
+from embodied_envs.config import MAX_SEED
 from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE
-
-MAX_SEED = 2**32 - 1  # ManiSkill seeds numpy RandomStates, which take seeds in [0, 2**32)
 
 
 def dataclass_arg(cls, value, name: str):

@@ -107,7 +107,14 @@ def test_impossible_only_success_target_ends_with_a_clear_error(tmp_path):
 def test_bad_arguments_fail_in_one_line_before_simulation(tmp_path):
     for args, words in (
         (["collect", "--num", "0"], "0 is not a positive integer"),
-        (["collect", "--seed", "-5"], "seed -5 is outside [0, 2**63)"),
+        (["collect", "--seed", "-5"], "seed -5 is outside [0, 4294967295]"),
+        (["collect", "--seed", str(2**32)], "seed 4294967296 is outside [0, 4294967295]"),
+        (["collect", "--seed", str(2**32 - 2), "--num", "3"], "reaches seed 4294967296"),
+        (
+            ["eval", "--policy", "zero", "--seed", str(2**32 - 1), "--episodes", "2"],
+            "Fix: --seed 4294967294 or lower",
+        ),
+        (["demo", "--seed", str(2**32 - 1), "--num-envs", "2"], "reaches seed 4294967296"),
         (["collect", "--layout", "missing.json"], "missing.json"),
     ):
         res = run(args + ["--out", "out"], tmp_path, check=False)
