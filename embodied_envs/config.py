@@ -18,9 +18,11 @@ import copy
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+import stat
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -123,21 +125,79 @@ class ConfigError(ValueError):
     """A config file that cannot be used; names the file, the key and the fix."""
 
 
+MAX_CONFIG_BYTES = 1 << 20  # a config file holds a few keywords: larger files are refused
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """PyYAML's safe loader without aliases (``*a`` expands without bound) and without
+    duplicate keys (YAML would keep the last one silently)."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise ConfigError(
+                f"line {event.start_mark.line + 1}: the alias *{event.anchor} is refused "
+                "(aliases can expand without bound). Fix: write the value out"
+            )
+        return super().compose_node(parent, index)
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise ConfigError(
+                    f"line {key_node.start_mark.line + 1}: the key {key!r} appears twice in one "
+                    "mapping; YAML would silently keep the last. Fix: keep one"
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _unique_json_keys(pairs: list) -> dict:
+    out: dict = {}
+    for key, value in pairs:
+        if key in out:
+            raise ConfigError(f"the key {key!r} appears twice in one object. Fix: keep one")
+        out[key] = value
+    return out
+
+
 def read_config_file(path: str | os.PathLike) -> dict:
-    """One config file (``.yaml``/``.yml`` or ``.json``) as a dict.
+    """One config file (``.yaml``/``.yml`` or ``.json``) as a dict: a regular file of at most
+    ``MAX_CONFIG_BYTES``, without YAML aliases or repeated keys.
 
     Raises:
-        ConfigError: unreadable, not YAML/JSON, or not a mapping at the top.
+        ConfigError: unreadable, not a regular file, too large, not YAML/JSON, aliases or
+            repeated keys, or not a mapping at the top.
     """
     path = Path(path)
     try:
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            raise ConfigError(
+                f"{path}: not a regular file (a device, FIFO or folder). Fix: give a YAML or "
+                "JSON file"
+            )
+        if st.st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(
+                f"{path}: {st.st_size:,} bytes, over the {MAX_CONFIG_BYTES:,} bytes a config "
+                "file may hold. Fix: keep only env keywords in it"
+            )
         text = path.read_text()
     except OSError as e:
         raise ConfigError(f"{path}: cannot read the config file ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a UTF-8 text file") from None
+    kind = "JSON" if path.suffix.lower() == ".json" else "YAML"
     try:
-        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
-    except (json.JSONDecodeError, yaml.YAMLError) as e:
-        kind = "JSON" if path.suffix.lower() == ".json" else "YAML"
+        if kind == "JSON":
+            data = json.loads(text, object_pairs_hook=_unique_json_keys)
+        else:
+            data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506  (a safe loader)
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}") from None
+    except (json.JSONDecodeError, yaml.YAMLError, RecursionError) as e:
         raise ConfigError(f"{path}: not valid {kind}: {e}") from None
     if data is None:
         return {}
@@ -187,13 +247,17 @@ def merge_config(base: Mapping, override: Mapping) -> dict:
 
 
 def load_config(
-    paths: str | os.PathLike | Sequence[str | os.PathLike] | None, known: Sequence[str]
+    paths: str | os.PathLike | Sequence[str | os.PathLike] | None,
+    known: Sequence[str],
+    check: Callable[[str, Any], None] | None = None,
 ) -> dict:
     """Merge config files in order (later overrides earlier), checking every key.
 
     Args:
         paths: one file or a list; None gives ``{}``.
         known: accepted top-level keys (the env's: ``PickEmbodiedGenEnv.keywords()``).
+        check: ``check(key, value)`` raises ``ValueError`` for a value of the wrong type or
+            range (the env's: ``PickEmbodiedGenEnv.check_keyword``); named with the file.
 
     Raises:
         ConfigError: naming the file and the key.
@@ -206,5 +270,11 @@ def load_config(
     for path in paths:
         data = read_config_file(path)
         check_config_keys(data, known, str(path))
+        for key, value in data.items():
+            try:
+                if check is not None:
+                    check(key, value)
+            except ValueError as e:
+                raise ConfigError(f"{path}: {e}") from None
         merged = merge_config(merged, data)
     return merged

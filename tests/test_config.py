@@ -69,6 +69,65 @@ def test_bad_files_name_the_file_and_the_key(tmp_path, text, words):
         assert w in message
 
 
+def env_config_of(path):
+    return load_config([path], PickEmbodiedGenEnv.keywords(), PickEmbodiedGenEnv.check_keyword)
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ('replace_objs: "false"\n', ["replace_objs='false'", "True or False", "not a string"]),
+        ("hybrid_obs: yes please\n", ["hybrid_obs='yes please'"]),
+        ('robot_init_qpos_noise: "0.1"\n', ["robot_init_qpos_noise='0.1' must be float"]),
+        ("robot_init_qpos_noise: 1000\n", ["robot_init_qpos_noise=1000", "[0.0, 0.5]"]),
+        ("reconfiguration_freq: 1.5\n", ["reconfiguration_freq=1.5 must be int or None"]),
+        ("obs_mode: 3\n", ["obs_mode=3 must be"]),
+        ("placement_limits: {batch: 0}\n", ["placement_limits.batch=0", "[1, 100000]"]),
+        ("goal_region: {height: [50, 60]}\n", ["goal_region.height[0]=50"]),
+        ("camera_cfg: {image_hw: [16384, 16384]}\n", ["image_hw=[16384, 16384]", "8192"]),
+        ("init_3dgs_quat: [0, 0, 0, 0]\n", ["init_3dgs_quat", "unit quaternion"]),
+        ("enable_grasp: &a [1, 2]\nhybrid_obs: *a\n", ["line 2", "alias *a is refused"]),
+        ("obs_mode: state\nobs_mode: rgb\n", ["line 2", "'obs_mode' appears twice"]),
+    ],
+)  # fmt: skip
+def test_values_are_checked_by_type_and_range_naming_the_file(tmp_path, text, words):
+    path = write(tmp_path / "bad.yaml", text)
+    with pytest.raises(ConfigError) as e:
+        env_config_of(path)
+    assert str(e.value).startswith(str(path)), str(e.value)
+    for w in words:
+        assert w in str(e.value), str(e.value)
+
+
+def test_only_small_regular_files_are_read(tmp_path):
+    import os
+    import time
+
+    fifo = tmp_path / "fifo.yaml"
+    os.mkfifo(fifo)  # reading would block until a writer comes
+    big = write(tmp_path / "big.yaml", "# " + "x" * (2 << 20) + "\n")
+    dup = write(tmp_path / "dup.json", '{"obs_mode": "state", "obs_mode": "rgb"}')
+    for path, words in (
+        ("/dev/zero", "not a regular file"),
+        (fifo, "not a regular file"),
+        (big, "over the 1,048,576 bytes"),
+        (dup, "'obs_mode' appears twice"),
+    ):
+        t = time.perf_counter()
+        with pytest.raises(ConfigError) as e:
+            env_config_of(path)
+        assert str(e.value).startswith(str(path)) and words in str(e.value), str(e.value)
+        assert time.perf_counter() - t < 2
+
+
+def test_a_bad_config_value_is_one_line_from_the_cli(tmp_path, capsys):
+    path = write(tmp_path / "c.yaml", 'replace_objs: "false"\n')
+    code = main(["eval", "--policy", "zero", "--config", str(path), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1 and str(path) in err and "replace_objs" in err
+    assert not (tmp_path / "o").exists()
+
+
 def test_the_known_keys_are_the_envs_keywords(tmp_path):
     path = write(tmp_path / "c.yaml", "num_env: 2\n")
     with pytest.raises(ConfigError) as e:

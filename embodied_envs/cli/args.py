@@ -96,7 +96,7 @@ def env_config(paths: list[Path] | None, owned: dict[str, str]) -> dict:
     # the env class (torch, SAPIEN) only for commands that run it, not for --help
     from embodied_envs.envs.pick_embodiedgen import PickEmbodiedGenEnv
 
-    config = load_config(paths, PickEmbodiedGenEnv.keywords())
+    config = load_config(paths, PickEmbodiedGenEnv.keywords(), PickEmbodiedGenEnv.check_keyword)
     taken = sorted(set(config) & set(owned))
     if taken:
         key = taken[0]

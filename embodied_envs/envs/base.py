@@ -11,7 +11,10 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import numbers
 import os
+import types
+import typing
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +26,7 @@ from embodied_envs.config import load_config, merge_config
 from embodied_envs.envs.arguments import (
     check_action,
     check_env_idx,
+    check_flag,
     check_num_envs,
     check_reset_options,
     check_seed,
@@ -74,13 +78,38 @@ class CheckedEnv(BaseEnv):
         return tuple(sorted(names - {"self"}))
 
     @classmethod
+    def keyword_types(cls) -> dict:
+        """Each keyword's annotation (the subclass's where several classes declare one)."""
+        hints: dict = {}
+        for klass in reversed(cls.__mro__):
+            if "__init__" in vars(klass) and issubclass(klass, BaseEnv):
+                hints.update(typing.get_type_hints(klass.__init__))
+        hints.pop("return", None)
+        return hints
+
+    @classmethod
+    def check_keyword(cls, name: str, value) -> None:
+        """Refuse a keyword value whose type does not fit the constructor's annotation (a
+        boolean is a boolean, not a string that reads "false"). Subclasses add ranges.
+
+        Raises:
+            ValueError: naming the keyword, the value and the expected type.
+        """
+        hint = cls.keyword_types().get(name)
+        if hint is bool:
+            check_flag(name, value)
+        elif hint is not None and not value_fits(value, hint):
+            raise ValueError(f"{name}={value!r} must be {describe_type(hint)}")
+
+    @classmethod
     def env_kwargs(cls, config=None, **kwargs) -> dict:
         """The env's keywords: the ``config`` files merged in order, then ``kwargs`` over them.
 
         Raises:
-            embodied_envs.config.ConfigError: a file that cannot be read, or an unknown key.
+            embodied_envs.config.ConfigError: a file that cannot be read, an unknown key, or a
+                value of the wrong type or range (naming the file and the key).
         """
-        return merge_config(load_config(config, cls.keywords()), kwargs)
+        return merge_config(load_config(config, cls.keywords(), cls.check_keyword), kwargs)
 
     def _reconfigure(self, options: dict | None = None):
         options = {} if options is None else options
@@ -136,3 +165,44 @@ class CheckedEnv(BaseEnv):
             name: {k: v.clone() for k, v in params.items()}
             for name, params in super().get_sensor_params().items()
         }
+
+
+def value_fits(value, hint) -> bool:
+    """Whether a config value (YAML/JSON: None, bool, numbers, str, lists, dicts) fits a type
+    annotation; annotations it cannot judge (classes YAML cannot make) fit nothing but their
+    instances, and ``Any`` fits everything."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is typing.Any:
+        return True
+    if origin in (typing.Union, types.UnionType):
+        return any(value_fits(value, a) for a in args)
+    if hint is type(None):
+        return value is None
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+    if hint is float:
+        return isinstance(value, numbers.Real) and not isinstance(value, bool)
+    if origin in (tuple, list) or hint in (tuple, list):
+        if not isinstance(value, list | tuple):
+            return False
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            return len(value) == len(args) and all(map(value_fits, value, args))
+        return all(value_fits(v, args[0]) for v in value) if args else True
+    if origin in (dict, typing.Mapping) or hint in (dict, dict):
+        return isinstance(value, dict)
+    if hint is os.PathLike:
+        return isinstance(value, os.PathLike)
+    return isinstance(hint, type) and isinstance(value, hint)
+
+
+def describe_type(hint) -> str:
+    """A type annotation in words: ``bool``, ``float``, ``str or None``, ..."""
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return " or ".join(describe_type(a) for a in typing.get_args(hint))
+    if hint is type(None):
+        return "None"
+    if isinstance(hint, type) and not typing.get_args(hint):
+        return {"dict": "a mapping", "str": "a string"}.get(hint.__name__, hint.__name__)
+    return str(hint).replace("typing.", "")

@@ -104,6 +104,21 @@ class PickEmbodiedGenEnv(CheckedEnv):
         "robot_z_offset": (0.0, 0.1),  # m, the robot base stands this far above its spot
     }
 
+    @classmethod
+    def check_keyword(cls, name: str, value) -> None:
+        """A keyword's type (``CheckedEnv``) and range, checked as ``__init__`` checks it."""
+        super().check_keyword(name, value)
+        if name in cls.number_ranges:
+            check_number(name, value, *cls.number_ranges[name])
+        elif name == "placement_limits":
+            dataclass_arg(PlacementLimits, value, name)
+        elif name == "goal_region":
+            dataclass_arg(GoalRegion, value, name)
+        elif name == "camera_cfg":
+            CameraSpec.from_cfg(value)
+        elif name == "init_3dgs_quat":
+            check_quaternion(name, value)
+
     def __init__(
         self,
         *args,
