@@ -104,8 +104,8 @@ class CameraSpec:
             isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_IMAGE_SIDE for v in hw
         ):
             raise ValueError(
-                f"camera_cfg: image_hw={list(hw)} must be two integers [height, width] in "
-                f"[1, {MAX_IMAGE_SIDE}] (larger images are refused: memory)"
+                f"camera_cfg: image_hw={list(hw)} must be two positive integers [height, width] "
+                f"of at most {MAX_IMAGE_SIDE} px (larger images are refused: memory)"
             )
         if not 0 < fovy < 180:
             raise ValueError(f"camera_cfg: fovy_deg={fovy} must be in (0, 180)")

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
-import queue as queue_module
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -101,14 +100,13 @@ def run(
         finally:
             _report = previous
     ctx = mp.get_context(context)
-    progress = ctx.Queue() if on_progress is not None else None
+    # a SimpleQueue writes in the task's own thread: a task's reports are in the pipe before
+    # its result is sent, so the last drain sees them all (a Queue's feeder thread may lag)
+    progress = ctx.SimpleQueue() if on_progress is not None else None
 
     def drain() -> None:
-        while progress is not None:
-            try:
-                on_progress(progress.get_nowait())
-            except queue_module.Empty:
-                return
+        while progress is not None and not progress.empty():
+            on_progress(progress.get())
 
     pool = ProcessPoolExecutor(
         min(workers, max(1, len(tasks))),
