@@ -84,7 +84,7 @@ def env_config_of(path):
         ("obs_mode: 3\n", ["obs_mode=3 must be"]),
         ("placement_limits: {batch: 0}\n", ["placement_limits.batch=0", "[1, 100000]"]),
         ("goal_region: {height: [50, 60]}\n", ["goal_region.height[0]=50"]),
-        ("camera_cfg: {image_hw: [16384, 16384]}\n", ["image_hw=[16384, 16384]", "at most 8192 px"]),
+        ("camera_cfg: {image_hw: [16384, 16384]}\n", ["[16384, 16384]", "at most 8192 px"]),
         ("init_3dgs_quat: [0, 0, 0, 0]\n", ["init_3dgs_quat", "unit quaternion"]),
         ("enable_grasp: &a [1, 2]\nhybrid_obs: *a\n", ["line 2", "alias *a is refused"]),
         ("obs_mode: state\nobs_mode: rgb\n", ["line 2", "'obs_mode' appears twice"]),
