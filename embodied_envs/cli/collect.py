@@ -67,7 +67,7 @@ def add_parser(sub) -> None:
 
 def cmd_collect(args) -> int:
     # the pipeline imports the simulator: only when the command runs, not for --help
-    from embodied_envs.pipelines.collect import CollectError, CollectPlan, collect
+    from embodied_envs.pipelines.collect import CollectError, CollectPlan, owned_output
 
     config = env_config(args.config, OWNED_KEYS)
     layouts = [p.resolve() for p in (args.layout or [default_layout()])]
@@ -84,31 +84,44 @@ def cmd_collect(args) -> int:
     writable_dir(args.out)
     if workers > (os.cpu_count() or 1):
         print(f"note: --workers {workers} is more than this machine's {os.cpu_count()} cores")
-    failed = 0
-    for path in layouts:
-        plan = CollectPlan(
-            layout=str(path),
-            num=args.num,
-            seed=args.seed,
-            obs_mode=args.obs_mode,
-            hybrid_obs=args.hybrid_obs,
-            only_success=args.only_success,
-            max_attempts=args.max_attempts,
-            workers=workers,
-            video=args.video,
-            env_kwargs=config,
-        )
-        with tqdm(total=plan.attempts(), desc=path.stem, unit="episode") as bar:
-            try:
-                s = collect(plan, args.out, progress=lambda r: bar.update(1))
-            except CollectError as e:
-                bar.close()
-                print(f"error: {e}")
-                failed += 1
-                continue
-        print(
-            f"{path.name}: {s.kept} demonstrations ({s.successes}/{s.attempted} successful, "
-            f"{s.success_rate:.0%}), mean {s.steps_mean:.0f} steps, {s.wall_time_s:.0f} s -> "
-            f"{args.out / path.stem}"
-        )
+    try:
+        with owned_output(args.out):  # one run writes to --out at a time
+            failed = 0
+            for path in layouts:
+                failed += not _collect_one(path, args, workers, config)
+    except CollectError as e:
+        print(f"error: {e}")
+        return 1
     return 1 if failed else 0
+
+
+def _collect_one(path, args, workers: int, config: dict) -> bool:
+    """One layout's dataset; False (after one error line) when it could not be made."""
+    # the pipeline imports the simulator: only when the command runs, not for --help
+    from embodied_envs.pipelines.collect import CollectError, CollectPlan, collect
+
+    plan = CollectPlan(
+        layout=str(path),
+        num=args.num,
+        seed=args.seed,
+        obs_mode=args.obs_mode,
+        hybrid_obs=args.hybrid_obs,
+        only_success=args.only_success,
+        max_attempts=args.max_attempts,
+        workers=workers,
+        video=args.video,
+        env_kwargs=config,
+    )
+    with tqdm(total=plan.attempts(), desc=path.stem, unit="episode") as bar:
+        try:
+            s = collect(plan, args.out, progress=lambda r: bar.update(1))
+        except CollectError as e:
+            bar.close()
+            print(f"error: {e}")
+            return False
+    print(
+        f"{path.name}: {s.kept} demonstrations ({s.successes}/{s.attempted} successful, "
+        f"{s.success_rate:.0%}), mean {s.steps_mean:.0f} steps, {s.wall_time_s:.0f} s -> "
+        f"{args.out / path.stem}"
+    )
+    return True

@@ -11,9 +11,12 @@ collects a disjoint block of seeds into its own file, and the blocks are merged 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import fcntl
 import json
 import math
+import os
 import shutil
 import tempfile
 import time
@@ -159,6 +162,60 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
     return records
 
 
+WORK_PREFIX = ".collect-"  # work folders in --out while a dataset is being made
+_HELD: dict[str, tuple[int, int]] = {}  # folders this process holds: path -> (fd, depth)
+
+
+@contextlib.contextmanager
+def owned_output(out: Path):
+    """Hold ``out`` for this process: an exclusive ``flock`` on the folder itself, refused at
+    once while another run holds it (re-entrant within a process). Once held, the work folders
+    of runs that were killed (``WORK_PREFIX``) are removed.
+
+    Raises:
+        CollectError: another run is writing to ``out``.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    key = str(out.resolve())
+    if key in _HELD:
+        fd, depth = _HELD[key]
+        _HELD[key] = (fd, depth + 1)
+        try:
+            yield
+        finally:
+            _HELD[key] = (fd, depth)
+        return
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise CollectError(
+                f"{out} is being written by another embodied-envs collect. Fix: wait for it to "
+                "end, or give this run its own --out"
+            ) from None
+        for stale in out.glob(f"{WORK_PREFIX}*"):  # no run holds them: killed runs' leftovers
+            shutil.rmtree(stale, ignore_errors=True)
+        _HELD[key] = (fd, 1)
+        try:
+            yield
+        finally:
+            del _HELD[key]
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def describe_dataset(folder: Path) -> str:
+    """A dataset folder in words: its layout and episode seeds, as far as they can be read."""
+    try:
+        meta = json.loads((folder / "trajectory.json").read_text())
+        seeds = [e["episode_seed"] for e in meta["episodes"]]
+        layout = meta["env_info"]["env_kwargs"].get("layout_file")
+        return f"a dataset of {layout} (episode seeds {min(seeds)}-{max(seeds)})"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "files this run did not write"
+
+
 def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
     """Collect one layout's dataset into ``out/<layout stem>/``.
 
@@ -172,19 +229,27 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
 
     Raises:
         CollectError: with ``only_success``, when the attempts run out before ``num``
-            successes (nothing is written then).
+            successes (nothing is written then); ``out`` is held by another run; or
+            ``out/<layout stem>`` exists already (a run never replaces a dataset it did not
+            write).
     """
     layout = Path(plan.layout).resolve()
     target = out / layout.stem
     out.mkdir(parents=True, exist_ok=True)
-    if (target / "trajectory.json").exists():
-        info = json.loads((target / "trajectory.json").read_text())["env_info"]
-        if info["env_kwargs"].get("layout_file") != str(layout):
+    with owned_output(out):
+        if target.exists():
             raise CollectError(
-                f"{target} holds a dataset of {info['env_kwargs'].get('layout_file')}, not of "
-                f"{layout}. Fix: choose another --out, or remove that folder."
+                f"{target} already holds {describe_dataset(target)}; this run would replace it. "
+                "Fix: collect each shard (--seed range) into its own --out and join them with "
+                "python -m mani_skill.trajectory.merge_trajectory, or remove that folder."
             )
-    work = Path(tempfile.mkdtemp(prefix=f".{layout.stem}.", dir=out))
+        return _collect_into(plan, layout, out, target, progress)
+
+
+def _collect_into(plan: CollectPlan, layout: Path, out: Path, target: Path, progress):
+    """``collect``'s work, with ``out`` held: the dataset is made in a work folder and renamed
+    to ``target`` when complete."""
+    work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{layout.stem}.", dir=out))
     t0 = time.perf_counter()
     try:
         layout_plan = dataclasses.replace(plan, layout=str(layout))
@@ -233,9 +298,7 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
             (work / name).replace(staging / name)
         for video in sorted(work.glob("seed_*.mp4")):
             video.replace(staging / video.name)
-        if target.exists():  # the same layout's earlier dataset: replaced whole
-            shutil.rmtree(target)
-        staging.replace(target)
+        staging.rename(target)  # a folder that appeared meanwhile is not replaced
         return summary
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -89,3 +89,46 @@ def test_variants_of_another_layout_are_not_replaced(tmp_path, scene_copy, capsy
     assert snapshot(out) == before
     # the same layout again is fine: its own variants are re-written
     assert main(["layout", "generate", str(DEFAULT_LAYOUT), "--num", "2", "--out", str(out)]) == 0
+
+
+def collect_cmd(out, *extra):
+    return [*CLI, "collect", "--num", "1", "--out", str(out), *extra]
+
+
+def test_one_collect_at_a_time_per_out_and_no_dataset_replaced(tmp_path):
+    """A second run into a held --out is refused at once; a finished dataset is never
+    replaced by another shard; the first run's dataset is whole."""
+    out = tmp_path / "out"
+    env = {**os.environ, "MS_SKIP_ASSET_DOWNLOAD_PROMPT": "1"}
+    first = subprocess.Popen(collect_cmd(out, "--num", "8"), env=env, text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    deadline = time.time() + 120
+    while not list(out.glob(".collect-*")) and time.time() < deadline:
+        time.sleep(0.1)
+    assert list(out.glob(".collect-*")), "the first run is working"
+    t = time.time()
+    second = subprocess.run(collect_cmd(out, "--seed", "100"), env=env, capture_output=True,
+                            text=True, timeout=120)  # fmt: skip
+    assert second.returncode == 1 and time.time() - t < 30
+    assert first.poll() is None, "refused while the first run works, not after it"
+    assert "being written by another embodied-envs collect" in second.stdout
+    stdout, _ = first.communicate(timeout=300)
+    assert first.returncode == 0 and "default.json: 8 demonstrations" in stdout
+    before = snapshot(out)
+    shard = subprocess.run(collect_cmd(out, "--seed", "100"), env=env, capture_output=True,
+                           text=True, timeout=300)  # fmt: skip
+    assert shard.returncode == 1
+    assert "already holds a dataset of" in shard.stdout and "episode seeds 0-7" in shard.stdout
+    assert "merge_trajectory" in shard.stdout
+    assert snapshot(out) == before, "the first dataset is untouched"
+
+
+def test_a_killed_runs_work_folder_is_removed_by_the_next_run(tmp_path):
+    out = tmp_path / "out"
+    stale = out / ".collect-default.dead"
+    stale.mkdir(parents=True)
+    (stale / "part000.h5").write_bytes(b"half a file")
+    env = {**os.environ, "MS_SKIP_ASSET_DOWNLOAD_PROMPT": "1"}
+    res = subprocess.run(collect_cmd(out), env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["default"]
