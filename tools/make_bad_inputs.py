@@ -301,6 +301,40 @@ def main() -> None:
         validate=False,
         layout=b,
     )
+    # the robot's own pose: the task would be silently impossible
+    table = b["position"]["table"]
+    for name, what, xyz, words in (
+        (
+            "robot_floating",
+            "the robot base 3 m above the table top",
+            [None, None, 3.76],
+            ["franka", "z = 3.760", "+3.000 m from the top", "set its z to 0.760"],
+        ),
+        (
+            "robot_under_floor",
+            "the robot base under the floor",
+            [None, None, -0.5],
+            ["franka", "z = -0.500", "set its z to 0.760"],
+        ),
+        (
+            "robot_inside_table",
+            "the robot base in the middle of the table top",
+            [table[0], table[1], None],
+            ["franka", "inside the edge", "move it to the table's edge"],
+        ),
+        (
+            "robot_away_from_table",
+            "the robot base 1.5 m from the table",
+            [table[0] - 1.5, table[1], None],
+            ["franka", "outside the edge"],
+        ),
+    ):
+
+        def move(d, xyz=xyz):
+            pos = d["position"]["franka"]
+            pos[:3] = [old if new is None else new for old, new in zip(pos[:3], xyz, strict=True)]
+
+        write_case(name, what, "LayoutError", ["layout.json", *words], layout=mutated(move))
     # JSON that would silently lose data
     text = json.dumps(b, indent=2)
     mug = json.dumps(b["position"]["mug"])

@@ -494,7 +494,44 @@ def check_file_poses(layout: LayoutInfo) -> list[str]:
                             f"overlap by more than {MAX_INTERPENETRATION} m. Fix: move them "
                             "apart, or pass replace_objs=True."
                         )
+    problems += _check_robot_pose(layout, world)
     return problems
+
+
+ROBOT_REST_TOLERANCE = 0.05  # m, the robot base's height off the top of its table
+ROBOT_EDGE_DISTANCE = 0.25  # m, the robot base's distance from the table top's edge
+
+
+def _check_robot_pose(layout: LayoutInfo, world: dict[str, np.ndarray]) -> list[str]:
+    """The robot stands on its table's edge at the top's height (as EmbodiedGen and
+    ``place`` put it): not floating, not sunk into the table or under the floor, not away from
+    the table, where the task would be silently impossible."""
+    ctx = layout.context
+    if ctx not in world:
+        return []
+    top = top_surface(world[ctx], PlacementLimits().top_band)
+    robot = layout.pose(layout.robot)
+    where = f'{layout.source or "<layout>"}: position["{layout.robot}"]'
+    z = float(robot.p[2])
+    if abs(z - top.z) > ROBOT_REST_TOLERANCE:
+        return [
+            f"{where}: the robot base is at z = {z:.3f} m, {z - top.z:+.3f} m from the top of "
+            f'"{ctx}" (z = {top.z:.3f}); it must stand at the top\'s height (within '
+            f"{ROBOT_REST_TOLERANCE} m) on its edge. Fix: set its z to {top.z:.3f}, or let "
+            "`embodied-envs layout generate` place it."
+        ]
+    if len(top.hull) < 3:
+        return []
+    normals, offsets = half_planes(top.hull)
+    inward = float((normals @ np.asarray(robot.p[:2]) - offsets).min())  # < 0: outside
+    if abs(inward) > ROBOT_EDGE_DISTANCE:
+        side = "inside" if inward > 0 else "outside"
+        return [
+            f"{where}: the robot base is {abs(inward):.3f} m {side} the edge of the top of "
+            f'"{ctx}"; it must stand on the edge (within {ROBOT_EDGE_DISTANCE} m). Fix: move '
+            "it to the table's edge, or let `embodied-envs layout generate` place it."
+        ]
+    return []
 
 
 def place(
