@@ -9,6 +9,7 @@ import sys
 from embodied_envs.cli import collect, demo, eval_cmd, layout_cmds, replay, splat_cmds
 from embodied_envs.config import ConfigError
 from embodied_envs.layout import LayoutError, PlacementError
+from embodied_envs.pipelines.datasets import DatasetError
 from embodied_envs.splat import SplatFileError
 from embodied_envs.workers import WorkerError
 
@@ -31,11 +32,14 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["replay"]:  # every option after it is ManiSkill's replay_trajectory's
-        return replay.cmd_replay(argparse.Namespace(options=argv[1:]))
-    args = build_parser().parse_args(argv)
+        args = argparse.Namespace(options=argv[1:], func=replay.cmd_replay)
+    else:
+        args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ConfigError, LayoutError, PlacementError, SplatFileError, WorkerError) as e:
+    except (
+        ConfigError, DatasetError, LayoutError, PlacementError, SplatFileError, WorkerError
+    ) as e:  # fmt: skip
         print(f"error: {e}", file=sys.stderr)
         return 1
     except OSError as e:  # a full disk, a read-only folder, a vanished file: one line

@@ -29,10 +29,14 @@ def cmd_replay(args) -> int:
     from mani_skill.trajectory import replay_trajectory
     from mani_skill.trajectory.utils.actions import conversion
 
+    from embodied_envs.pipelines.datasets import check_replayable
     from embodied_envs.solvers.ee_actions import joint_pos_to_ee
 
+    options = replay_trajectory.parse_args(args.options or ["--help"])
+    for note in check_replayable(options.traj_path):  # a dataset that cannot replay: one line
+        print(note)
     # ManiSkill's replay_trajectory takes no converter argument and looks its end-effector
     # converter up as a module global: ours (root-frame actions) is set for this call only
     with mock.patch.object(conversion, "from_pd_joint_pos_to_ee", joint_pos_to_ee):
-        replay_trajectory.main(replay_trajectory.parse_args(args.options or ["--help"]))
+        replay_trajectory.main(options)
     return 0

@@ -28,6 +28,8 @@ import gymnasium as gym
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
 from mani_skill.utils.wrappers.record import RecordEpisode
 
+from embodied_envs.paths import atomic_output
+from embodied_envs.pipelines.datasets import RECORD_KEY, scene_record
 from embodied_envs.registration import ENV_ID
 from embodied_envs.solvers.pick_place import PickPlaceSolver
 from embodied_envs.workers import report, run
@@ -276,6 +278,11 @@ def _collect_into(plan: CollectPlan, layout: Path, out: Path, target: Path, prog
         parts = sorted(work.glob("part*.h5"))
         staged = work / "trajectory.h5"
         merge_trajectories(str(staged), [str(p) for p in parts])
+        meta_path = staged.with_suffix(".json")
+        meta = json.loads(meta_path.read_text())
+        meta[RECORD_KEY] = scene_record(layout)  # replay checks the scene is unchanged
+        with atomic_output(meta_path) as tmp:
+            tmp.write_text(json.dumps(meta, indent=2))
         steps = [r.steps for r in kept] or [0]
         summary = LayoutSummary(
             layout=str(layout),

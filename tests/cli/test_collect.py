@@ -188,3 +188,54 @@ def test_shards_on_disjoint_seeds_merge_with_maniskill(dataset, tmp_path):
         str(tmp_path / "all" / "trajectory.h5"), load_count=-1, success_only=False
     )
     assert len(data) == sum(e["elapsed_steps"] for e in merged["episodes"])
+
+
+def test_replay_refuses_broken_datasets_in_one_line(dataset, tmp_path, scene_copy):
+    """Corrupt files, an unknown env id, a deleted layout: one line naming the file, exit 1,
+    before ManiSkill opens anything; a changed scene is said before replaying."""
+    meta = json.loads((dataset / "trajectory.json").read_text())
+    assert len(meta["embodied_envs"]["layout_sha256"]) == 64, "collect records the scene"
+
+    def copy(name, edit_meta=None, h5=None):
+        folder = tmp_path / name
+        shutil.copytree(dataset, folder, ignore=shutil.ignore_patterns("*.*.*"))
+        if edit_meta is not None:
+            m = json.loads((folder / "trajectory.json").read_text())
+            edit_meta(m)
+            (folder / "trajectory.json").write_text(json.dumps(m))
+        if h5 is not None:
+            (folder / "trajectory.h5").write_bytes(h5)
+        return folder / "trajectory.h5"
+
+    def set_env_id(m):
+        m["env_info"]["env_id"] = "NoSuchEnv-v9"
+
+    def set_layout(m):
+        m["env_info"]["env_kwargs"]["layout_file"] = str(tmp_path / "gone" / "layout.json")
+
+    cases = [
+        (copy("corrupt", h5=b"not hdf5 at all"), "not a readable HDF5 trajectory file"),
+        (copy("env_id", set_env_id), "'NoSuchEnv-v9' is not a registered env"),
+        (copy("layout", set_layout), "does not exist any more"),
+        (tmp_path / "missing" / "trajectory.h5", "no such trajectory file"),
+    ]
+    (tmp_path / "nojson").mkdir()
+    shutil.copy(dataset / "trajectory.h5", tmp_path / "nojson" / "trajectory.h5")
+    cases.append((tmp_path / "nojson" / "trajectory.h5", "missing; ManiSkill's replay needs"))
+    for h5, words in cases:
+        res = run(["replay", "--traj-path", str(h5), "-o", "state"], tmp_path, check=False)
+        err = res.stderr.strip().splitlines()
+        assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+        assert words in err[-1] and str(h5.parent) in err[-1], err
+
+    # a dataset of a copied scene whose mug mesh then changed: replay says so first
+    layout = scene_copy / "layouts" / "default.json"
+
+    def to_copy(m):
+        m["env_info"]["env_kwargs"]["layout_file"] = str(layout)
+
+    h5 = copy("changed", to_copy)
+    mesh = scene_copy / "assets" / "mug" / "mesh" / "mug.obj"
+    mesh.write_text(mesh.read_text() + "\n# edited\n")
+    res = run(["replay", "--traj-path", str(h5), "-o", "state", "-n", "1"], tmp_path, check=False)
+    assert "or its asset files changed since this dataset was recorded" in res.stdout
