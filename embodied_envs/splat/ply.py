@@ -111,6 +111,7 @@ def _read_header(path: Path, data: bytes) -> tuple[list[tuple[str, int, list]], 
 
 
 MAX_SCALE = 1e3  # m: a Gaussian larger than this is a corrupt value, not a scene part
+MAX_MEAN = 1e4  # m: a Gaussian centred farther from the origin is a corrupt value
 
 
 def read_ply_arrays(path: str | os.PathLike) -> dict[str, np.ndarray | None]:
@@ -124,7 +125,7 @@ def read_ply_arrays(path: str | os.PathLike) -> dict[str, np.ndarray | None]:
         SplatFileError: the file is missing, not binary little-endian, has no ``vertex``
             element, lacks a required property, has an SH property count that is not a degree
             0..3 one, is shorter than its header promises, holds no Gaussians, or holds a NaN,
-            a scale over ``MAX_SCALE`` or an all-zero quaternion.
+            a scale over ``MAX_SCALE``, a mean over ``MAX_MEAN`` or an all-zero quaternion.
     """
     path = Path(path)
     if not path.is_file():
@@ -229,6 +230,15 @@ def _check_values(path: Path, a: dict[str, np.ndarray | None]) -> None:
             f"{int(huge.sum())} Gaussians have a scale over {MAX_SCALE:g} m (first: vertex "
             f"{int(huge.nonzero()[0][0])}, scale exp({float(a['log_scales'][huge][0].max()):.3g}))",
             "scale_* are natural logs of metres in a 3DGS PLY; remove those Gaussians",
+        )
+    far = np.abs(a["means"]).max(1) > MAX_MEAN
+    if far.any():
+        first = int(far.nonzero()[0][0])
+        raise SplatFileError(
+            path,
+            f"{int(far.sum())} Gaussians lie over {MAX_MEAN:g} m from the origin (first: vertex "
+            f"{first}, x y z = {a['means'][first].tolist()})",
+            "x y z are metres in the splat's frame; remove those Gaussians or re-export the splat",
         )
     flat = np.linalg.norm(a["quats_wxyz"], axis=1) < 1e-8
     if flat.any():

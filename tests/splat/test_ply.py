@@ -201,6 +201,7 @@ def _rows(n):
         ("bad_count", "has count '-3', not a non-negative integer"),
         ("huge_scale", "have a scale over 1000 m (first: vertex 2"),
         ("zero_quaternion", "all-zero rotation quaternion (first: vertex 1"),
+        ("far_mean", "lie over 10000 m from the origin (first: vertex 3"),
     ],
 )
 def test_splats_that_parse_but_cannot_render_are_refused(tmp_path, change, words):
@@ -215,6 +216,8 @@ def test_splats_that_parse_but_cannot_render_are_refused(tmp_path, change, words
         rows[2, PROPS.index("scale_1")] = 50.0  # exp(50) m
     elif change == "zero_quaternion":
         rows[1, PROPS.index("rot_0")] = 0.0
+    elif change == "far_mean":
+        rows[3, PROPS.index("y")] = 1e30  # renders nothing: a black room
     path = write_raw(tmp_path / "bad.ply", PROPS, rows, **kw)
     with pytest.raises(SplatFileError) as e:
         read_ply(path)
