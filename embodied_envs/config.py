@@ -27,7 +27,7 @@ from typing import Any
 import yaml
 
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.limits import GoalRegion, PlacementLimits
+from embodied_envs.layout.limits import MAX_IMAGE_SIDE, GoalRegion, PlacementLimits
 
 # Layout robot names -> ManiSkill robot uids. An unknown name is an error unless the user
 # passes robot_uids explicitly (EmbodiedGen silently fell back to panda).
@@ -43,7 +43,6 @@ SUPPORTED_ROBOTS = sorted(set(ROBOT_REGISTRY.values()))
 # EmbodiedGen store them) Z-up; applied before the layout's background pose
 SPLAT_Y_UP_TO_Z_UP = (0.7071, 0.0, 0.0, 0.7071)
 MAX_SEED = 2**32 - 1  # ManiSkill seeds NumPy RandomStates, which take seeds in [0, 2**32)
-MAX_IMAGE_SIDE = 8192  # pixels a side of any rendered image: larger ones are refused (memory)
 
 
 def resolve_robot(layout_robot: str, robot_uids: str | None, source: str) -> str:

@@ -23,6 +23,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
 from embodied_envs.splat.ply import REQUIRED
 
@@ -148,6 +149,28 @@ def main() -> None:
         start, end = urdf.index("<collision>"), urdf.index("</collision>") + len("</collision>")
         (asset / "can.urdf").write_text(urdf[:start] + urdf[end:])
 
+    def add_texture(asset: Path, content) -> None:
+        mtl = asset / "mesh" / "mug.mtl"
+        if content == "outside":
+            Image.new("RGB", (4, 4)).save(asset.parent / "outside.png")
+            mtl.write_text(mtl.read_text() + "map_Kd ../../outside.png\n")
+            return
+        mtl.write_text(mtl.read_text() + "map_Kd -s 1 1 1 tex.png\n")
+        if content == "huge":
+            Image.new("L", (9000, 1)).save(asset / "mesh" / "tex.png")
+        elif content is not None:
+            (asset / "mesh" / "tex.png").write_bytes(content)
+
+    def two_collisions(asset: Path) -> None:
+        urdf = (asset / "can.urdf").read_text()
+        start, end = urdf.index("<collision>"), urdf.index("</collision>") + len("</collision>")
+        (asset / "can.urdf").write_text(urdf[:end] + urdf[start:end] + urdf[end:])
+
+    def mesh_outside(asset: Path) -> None:
+        shutil.copy(asset / "mesh" / "bowl_collision.obj", asset.parent / "shared.obj")
+        urdf = (asset / "bowl.urdf").read_text()
+        (asset / "bowl.urdf").write_text(urdf.replace("mesh/bowl_collision.obj", "../shared.obj"))
+
     broken_assets = [  # case, what, shipped asset, words, how its copy is broken
         ("urdf_without_collision", "a URDF without a collision mesh", "can",
          ["can.urdf", "collision"], drop_collision),
@@ -156,6 +179,20 @@ def main() -> None:
          lambda a: (a / "mesh" / "mug_collision.obj").write_bytes(b"\x00\x01PK not a mesh\n")),
         ("empty_collision_mesh", "an empty collision mesh", "bowl", ["bowl_collision.obj"],
          lambda a: (a / "mesh" / "bowl_collision.obj").write_text("# no geometry\n")),
+        ("texture_missing", "a material naming a texture that does not exist", "mug",
+         ["mug.mtl", "texture tex.png does not exist"], lambda a: add_texture(a, None)),
+        ("texture_corrupt", "a texture that is not an image", "mug",
+         ["mug.mtl", "texture tex.png is not a readable image"],
+         lambda a: add_texture(a, b"\x89PNG not really")),
+        ("texture_huge", "a texture over 8192 px a side", "mug",
+         ["mug.mtl", "tex.png is 9000x1 px, over 8192 px"], lambda a: add_texture(a, "huge")),
+        ("texture_outside_folder", "a texture reached through ../, outside the asset folder",
+         "mug", ["mug.mtl", "texture ../../outside.png lies outside the asset folder"],
+         lambda a: add_texture(a, "outside")),
+        ("urdf_two_collisions", "a URDF link with two <collision> elements (one would be lost)",
+         "can", ["can.urdf", "2 <collision> elements", "merge their meshes"], two_collisions),
+        ("mesh_outside_folder", "a collision mesh reached through ../, outside the asset folder",
+         "bowl", ["bowl.urdf", "lies outside the asset folder"], mesh_outside),
     ]  # fmt: skip
     for name, what, asset, words, damage in broken_assets:
         folder = f"{asset}_broken"
@@ -335,6 +372,18 @@ def main() -> None:
             pos[:3] = [old if new is None else new for old, new in zip(pos[:3], xyz, strict=True)]
 
         write_case(name, what, "LayoutError", ["layout.json", *words], layout=mutated(move))
+    # numbers and nesting a JSON reader accepts and the checks must not choke on
+    huge = mutated(lambda d: d["position"]["can"].__setitem__(0, int("7" * 400)))
+    write_case(
+        "pose_400_digits",
+        "a 400-digit integer in a pose",
+        "LayoutError",
+        ["layout.json", 'position["can"]', "too large for a float"],
+        layout=huge,
+    )
+    deep = json.dumps(b)[:-1] + ', "notes": ' + "[" * 50_000 + "]" * 50_000 + "}"
+    write_case("json_nested_deeply", "JSON nested 50,000 levels deep", "LayoutError",
+               ["layout.json", "nested too deeply"], raw_layout=deep)  # fmt: skip
     # JSON that would silently lose data
     text = json.dumps(b, indent=2)
     mug = json.dumps(b["position"]["mug"])

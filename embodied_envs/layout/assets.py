@@ -19,9 +19,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from PIL import Image
 from scipy.spatial import ConvexHull, QhullError
 
 from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.limits import MAX_IMAGE_SIDE
 from embodied_envs.layout.pose import rpy_to_matrix, rpy_to_quat_wxyz
 
 STATIC_FRICTION_RANGE = (0.1, 0.7)  # mu1 is clipped to this range
@@ -95,7 +97,13 @@ def _origin(elem: ET.Element | None, urdf: Path, where: str):
 
 
 def _mesh(link: ET.Element, tag: str, urdf: Path) -> MeshRef:
-    elem = link.find(tag)
+    elems = link.findall(tag)
+    if len(elems) > 1:
+        raise LayoutError(
+            f"{urdf}: the link has {len(elems)} <{tag}> elements; an asset is built from one"
+            f" (EmbodiedGen writes one). Fix: merge their meshes into one {tag} mesh file."
+        )
+    elem = elems[0] if elems else None
     if elem is None:
         raise LayoutError(
             f"{urdf}: link has no <{tag}>. Fix: add a <{tag}><geometry><mesh filename=...>"
@@ -106,6 +114,12 @@ def _mesh(link: ET.Element, tag: str, urdf: Path) -> MeshRef:
         raise LayoutError(f"{urdf}: <{tag}> has no <geometry><mesh filename=...>. Fix: add it.")
     filename = mesh.get("filename").replace("package://", "")
     path = (urdf.parent / filename).resolve()
+    if not path.is_relative_to(urdf.parent):
+        raise LayoutError(
+            f"{urdf}: <{tag}> mesh file {filename} lies outside the asset folder {urdf.parent}"
+            " (an asset folder must be whole to be moved or copied). Fix: copy the mesh into"
+            " the asset folder and name it relative to the URDF."
+        )
     if not path.is_file():
         raise LayoutError(
             f"{urdf}: <{tag}> mesh file {filename} does not exist (looked at {path})."
@@ -370,14 +384,71 @@ def _geometry(collision: MeshRef) -> AssetGeometry:
     return AssetGeometry(vertices, tuple(parts), volume)
 
 
+MAX_TEXTURE_BYTES = 256 << 20  # a texture file larger than this is refused before reading
+
+
 def check_visual_mesh(spec: AssetSpec) -> None:
-    """The visual mesh loads and holds finite vertices (it is rendered as it is).
+    """The visual mesh loads and holds finite vertices (it is rendered as it is), and every
+    material and texture it names (OBJ ``mtllib``, ``map_*``) lies in the asset folder and
+    reads as an image of at most ``MAX_IMAGE_SIDE`` px a side: SAPIEN would otherwise fail
+    minutes later, without naming the node.
 
     Raises:
-        LayoutError: naming the file and the first bad vertex.
+        LayoutError: naming the file and the first bad vertex, material or texture.
     """
     key = ("visual checked", FileVersion.of(spec.visual.path), spec.visual)
     ASSET_FILES.get(key, lambda: _load_parts_checked(spec.visual, collision=False) and True)
+    if spec.visual.path.suffix.lower() == ".obj":
+        _check_materials(spec.visual.path, spec.urdf_path.parent)
+
+
+def _inside(path: Path, folder: Path, what: str, source: Path, name: str) -> Path:
+    """``path`` resolved, refused when outside ``folder`` or missing."""
+    path = path.resolve()
+    if not path.is_relative_to(folder):
+        raise LayoutError(
+            f"{source}: {what} {name} lies outside the asset folder {folder}. Fix: copy it into"
+            " the asset folder and name it relative to the file that uses it."
+        )
+    if not path.is_file():
+        raise LayoutError(f"{source}: {what} {name} does not exist (looked at {path}).")
+    return path
+
+
+def _check_materials(obj: Path, folder: Path) -> None:
+    with open(obj, "rb") as fh:
+        lines = [line for line in fh if line.startswith(b"mtllib") and len(line.split()) > 1]
+    libraries = [line.split(None, 1)[1].decode(errors="replace").strip() for line in lines]
+    for name in libraries:
+        mtl = _inside(obj.parent / name, folder, "material file", obj, name)
+        for line in mtl.read_text(errors="replace").splitlines():
+            words = line.split()
+            if words and (words[0].lower().startswith("map_") or words[0] in ("bump", "disp")):
+                tex_name = words[-1]  # options such as -s 1 1 1 come before the file name
+                tex = _inside(mtl.parent / tex_name, folder, "texture", mtl, tex_name)
+                key = ("texture checked", FileVersion.of(tex))
+                ASSET_FILES.get(key, lambda mtl=mtl, tex=tex: _check_texture(mtl, tex))
+
+
+def _check_texture(mtl: Path, tex: Path) -> bool:
+    size = tex.stat().st_size
+    if size > MAX_TEXTURE_BYTES:
+        raise LayoutError(
+            f"{mtl}: texture {tex.name} is {size:,} bytes, over {MAX_TEXTURE_BYTES:,}."
+            " Fix: downscale it."
+        )
+    try:
+        with Image.open(tex) as im:
+            w, h = im.size
+            im.verify()  # the file's structure (chunks, checksums), without decoding pixels
+    except Exception as e:  # PIL raises many types for unreadable images
+        raise LayoutError(f"{mtl}: texture {tex.name} is not a readable image ({e}).") from None
+    if max(w, h) > MAX_IMAGE_SIDE:
+        raise LayoutError(
+            f"{mtl}: texture {tex.name} is {w}x{h} px, over {MAX_IMAGE_SIDE} px a side (it would"
+            f" cost {w * h * 4 / 1e9:.1f} GB to load). Fix: downscale it."
+        )
+    return True
 
 
 def asset_geometry(spec: AssetSpec, version: FileVersion | None = None) -> AssetGeometry:

@@ -13,6 +13,8 @@ import math
 import numbers
 from dataclasses import dataclass
 
+MAX_IMAGE_SIDE = 8192  # pixels a side of any image rendered or read: larger ones are refused
+
 
 def check_number(
     where: str,

@@ -97,6 +97,11 @@ def load_layout(path: Path | str, check_files: bool = True, check_poses: bool = 
         ) from e
     except UnicodeDecodeError as e:
         raise LayoutError(f"{path}: not a UTF-8 text file ({e}).") from e
+    except RecursionError:
+        raise LayoutError(
+            f"{path}: JSON nested too deeply to read (a layout is a few levels deep)."
+            " Fix: remove the nested value."
+        ) from None
     try:
         info = LayoutInfo.from_dict(data, source=path)
     except LayoutError as e:

@@ -211,6 +211,8 @@ def _check_pose(f: str, node: str, values) -> str | None:
         )
     if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
         return f"{where} holds a non-number. Fix: use 7 numbers."
+    if not all(isinstance(v, float) or abs(v) < 1e300 for v in values):
+        return f"{where} holds an integer too large for a float. Fix: use metres."
     if not all(math.isfinite(v) for v in values):
         return f"{where} holds NaN or infinity. Fix: use 7 finite numbers."
     if max(abs(v) for v in values[:3]) > WORLD_BOUND:
