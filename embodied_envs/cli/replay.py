@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 from unittest import mock
 
+from embodied_envs.pipelines.datasets import check_replayable
+
 
 def add_parser(sub) -> None:
     p = sub.add_parser(
@@ -29,8 +31,7 @@ def cmd_replay(args) -> int:
     from mani_skill.trajectory import replay_trajectory
     from mani_skill.trajectory.utils.actions import conversion
 
-    from embodied_envs.pipelines.datasets import check_replayable
-    from embodied_envs.solvers.ee_actions import joint_pos_to_ee
+    from embodied_envs.solvers.ee_actions import joint_pos_to_ee  # torch, as ManiSkill's tool
 
     options = replay_trajectory.parse_args(args.options or ["--help"])
     for note in check_replayable(options.traj_path):  # a dataset that cannot replay: one line
