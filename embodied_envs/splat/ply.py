@@ -114,6 +114,9 @@ MAX_SCALE = 1e3  # m: a Gaussian larger than this is a corrupt value, not a scen
 MAX_MEAN = 1e4  # m: a Gaussian centred farther from the origin is a corrupt value
 
 
+CHECK_CHUNK = 1 << 18  # Gaussians checked at a time by check_ply (bounded memory)
+
+
 def read_ply_arrays(path: str | os.PathLike) -> dict[str, np.ndarray | None]:
     """Read and check a 3DGS PLY file with numpy alone (no torch: ``layout validate`` uses it).
 
@@ -134,7 +137,18 @@ def read_ply_arrays(path: str | os.PathLike) -> dict[str, np.ndarray | None]:
             "file does not exist",
             "check the path (a layout's background folder needs gs_model.ply)",
         )
-    data = path.read_bytes()
+    vertices, degree = _open_vertices(path)
+    arrays = _columns(vertices, degree)
+    _check_values(path, arrays)
+    return arrays
+
+
+def _open_vertices(path: Path) -> tuple[np.ndarray, int]:
+    """The vertex element of a checked header, memory-mapped (nothing is read yet), and its
+    SH degree."""
+    with open(path, "rb") as fh:
+        data = fh.read(MAX_HEADER_BYTES)
+    size = path.stat().st_size
     elements, offset, fmt = _read_header(path, data)
     if fmt != "binary_little_endian":
         raise SplatFileError(
@@ -182,20 +196,26 @@ def read_ply_arrays(path: str | os.PathLike) -> dict[str, np.ndarray | None]:
             "write f_rest_0..f_rest_{3*((d+1)^2-1)-1} for one degree d",
         )
     need = offset + count * dtype.itemsize
-    if len(data) < need:
-        have = max(0, (len(data) - offset) // dtype.itemsize)
+    if size < need:
+        have = max(0, (size - offset) // dtype.itemsize)
         raise SplatFileError(
             path,
             f"truncated: the header promises {count} vertices ({need} bytes) but the file "
-            f"has {len(data)} bytes ({have} whole vertices)",
+            f"has {size} bytes ({have} whole vertices)",
             "re-copy or re-export the file; it was cut short",
         )
-    v = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
+    return np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(count,)), degrees[n_rest]
+
+
+def _columns(v: np.ndarray, degree: int) -> dict[str, np.ndarray | None]:
+    """float32 arrays of (a slice of) the vertex element."""
+    count, names = len(v), set(v.dtype.names)
+    n_rest = 3 * (sh_coeff_count(degree) - 1)
 
     def cols(*props: str) -> np.ndarray:
         return np.stack([v[p].astype(np.float32) for p in props], axis=1)
 
-    k = sh_coeff_count(degrees[n_rest])
+    k = sh_coeff_count(degree)
     sh = cols("f_dc_0", "f_dc_1", "f_dc_2")[:, None, :]
     if k > 1:
         rest = cols(*(f"f_rest_{i}" for i in range(n_rest))).reshape(count, 3, k - 1)
@@ -208,11 +228,12 @@ def read_ply_arrays(path: str | os.PathLike) -> dict[str, np.ndarray | None]:
         sh=np.ascontiguousarray(sh),
         normals=cols("nx", "ny", "nz") if {"nx", "ny", "nz"} <= names else None,
     )
-    _check_values(path, arrays)
     return arrays
 
 
-def _check_values(path: Path, a: dict[str, np.ndarray | None]) -> None:
+def _check_values(path: Path, a: dict[str, np.ndarray | None], first: int = 0) -> None:
+    """Refuse NaN, huge scales, far means and zero quaternions; vertex numbers count from
+    ``first`` (the chunk's start)."""
     count = len(a["means"])
     values = [a["means"], a["quats_wxyz"], a["log_scales"], a["opacity_logits"][:, None]]
     bad = ~np.isfinite(np.concatenate([*values, a["sh"].reshape(count, -1)], 1)).all(1)
@@ -220,7 +241,7 @@ def _check_values(path: Path, a: dict[str, np.ndarray | None]) -> None:
         raise SplatFileError(
             path,
             f"{int(bad.sum())} Gaussians have a NaN or infinite value (first: vertex "
-            f"{int(bad.nonzero()[0][0])})",
+            f"{first + int(bad.nonzero()[0][0])})",
             "remove them or re-export the splat",
         )
     huge = a["log_scales"].max(1) > math.log(MAX_SCALE)
@@ -228,16 +249,17 @@ def _check_values(path: Path, a: dict[str, np.ndarray | None]) -> None:
         raise SplatFileError(
             path,
             f"{int(huge.sum())} Gaussians have a scale over {MAX_SCALE:g} m (first: vertex "
-            f"{int(huge.nonzero()[0][0])}, scale exp({float(a['log_scales'][huge][0].max()):.3g}))",
+            f"{first + int(huge.nonzero()[0][0])}, scale "
+            f"exp({float(a['log_scales'][huge][0].max()):.3g}))",
             "scale_* are natural logs of metres in a 3DGS PLY; remove those Gaussians",
         )
     far = np.abs(a["means"]).max(1) > MAX_MEAN
     if far.any():
-        first = int(far.nonzero()[0][0])
+        k = int(far.nonzero()[0][0])
         raise SplatFileError(
             path,
             f"{int(far.sum())} Gaussians lie over {MAX_MEAN:g} m from the origin (first: vertex "
-            f"{first}, x y z = {a['means'][first].tolist()})",
+            f"{first + k}, x y z = {a['means'][k].tolist()})",
             "x y z are metres in the splat's frame; remove those Gaussians or re-export the splat",
         )
     flat = np.linalg.norm(a["quats_wxyz"], axis=1) < 1e-8
@@ -245,7 +267,7 @@ def _check_values(path: Path, a: dict[str, np.ndarray | None]) -> None:
         raise SplatFileError(
             path,
             f"{int(flat.sum())} Gaussians have an all-zero rotation quaternion (first: vertex "
-            f"{int(flat.nonzero()[0][0])})",
+            f"{first + int(flat.nonzero()[0][0])})",
             "write unit quaternions rot_0..3 (w x y z)",
         )
 
@@ -256,7 +278,13 @@ def check_ply(path: str | os.PathLike) -> int:
     Raises:
         SplatFileError: as :func:`read_ply_arrays`.
     """
-    return len(read_ply_arrays(path)["means"])
+    path = Path(path)
+    if not path.is_file():
+        read_ply_arrays(path)  # the missing-file error
+    vertices, degree = _open_vertices(path)
+    for start in range(0, len(vertices), CHECK_CHUNK):  # memory bounded by the chunk, not N
+        _check_values(path, _columns(vertices[start : start + CHECK_CHUNK], degree), start)
+    return len(vertices)
 
 
 def read_ply(path: str | os.PathLike) -> GaussianSplat:
