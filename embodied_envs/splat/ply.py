@@ -282,9 +282,13 @@ def check_ply(path: str | os.PathLike) -> int:
     if not path.is_file():
         read_ply_arrays(path)  # the missing-file error
     vertices, degree = _open_vertices(path)
-    for start in range(0, len(vertices), CHECK_CHUNK):  # memory bounded by the chunk, not N
-        _check_values(path, _columns(vertices[start : start + CHECK_CHUNK], degree), start)
-    return len(vertices)
+    count, offset = len(vertices), vertices.offset
+    with open(path, "rb") as fh:  # read chunk by chunk: memory bounded by the chunk, not N
+        fh.seek(offset)
+        for start in range(0, count, CHECK_CHUNK):
+            chunk = np.fromfile(fh, dtype=vertices.dtype, count=min(CHECK_CHUNK, count - start))
+            _check_values(path, _columns(chunk, degree), start)
+    return count
 
 
 def read_ply(path: str | os.PathLike) -> GaussianSplat:

@@ -231,7 +231,7 @@ def test_checking_a_large_splat_reads_it_in_bounded_memory(tmp_path):
     import subprocess
     import sys
 
-    n = 1_200_000
+    n = 2_400_000
     rows = _rows(n)
     rows[n - 5, PROPS.index("x")] = float("nan")
     path = write_raw(tmp_path / "large.ply", PROPS, rows)
