@@ -76,6 +76,19 @@ def writable_dir(path):
     return path
 
 
+DEBUG_ENV = "EMBODIED_ENVS_DEBUG"  # set to 1: tracebacks instead of one-line errors
+
+
+def failure_line(what: str, error: Exception) -> str:
+    """One line for an error raised where the user's input met the simulator (a worker's env,
+    a policy): its type and message, and how to see the traceback. Re-raised under
+    ``EMBODIED_ENVS_DEBUG=1``."""
+    if os.environ.get(DEBUG_ENV):
+        raise error
+    text = " ".join(str(error).split())
+    return f"error: {what}: {type(error).__name__}: {text} (set {DEBUG_ENV}=1 for the traceback)"
+
+
 def add_config_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--config",

@@ -11,6 +11,7 @@ from embodied_envs.cli.args import (
     add_config_argument,
     check_seed_span,
     env_config,
+    failure_line,
     positive_int,
     seed_int,
     writable_dir,
@@ -118,6 +119,10 @@ def _collect_one(path, args, workers: int, config: dict) -> bool:
         except CollectError as e:
             bar.close()
             print(f"error: {e}")
+            return False
+        except Exception as e:  # a worker's env or solver failed: one line, not a traceback
+            bar.close()
+            print(failure_line(f"collecting {path.name} failed", e))
             return False
     print(
         f"{path.name}: {s.kept} demonstrations ({s.successes}/{s.attempted} successful, "

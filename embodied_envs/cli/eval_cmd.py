@@ -11,6 +11,7 @@ from embodied_envs.cli.args import (
     add_config_argument,
     check_seed_span,
     env_config,
+    failure_line,
     positive_int,
     seed_int,
     writable_dir,
@@ -104,6 +105,10 @@ def cmd_eval(args) -> int:
         except EvalError as e:
             bar.close()
             print(f"error: {e}")
+            return 1
+        except Exception as e:  # an env or a policy failed in a worker: one line
+            bar.close()
+            print(failure_line("evaluation failed", e))
             return 1
     lo, hi = s["success_ci95"]
     print(

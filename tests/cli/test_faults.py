@@ -132,3 +132,23 @@ def test_a_killed_runs_work_folder_is_removed_by_the_next_run(tmp_path):
     res = subprocess.run(collect_cmd(out), env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stdout + res.stderr
     assert sorted(p.name for p in out.iterdir()) == ["default"]
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_a_worker_failing_before_its_loop_ends_collect_in_one_line(tmp_path, workers):
+    """A config value ManiSkill refuses inside the worker's env: the command ends within
+    seconds with one error line and exit 1, leaving no partial dataset."""
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("reward_mode: bogus\n")
+    out = tmp_path / "out"
+    env = {**os.environ, "MS_SKIP_ASSET_DOWNLOAD_PROMPT": "1"}
+    env.pop("EMBODIED_ENVS_DEBUG", None)
+    t = time.time()
+    res = subprocess.run(collect_cmd(out, "--num", "2", "--workers", workers, "--config",
+                                     str(cfg)), env=env, capture_output=True, text=True,
+                         timeout=120)  # fmt: skip
+    assert res.returncode == 1 and time.time() - t < 60
+    lines = [x for x in res.stdout.splitlines() if x.startswith("error:")]
+    assert len(lines) == 1 and "Unsupported reward mode: bogus" in lines[0], res.stdout
+    assert "Traceback" not in res.stderr
+    assert list(out.iterdir()) == [], "no dataset and no work folder left"
