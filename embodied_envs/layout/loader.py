@@ -17,6 +17,8 @@ from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.placement import check_file_poses
 from embodied_envs.layout.schema import LayoutInfo, label
 
+MAX_LAYOUT_BYTES = 1 << 20  # a layout file over this is refused before it is read
+
 
 def check_asset_files(info: LayoutInfo) -> list[str]:
     """File checks: every asset folder exists and holds a loadable URDF with its meshes."""
@@ -82,6 +84,13 @@ def load_layout(path: Path | str, check_files: bool = True, check_poses: bool = 
     path = Path(path)
     if not path.is_file():
         raise LayoutError(f"{path}: layout file does not exist. Fix: check the path.")
+    size = path.stat().st_size
+    if size > MAX_LAYOUT_BYTES:
+        raise LayoutError(
+            f"{path}: {size:,} bytes, over the {MAX_LAYOUT_BYTES:,} a layout may hold (it names"
+            " nodes, assets and poses: a few kB; every generated variant would copy the rest)."
+            " Fix: keep large data outside the layout file."
+        )
     try:
         data = json.loads(path.read_text(), object_pairs_hook=_unique_keys)
     except DuplicateKeyError as e:

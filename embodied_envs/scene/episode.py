@@ -271,6 +271,7 @@ class EpisodeStart:
 
 
 NOISE_DIMS = 7  # arm joints that get start noise (the fingers start exactly open)
+MANY_OBJECTS = 16  # placing more objects every episode is warned about (resets slow down)
 STARTS_PER_DRAW = 32  # episode starts prepared per sampler call at least (then per env)
 
 
@@ -341,6 +342,14 @@ class EpisodeSampler:
                 )
             )
         n = len(self.items)
+        if n > MANY_OBJECTS:
+            warnings.warn(
+                f"{base.source or '<layout>'}: {n} objects are placed on the table every "
+                f"episode (over {MANY_OBJECTS}); each one costs every reset a pass of the "
+                "placement, so resets slow down with them (34 objects measured seconds per "
+                "reset). Fix: fewer objects, or PlacementLimits.episode_candidates lower",
+                stacklevel=2,
+            )
         self.shape_idx = torch.arange(1, n + 1, device=self.device)  # item j is shape j + 1
         self.manipulated = torch.tensor([it.manipulated for it in self.items], device=self.device)
         table = [j for j, it in enumerate(self.items) if it.parent == ctx]

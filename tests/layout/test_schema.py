@@ -147,3 +147,14 @@ def test_urdf_named_after_node_with_underscores(tmp_path, layout_dict, scene_cop
 def test_from_dict_rejects_non_object():
     with pytest.raises(LayoutError, match="top level must be a JSON object"):
         LayoutInfo.from_dict([1, 2, 3])
+
+
+def test_a_layout_file_over_its_size_bound_is_refused_unread(tmp_path, layout_dict):
+    """A 2 MB unknown field would be copied into every generated variant: refused."""
+    from embodied_envs.layout.loader import MAX_LAYOUT_BYTES
+
+    layout_dict["notes"] = "x" * (2 * MAX_LAYOUT_BYTES)
+    path = write_layout(tmp_path, layout_dict)
+    with pytest.raises(LayoutError) as e:
+        load_layout(path)
+    assert str(path) in str(e.value) and "over the 1,048,576 a layout may hold" in str(e.value)

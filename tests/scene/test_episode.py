@@ -2,6 +2,7 @@
 envs at once on CPU, as the GPU simulation would call it, without a simulator."""
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -270,3 +271,32 @@ def test_targets_spread_over_both_sides_and_distractors_move(path):
     assert 0.2 < left < 0.8
     for node, raw in starts.items():
         assert len(torch.unique(raw[:, :2], dim=0)) == n, f"{node} repeats its start"
+
+
+def test_many_objects_on_the_table_are_warned_about(scene_copy):
+    """Resets slow down with the number of objects placed every episode: over MANY_OBJECTS
+    the sampler says so, naming the layout and the count."""
+    import json
+    import shutil
+
+    from embodied_envs.scene.episode import MANY_OBJECTS
+
+    data = json.loads((scene_copy / "layouts" / "default.json").read_text())
+    for k in range(MANY_OBJECTS - 3):
+        node = f"can{k}"
+        folder = scene_copy / "assets" / node
+        shutil.copytree(scene_copy / "assets" / "can", folder)
+        (folder / "can.urdf").rename(folder / f"{node}.urdf")
+        data["tree"]["table"].append([node, "ON"])
+        data["relation"]["distractor_objs"].append(node)
+        data["objs_mapping"][node] = "distractor_objs"
+        data["assets"][node] = f"../assets/{node}"
+        data["position"][node] = data["position"]["can"]
+    path = scene_copy / "layouts" / "many.json"
+    path.write_text(json.dumps(data))
+    config = place(load_layout(path, check_poses=False), 0)
+    with pytest.warns(UserWarning, match=rf"many.json: {MANY_OBJECTS + 1} objects are placed"):
+        EpisodeSampler([config], PlacementLimits(), objs_z_offset=OFFSET)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the shipped layouts are not warned about
+        EpisodeSampler(configurations(LAYOUTS[0], 1), PlacementLimits(), objs_z_offset=OFFSET)
