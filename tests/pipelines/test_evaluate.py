@@ -3,7 +3,7 @@
 import json
 
 import pytest
-from conftest import DEFAULT_LAYOUT
+from conftest import DEFAULT_LAYOUT, LAYOUTS
 
 from embodied_envs.cli.main import main
 from embodied_envs.pipelines.evaluate import EvalError, EvalPlan, evaluate, wilson_interval
@@ -90,18 +90,18 @@ def test_zero_and_random_finish_without_success_and_random_is_seeded(tmp_path):
         evaluate(plan("zero"), tmp_path / "zero")
 
 
-def test_expert_gives_the_successes_collect_gives_on_the_same_seeds(tmp_path):
+@pytest.mark.parametrize("layout", LAYOUTS, ids=[p.stem for p in LAYOUTS])
+def test_expert_gives_the_successes_collect_gives_on_the_same_seeds(tmp_path, layout):
     from embodied_envs.pipelines.collect import CollectPlan, collect
 
-    seeds = (5, 2)
-    collected = collect(CollectPlan(layout=str(DEFAULT_LAYOUT), num=2, seed=seeds[0]), tmp_path)
-    meta = json.loads((tmp_path / "default" / "trajectory.json").read_text())
-    s = evaluate(plan("expert", seed=seeds[0], env_kwargs={}), tmp_path / "eval")
-    episodes = json.loads((tmp_path / "eval" / "episodes.json").read_text())
+    collected = collect(CollectPlan(layout=str(layout), num=2, seed=5), tmp_path)
+    meta = json.loads((tmp_path / layout.stem / "trajectory.json").read_text())
+    s = evaluate(plan("expert", layouts=(str(layout),), seed=5, env_kwargs={}), tmp_path / "e")
+    episodes = json.loads((tmp_path / "e" / "episodes.json").read_text())
     assert [e["success"] for e in episodes] == [e["success"] for e in meta["episodes"]]
     assert [e["steps"] for e in episodes] == [e["elapsed_steps"] for e in meta["episodes"]]
     assert s["successes"] == collected.successes == 2, "the expert solves these seeds"
-    assert s["per_layout"][str(DEFAULT_LAYOUT)]["success_rate"] == 1.0
+    assert s["per_layout"][str(layout)]["success_rate"] == 1.0
 
 
 def test_a_torch_module_policy_runs_and_is_graded(tmp_path, policies):
