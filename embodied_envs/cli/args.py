@@ -7,6 +7,8 @@ import os
 from pathlib import Path
 
 from embodied_envs.config import MAX_IMAGE_SIDE, MAX_SEED, ConfigError, load_config
+from embodied_envs.layout import load_layout
+from embodied_envs.paths import default_layout
 
 
 def _parse(text: str, convert, what: str):
@@ -87,6 +89,24 @@ def failure_line(what: str, error: Exception) -> str:
         raise error
     text = " ".join(str(error).split())
     return f"error: {what}: {type(error).__name__}: {text} (set {DEBUG_ENV}=1 for the traceback)"
+
+
+def checked_layouts(paths: list[Path] | None) -> list[Path]:
+    """The command's layout files (default: the shipped one), absolute, each loaded and
+    checked: bad input fails here, before any simulation.
+
+    Raises:
+        embodied_envs.layout.LayoutError
+    """
+    layouts = [p.resolve() for p in (paths or [default_layout()])]
+    for path in layouts:
+        load_layout(path)
+    return layouts
+
+
+def note_workers(workers: int) -> None:
+    if workers > (os.cpu_count() or 1):
+        print(f"note: --workers {workers} is more than this machine's {os.cpu_count()} cores")
 
 
 def add_config_argument(parser: argparse.ArgumentParser) -> None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from tqdm import tqdm
@@ -10,14 +9,14 @@ from tqdm import tqdm
 from embodied_envs.cli.args import (
     add_config_argument,
     check_seed_span,
+    checked_layouts,
     env_config,
     failure_line,
+    note_workers,
     positive_int,
     seed_int,
     writable_dir,
 )
-from embodied_envs.layout import load_layout
-from embodied_envs.paths import default_layout
 
 # env keywords collect sets itself: a --config file may not set them
 OWNED_KEYS = {
@@ -71,9 +70,7 @@ def cmd_collect(args) -> int:
     from embodied_envs.pipelines.collect import CollectError, CollectPlan, owned_output
 
     config = env_config(args.config, OWNED_KEYS)
-    layouts = [p.resolve() for p in (args.layout or [default_layout()])]
-    for path in layouts:
-        load_layout(path)  # bad input fails here, before any simulation
+    layouts = checked_layouts(args.layout)
     workers = args.workers or 1
     # the seeds every worker will use (the same for every layout) are valid seeds
     blocks = CollectPlan(
@@ -83,8 +80,7 @@ def cmd_collect(args) -> int:
     last = max(s for seeds, _ in blocks for s in seeds)
     check_seed_span(args.seed, last - args.seed + 1, "episode seeds")
     writable_dir(args.out)
-    if workers > (os.cpu_count() or 1):
-        print(f"note: --workers {workers} is more than this machine's {os.cpu_count()} cores")
+    note_workers(workers)
     try:
         with owned_output(args.out):  # one run writes to --out at a time
             failed = 0

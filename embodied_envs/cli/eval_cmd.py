@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from tqdm import tqdm
@@ -10,14 +9,14 @@ from tqdm import tqdm
 from embodied_envs.cli.args import (
     add_config_argument,
     check_seed_span,
+    checked_layouts,
     env_config,
     failure_line,
+    note_workers,
     positive_int,
     seed_int,
     writable_dir,
 )
-from embodied_envs.layout import load_layout
-from embodied_envs.paths import default_layout
 from embodied_envs.pipelines.evaluate import (
     BUILTIN_POLICIES,
     VIDEO_CHOICES,
@@ -75,17 +74,14 @@ def add_parser(sub) -> None:
 
 def cmd_eval(args) -> int:
     config = env_config(args.config, OWNED_KEYS)
-    layouts = [p.resolve() for p in (args.layout or [default_layout()])]
-    for path in layouts:
-        load_layout(path)  # bad input fails here, before any simulation
+    layouts = checked_layouts(args.layout)
     if args.policy == "expert" and args.control_mode not in (None, "pd_joint_pos"):
         raise SystemExit(
             f"error: --policy expert drives pd_joint_pos, not --control-mode {args.control_mode}"
         )
     check_seed_span(args.seed, args.episodes, "episodes")
     writable_dir(args.out)
-    if args.workers > (os.cpu_count() or 1):
-        print(f"note: --workers {args.workers} is more than this machine's {os.cpu_count()} cores")
+    note_workers(args.workers)
     plan = EvalPlan(
         policy=args.policy,
         layouts=tuple(str(p) for p in layouts),

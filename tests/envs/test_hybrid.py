@@ -103,24 +103,7 @@ def sensor_view(u):
     and layout actors nearer than the splat; sensors do not see the goal marker) and the
     splat background rendered independently of the env's cache."""
     rgb = u.get_obs()["sensor_data"]["base_camera"]["rgb"][0]
-    sensor = u.scene.sensors["base_camera"]
-    raw = sensor.get_obs(rgb=True, depth=True, segmentation=True, position=False)
-    seg = raw["segmentation"][0, ..., 0]
-    fg = torch.isin(seg, torch.tensor(foreground_ids(u, hidden=False), dtype=seg.dtype))
-    cam = PinholeCamera.from_opengl(
-        sensor.camera.get_model_matrix()[0].numpy(),
-        sensor.camera.get_intrinsic_matrix()[0].numpy(),
-        128,
-        128,
-    )
-    layout = u.layouts[0]
-    pose = layout.pose(layout.background)
-    q = quat_multiply_xyzw(pose.q_xyzw, (0.7071, 0.0, 0.0, 0.7071))
-    splat = pose_splat(
-        read_ply(layout.gs_model_path()), torch.tensor(pose.p), torch.tensor(q[[3, 0, 1, 2]])
-    )
-    bg = render(splat, cam, backend="torch")
-    fg &= raw["depth"][0, ..., 0].float() / 1000.0 <= bg.surface_depth(0.5)
+    raw, fg, bg, _ = base_camera_truth(u)
     return rgb, raw["rgb"][0], fg, bg.rgb_uint8()
 
 
