@@ -221,6 +221,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
             self.placement_limits, self.goal_region, self.device,
         )  # fmt: skip
         self.env_actors, self.obj = ls.env_actors, ls.target_actor
+        self.instructions = [layout.instruction for layout in self.layouts]  # one per env
         ls.register_state(self)
         self.ground = build_ground(self.scene, altitude=ls.floor_z)
         self.goal_site = actors.build_sphere(

@@ -75,6 +75,17 @@ class LayoutInfo:
         """The graded object's node name: the first manipulated object."""
         return self.manipulated_objs[0]
 
+    @property
+    def instruction(self) -> str:
+        """The task in words, for language-conditioned policies: ``relation.task_desc``, or,
+        when the layout has none, a sentence built from the target's ``objs_desc`` (or its
+        node name)."""
+        desc = self.relation.get("task_desc")
+        if isinstance(desc, str) and desc.strip():
+            return " ".join(desc.split())
+        target = (self.objs_desc or {}).get(self.target_node) or self.target_node
+        return f"Pick up {' '.join(str(target).replace('_', ' ').split())} and hold it at the goal."
+
     def object_nodes(self) -> list[str]:
         """Simulated asset nodes (everything but the background), in ``objs_mapping`` order."""
         return [n for n, c in self.objs_mapping.items() if c != "background"]

@@ -28,6 +28,7 @@ import gymnasium as gym
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
 from mani_skill.utils.wrappers.record import RecordEpisode
 
+from embodied_envs.layout import load_layout
 from embodied_envs.paths import atomic_output
 from embodied_envs.pipelines.datasets import RECORD_KEY, scene_record
 from embodied_envs.registration import ENV_ID
@@ -281,6 +282,9 @@ def _collect_into(plan: CollectPlan, layout: Path, out: Path, target: Path, prog
         meta_path = staged.with_suffix(".json")
         meta = json.loads(meta_path.read_text())
         meta[RECORD_KEY] = scene_record(layout)  # replay checks the scene is unchanged
+        instruction = load_layout(layout).instruction
+        for episode in meta["episodes"]:  # what each episode was asked, and where
+            episode.update(instruction=instruction, layout_file=str(layout))
         with atomic_output(meta_path) as tmp:
             tmp.write_text(json.dumps(meta, indent=2))
         steps = [r.steps for r in kept] or [0]

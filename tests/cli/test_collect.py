@@ -50,6 +50,8 @@ def test_dataset_is_maniskill_trajectory_format(dataset):
     assert meta["source_type"] == "motionplanning" and "PickPlaceSolver" in meta["source_desc"]
     episodes = meta["episodes"]
     assert [e["episode_seed"] for e in episodes] == [5, 6, 7]
+    task = json.loads(DEFAULT_LAYOUT.read_text())["relation"]["task_desc"]
+    assert {(e["instruction"], e["layout_file"]) for e in episodes} == {(task, str(DEFAULT_LAYOUT))}
     assert [e["episode_id"] for e in episodes] == [0, 1, 2]
     summary = json.loads((dataset / "summary.json").read_text())
     assert summary["attempted"] == 3 and summary["kept"] == 3

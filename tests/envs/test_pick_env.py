@@ -255,3 +255,21 @@ def test_fail_is_the_table_footprint_and_height():
         assert off == [False, False, True, True]
     finally:
         e.close()
+
+
+def test_instructions_are_the_layouts_task_or_built_from_its_target(layout_dict):
+    """One instruction per env: relation.task_desc; without it, the target's objs_desc; without
+    that, the target's node name."""
+    from embodied_envs.layout import LayoutInfo
+
+    e = gym.make(ENV_ID)
+    try:
+        assert e.unwrapped.instructions == [layout_dict["relation"]["task_desc"]]
+    finally:
+        e.close()
+    d = dict(layout_dict, relation={k: v for k, v in layout_dict["relation"].items()
+                                     if k != "task_desc"})  # fmt: skip
+    built = LayoutInfo.from_dict(d)
+    assert built.instruction == "Pick up a blue soda can with a silver lid and hold it at the goal."
+    built = LayoutInfo.from_dict({k: v for k, v in d.items() if k != "objs_desc"})
+    assert built.instruction == "Pick up can and hold it at the goal."
