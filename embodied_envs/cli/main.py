@@ -6,7 +6,15 @@ import argparse
 import os
 import sys
 
-from embodied_envs.cli import collect, demo, eval_cmd, layout_cmds, replay, splat_cmds
+from embodied_envs.cli import (
+    collect,
+    demo,
+    eval_cmd,
+    layout_cmds,
+    lerobot_cmd,
+    replay,
+    splat_cmds,
+)
 from embodied_envs.config import ConfigError
 from embodied_envs.layout import LayoutError, PlacementError
 from embodied_envs.pipelines.datasets import DatasetError
@@ -24,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     collect.add_parser(sub)
     eval_cmd.add_parser(sub)
     replay.add_parser(sub)
+    lerobot_cmd.add_parser(sub)
     splat_cmds.add_parser(sub)
     return parser
 

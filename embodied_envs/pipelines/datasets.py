@@ -17,8 +17,9 @@ from pathlib import Path
 
 import gymnasium as gym
 
+from embodied_envs.config import resolve_robot
 from embodied_envs.layout import load_layout
-from embodied_envs.registration import ENV_ID
+from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 
 RECORD_KEY = "embodied_envs"  # our entry in trajectory.json (ManiSkill's tools ignore it)
 
@@ -43,6 +44,28 @@ def layout_content_hash(layout_file: str | Path) -> str:
 def scene_record(layout_file: str | Path) -> dict:
     """What a dataset records about its scene (``trajectory.json[RECORD_KEY]``)."""
     return {"layout_file": str(layout_file), "layout_sha256": layout_content_hash(layout_file)}
+
+
+def lerobot_settings(traj_path: str | Path) -> dict:
+    """ManiSkill's LeRobot converter's ``task_name``, ``fps`` and ``robot_type`` for one of our
+    datasets: the episodes' instruction (or the layout's), the control rate, the robot uid.
+
+    Raises:
+        DatasetError: the episodes hold several instructions (the converter writes one task
+            per dataset).
+    """
+    meta = json.loads(Path(traj_path).with_suffix(".json").read_text())
+    kwargs = meta["env_info"]["env_kwargs"]
+    layout = load_layout(kwargs["layout_file"], check_files=False)
+    tasks = sorted({e.get("instruction") or layout.instruction for e in meta["episodes"]})
+    if len(tasks) > 1:
+        raise DatasetError(
+            f"{traj_path}: its episodes hold {len(tasks)} instructions ({tasks[:3]}); ManiSkill's "
+            "LeRobot converter writes one task per dataset. Fix: convert each layout's dataset"
+        )
+    robot = kwargs.get("robot_uids") or resolve_robot(layout.robot, None, str(layout.source))
+    return dict(task_name=tasks[0] if tasks else layout.instruction, fps=CONTROL_FREQ,
+                robot_type=str(robot))  # fmt: skip
 
 
 def check_replayable(traj_path: str | Path) -> list[str]:

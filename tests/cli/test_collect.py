@@ -144,7 +144,8 @@ def test_end_effector_conversion_on_a_yawed_robot_base(dataset, tmp_path, mode):
 
 
 def test_lerobot_conversion_with_maniskill_converter(dataset, tmp_path):
-    """rgb observations by replay, then ManiSkill's convert_to_lerobot (the lerobot extra)."""
+    """rgb observations by replay, then `embodied-envs lerobot`: ManiSkill's convert_to_lerobot
+    (the lerobot extra) told the instruction, the control rate and the robot."""
     import pandas as pd
 
     work = tmp_path / "data"
@@ -155,13 +156,13 @@ def test_lerobot_conversion_with_maniskill_converter(dataset, tmp_path):
         tmp_path,
     )  # fmt: skip
     rgb = next(work.glob("trajectory.rgb.*.h5"))
-    subprocess.run(
-        [sys.executable, "-m", "mani_skill.trajectory.convert_to_lerobot", "--traj-path",
-         str(rgb), "--output-dir", str(tmp_path / "lerobot"), "--task-name", "pick the can",
-         "--image-size", "128"],
-        env=ENV, check=True, capture_output=True, timeout=300,
-    )  # fmt: skip
+    run(["lerobot", "--traj-path", str(rgb), "--output-dir", str(tmp_path / "lerobot"),
+         "--image-size", "128"], tmp_path)  # fmt: skip
     info = json.loads((tmp_path / "lerobot" / "meta" / "info.json").read_text())
+    task = json.loads(DEFAULT_LAYOUT.read_text())["relation"]["task_desc"]
+    assert info["fps"] == 50 and info["robot_type"] == "panda", "the env's rate and robot"
+    tasks = pd.read_parquet(tmp_path / "lerobot" / "meta" / "tasks.parquet")
+    assert list(tasks.index) == [task], "the layout's instruction, not the env id"
     steps = json.loads((dataset / "trajectory.json").read_text())["episodes"][0]["elapsed_steps"]
     assert info["total_episodes"] == 1 and info["total_frames"] == steps
     frames = pd.read_parquet(next((tmp_path / "lerobot" / "data").rglob("*.parquet")))
