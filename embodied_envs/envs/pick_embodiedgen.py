@@ -97,6 +97,10 @@ class PickEmbodiedGenEnv(CheckedEnv):
     max_reward = 5.0  # dense reward on success; the normalised reward divides by it
     base_camera_eye = (0.95, 0.0, 0.55)  # base_camera eye in the robot base frame, m
     base_camera_target = (0.30, 0.0, 0.0)  # base_camera target in the robot base frame, m
+    # the framed render camera (camera_cfg without an eye or target): past the table's centre,
+    # away from the robot, looking back at the robot over the table
+    render_camera_back = 0.9  # m from the table's centre, away from the robot
+    render_camera_rise = (0.34, 0.14)  # m above the table's top: the eye, the target
 
     number_ranges = {  # numeric keywords: (low, high), checked before any simulation object
         "robot_init_qpos_noise": (0.0, 0.5),  # rad, std of the arm joints' start noise
@@ -142,6 +146,8 @@ class PickEmbodiedGenEnv(CheckedEnv):
     ):
         # everything the user gave is checked before any simulation object exists
         self.camera_spec = CameraSpec.from_cfg(camera_cfg)
+        # no eye or target given: the render camera is framed on the robot and the table
+        self.frame_render_camera = not {"camera_eye", "camera_target_pt"} & set(camera_cfg or {})
         self.layout_file = Path(layout_file) if layout_file is not None else default_layout()
         self.base_layout: LayoutInfo = load_layout(self.layout_file)
         robot = resolve_robot(self.base_layout.robot, robot_uids, str(self.layout_file))
@@ -203,7 +209,12 @@ class PickEmbodiedGenEnv(CheckedEnv):
     @property
     def _default_human_render_camera_configs(self):
         cam = self.camera_spec
-        pose = sapien_utils.look_at(eye=cam.eye, target=cam.target)
+        eye, target = cam.eye, cam.target
+        if self.frame_render_camera:  # on this configuration's robot and table (env 0's)
+            eye, target = self.layout_scene.framing(
+                self.render_camera_back, *self.render_camera_rise
+            )
+        pose = sapien_utils.look_at(eye=eye, target=target)
         fovy = np.deg2rad(cam.fovy_deg)
         return CameraConfig("render_camera", pose, cam.width, cam.height, fovy, 0.01, 100)
 

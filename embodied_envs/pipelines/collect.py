@@ -30,7 +30,7 @@ from mani_skill.utils.wrappers.record import RecordEpisode
 
 from embodied_envs.layout import load_layout
 from embodied_envs.paths import atomic_output
-from embodied_envs.pipelines.datasets import RECORD_KEY, scene_record
+from embodied_envs.pipelines.datasets import RECORD_KEY, has_splat, scene_record
 from embodied_envs.registration import ENV_ID
 from embodied_envs.solvers.pick_place import PickPlaceSolver
 from embodied_envs.workers import report, run
@@ -125,7 +125,7 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         obs_mode=plan.obs_mode,
         hybrid_obs=plan.hybrid_obs,
         control_mode="pd_joint_pos",
-        render_mode="rgb_array" if plan.video else None,
+        render_mode=("hybrid" if has_splat(plan.layout) else "rgb_array") if plan.video else None,
         sim_backend="physx_cpu",
     )
     env = RecordEpisode(

@@ -28,6 +28,11 @@ class DatasetError(RuntimeError):
     """A dataset that cannot be replayed here (names the file and the fix)."""
 
 
+def has_splat(layout_file: str | Path) -> bool:
+    """Whether a layout's background has a splat (videos are then hybrid)."""
+    return load_layout(layout_file, check_poses=False).gs_model_path().is_file()
+
+
 def layout_content_hash(layout_file: str | Path) -> str:
     """SHA-256 of a layout file and of every file in its asset folders (names and bytes)."""
     layout_file = Path(layout_file)

@@ -42,8 +42,8 @@ import gymnasium as gym
 import imageio.v2 as imageio
 import numpy as np
 
-from embodied_envs.layout import load_layout
 from embodied_envs.paths import atomic_output
+from embodied_envs.pipelines.datasets import has_splat
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 from embodied_envs.workers import WorkerError, run
 
@@ -89,7 +89,7 @@ class EvalPlan:
         if control is not None:
             kwargs["control_mode"] = control
         if render:
-            kwargs["render_mode"] = "hybrid" if _has_splat(layout) else "rgb_array"
+            kwargs["render_mode"] = "hybrid" if has_splat(layout) else "rgb_array"
         return kwargs | dict(sim_backend="physx_cpu")
 
     def tasks(self) -> list[tuple[str, int]]:
@@ -121,10 +121,6 @@ def wilson_interval(successes: int, n: int, z: float = WILSON_Z) -> tuple[float,
     centre = (p + z * z / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
     return (max(0.0, centre - half), min(1.0, centre + half))
-
-
-def _has_splat(layout: str) -> bool:
-    return load_layout(layout, check_poses=False).gs_model_path().is_file()
 
 
 # --- policies ------------------------------------------------------------------------------

@@ -72,6 +72,20 @@ class LayoutScene:
         inside = top.contains(points[:, None, :2])[:, 0]
         return (points[:, 2] < top.z - drop) | ~inside
 
+    def framing(
+        self, back: float, eye_rise: float, target_rise: float, env: int = 0
+    ) -> tuple[list[float], list[float]]:
+        """A render camera's eye and target framed on env ``env``'s robot and table: the eye
+        ``back`` metres past the centre of the table's top, away from the robot, ``eye_rise``
+        above the top; the target over the top's centre, ``target_rise`` above it."""
+        top = self.episodes.top
+        centre = ((top.lo[env] + top.hi[env]) / 2).tolist()
+        away = np.asarray(centre) - self.episodes.robot_xy[env].tolist()
+        away = away / max(float(np.linalg.norm(away)), 1e-6)
+        z = float(self.top_z[env])
+        eye = [centre[0] + back * away[0], centre[1] + back * away[1], z + eye_rise]
+        return eye, [centre[0], centre[1], z + target_rise]
+
     @property
     def top_z(self) -> torch.Tensor:
         """Height of the context's top per env, ``(num_envs,)``."""

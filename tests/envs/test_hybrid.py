@@ -183,8 +183,13 @@ def test_depth_test_hides_objects_behind_a_splat_occluder(scene_copy):
     write_ply(occluder_splat(), scene_copy / "assets" / "background" / "gs_model.ply")
     images = {}
     for depth_test in (True, False):
-        e = make(layout_file, hybrid_depth_test=depth_test, replace_objs=False)
-        e.reset(seed=0)
+        e = make(
+            layout_file,
+            hybrid_depth_test=depth_test,
+            replace_objs=False,
+            camera_cfg=dict(camera_eye=[0.9, 0.0, 1.1], camera_target_pt=[0.0, 0.0, 0.9]),
+        )
+        e.reset(seed=0)  # a fixed camera: the wall stands between it and the table
         images[depth_test] = e.render()[0]
         cam, raw = camera_data(e.unwrapped)
         wall = independent_background(e.unwrapped, cam)
@@ -435,3 +440,30 @@ def test_maniskill_cpu_wrapper_and_record_episode_write_hybrid_videos(tmp_path):
     first = iio.imread(videos[0], index=0).astype(float)
     assert np.abs(first - hybrid).mean() < 6, "the video shows the hybrid frames"
     assert np.abs(first - plain).mean() > 5 * np.abs(first - hybrid).mean()
+
+
+def test_the_render_camera_is_framed_on_each_configurations_robot_and_table():
+    """Without an eye or target, the render camera stands past the table's centre, away from
+    the robot, at every configuration; given ones are kept."""
+    e = make(obs_mode="state", render_mode="rgb_array")
+    try:
+        u = e.unwrapped
+        for seed in (0, 7, 11):
+            e.reset(seed=seed, options=dict(reconfigure=True))
+            cam = u.scene.human_render_cameras["render_camera"]
+            eye = cam.camera.get_model_matrix()[0, :3, 3].numpy()
+            robot = u.layouts[0].pose(u.layouts[0].robot).p
+            top = u.layout_scene.episodes.top
+            centre = ((top.lo[0] + top.hi[0]) / 2).numpy()
+            away = (centre - np.asarray(robot[:2])) / np.linalg.norm(centre - robot[:2])
+            np.testing.assert_allclose(eye[:2], centre + u.render_camera_back * away, atol=1e-4)
+            assert eye[2] == pytest.approx(float(u.layout_scene.top_z[0]) + 0.34, abs=1e-4)
+    finally:
+        e.close()
+    fixed = make(obs_mode="state", render_mode="rgb_array", camera_cfg=dict(camera_eye=[1, 1, 2]))
+    try:
+        fixed.reset(seed=0)
+        cam = fixed.unwrapped.scene.human_render_cameras["render_camera"]
+        np.testing.assert_allclose(cam.camera.get_model_matrix()[0, :3, 3].numpy(), [1, 1, 2])
+    finally:
+        fixed.close()
