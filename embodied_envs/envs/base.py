@@ -185,12 +185,14 @@ def value_fits(value, hint) -> bool:
     if hint is float:
         return isinstance(value, numbers.Real) and not isinstance(value, bool)
     if origin in (tuple, list) or hint in (tuple, list):
+        if isinstance(value, np.ndarray) and value.ndim == 1:  # passed directly to gym.make
+            value = value.tolist()
         if not isinstance(value, list | tuple):
             return False
         if origin is tuple and args and args[-1] is not Ellipsis:
             return len(value) == len(args) and all(map(value_fits, value, args))
         return all(value_fits(v, args[0]) for v in value) if args else True
-    if origin in (dict, typing.Mapping) or hint in (dict, dict):
+    if origin in (dict, typing.Mapping) or hint is dict:
         return isinstance(value, dict)
     if hint is os.PathLike:
         return isinstance(value, os.PathLike)

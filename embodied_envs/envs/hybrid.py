@@ -228,6 +228,7 @@ class HybridRenderer:
         cam_to_world_gl: torch.Tensor,
         intrinsic: torch.Tensor,
         human: bool,
+        textures: tuple[str, ...] = ("rgb", "depth", "segmentation", "position"),
     ) -> dict[str, torch.Tensor]:
         """Composite a batch of camera images over their backgrounds, all envs at once.
 
@@ -245,37 +246,41 @@ class HybridRenderer:
             cam_to_world_gl: (n, 4, 4) SAPIEN model matrices (OpenGL convention).
             intrinsic: (n, 3, 3) OpenCV intrinsics.
             human: a human render camera (hidden objects such as the goal are foreground).
+            textures: which to composite (those not in ``images`` are skipped); ``render()``
+                needs ``rgb`` only.
 
         Returns:
-            The composited ``rgb``, ``depth``, ``segmentation`` and (when given) ``position``,
-            on the images' device and in their dtypes, and ``splat_points`` ``(n, H, W)`` bool:
-            pixels that show a splat surface point.
+            The composited textures, on the images' device and in their dtypes, and, with
+            ``depth``, ``splat_points`` ``(n, H, W)`` bool: pixels that show a splat surface
+            point.
         """
         rgb, segmentation = images["rgb"], images["segmentation"]
         n, h, w = rgb.shape[:3]
         bg = self.backgrounds(camera_name, cam_to_world_gl, intrinsic, w, h)
         mask = self.foreground_mask(segmentation, human)
-        fg_depth = images["depth"][..., 0].to(self.device, torch.float32) / 1000.0
         if self.depth_test:
+            fg_depth = images["depth"][..., 0].to(self.device, torch.float32) / 1000.0
             mask &= fg_depth <= bg.depth
-        # the splat's surface depth in ManiSkill's int16 millimetres; none beyond its range
-        bg_mm = (bg.depth * 1000.0).round()
-        splat_points = ~mask & (bg_mm <= DEPTH_MM_MAX)
-        bg_mm = torch.where(splat_points, bg_mm, torch.zeros_like(bg_mm))
 
         def pick(fg: torch.Tensor, splat: torch.Tensor) -> torch.Tensor:
             fg_here = fg.to(self.device)
             out = torch.where(mask[..., None], fg_here, splat.to(fg_here.dtype))
             return out.to(fg.device)
 
-        out = {
-            "rgb": pick(rgb[..., :3], bg.rgb),
-            "depth": pick(images["depth"], bg_mm[..., None]),
-            "segmentation": pick(segmentation, torch.zeros_like(bg_mm)[..., None]),
-            "splat_points": splat_points.to(rgb.device),
-        }
-        if "position" in images:
-            out["position"] = pick(images["position"], self._camera_points(bg_mm, intrinsic))
+        wanted = [t for t in textures if t in images]
+        out = {"rgb": pick(rgb[..., :3], bg.rgb)} if "rgb" in wanted else {}
+        if "segmentation" in wanted:
+            out["segmentation"] = pick(segmentation, torch.zeros(1, device=self.device))
+        if "depth" in wanted or "position" in wanted:
+            # the splat's surface depth in ManiSkill's int16 millimetres; none beyond its range
+            bg_mm = (bg.depth * 1000.0).round()
+            splat_points = ~mask & (bg_mm <= DEPTH_MM_MAX)
+            bg_mm = torch.where(splat_points, bg_mm, torch.zeros_like(bg_mm))
+            out["splat_points"] = splat_points.to(rgb.device)
+            if "depth" in wanted:
+                out["depth"] = pick(images["depth"], bg_mm[..., None])
+            if "position" in wanted:
+                out["position"] = pick(images["position"], self._camera_points(bg_mm, intrinsic))
         return out
 
     def _camera_points(self, depth_mm: torch.Tensor, intrinsic: torch.Tensor) -> torch.Tensor:
@@ -301,8 +306,10 @@ class HybridRenderer:
 
     # --- the env's cameras ---------------------------------------------------------------
     def composite_camera(self, name: str, camera, data: dict, human: bool) -> dict:
-        """Composite a ManiSkill camera's ``data`` (its obs dict; segmentation and depth are
-        fetched when missing): :meth:`composite`'s result."""
+        """Composite the textures a ManiSkill camera's ``data`` holds (its obs dict;
+        segmentation and depth, which the mask needs, are fetched when missing):
+        :meth:`composite`'s result."""
+        textures = tuple(data)
         if "segmentation" not in data or "depth" not in data:
             data = data | camera.get_obs(rgb=False, depth=True, position=False, segmentation=True)
         return self.composite(
@@ -311,6 +318,7 @@ class HybridRenderer:
             camera.camera.get_model_matrix(),
             camera.camera.get_intrinsic_matrix(),
             human,
+            textures,
         )
 
     def composite_sensors(self, scene, obs: dict) -> dict:
@@ -320,8 +328,9 @@ class HybridRenderer:
         for name, data in obs.items():
             if "rgb" in data:
                 out = self.composite_camera(name, scene.sensors[name], data, human=False)
-                self.splat_points[name] = out["splat_points"]
-                data.update({k: v for k, v in out.items() if k in data})
+                if "splat_points" in out:
+                    self.splat_points[name] = out.pop("splat_points")
+                data.update(out)
         return obs
 
     def place_splat_points(self, pointcloud: dict, sensor_param: dict) -> None:
@@ -370,7 +379,11 @@ class HybridRenderer:
                 continue
             camera.capture()
             data = camera.get_obs(rgb=True, depth=True, position=False, segmentation=True)
-            images.append(self.composite_camera(name, camera, data, human=True)["rgb"])
+            out = self.composite(
+                name, data, camera.camera.get_model_matrix(),
+                camera.camera.get_intrinsic_matrix(), True, ("rgb",),
+            )  # fmt: skip
+            images.append(out["rgb"])
         for obj in hidden_objects:
             obj.hide_visual()
         return images[0] if len(images) == 1 else tile_images(images)

@@ -23,7 +23,7 @@ from embodied_envs.config import (
     CameraSpec,
     resolve_robot,
 )
-from embodied_envs.envs.arguments import check_flag, check_quaternion, dataclass_arg
+from embodied_envs.envs.arguments import check_quaternion, dataclass_arg
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
 from embodied_envs.layout import GoalRegion, LayoutInfo, PlacementLimits, load_layout
@@ -158,15 +158,13 @@ class PickEmbodiedGenEnv(CheckedEnv):
             ("robot_init_qpos_noise", robot_init_qpos_noise),
             ("objs_z_offset", objs_z_offset),
             ("robot_z_offset", robot_z_offset),
-        ):
-            check_number(name, value, *self.number_ranges[name])
-        for name, value in (
             ("replace_objs", replace_objs),
             ("enable_grasp", enable_grasp),
             ("hybrid_obs", hybrid_obs),
             ("hybrid_depth_test", hybrid_depth_test),
+            ("init_3dgs_quat", init_3dgs_quat),
         ):
-            check_flag(name, value)
+            self.check_keyword(name, value)  # as a config file's values are checked
         init_3dgs_quat = check_quaternion("init_3dgs_quat", init_3dgs_quat)
         self.replace_objs = bool(replace_objs)
         if self.replace_objs:  # an impossible layout fails here, not mid-simulation

@@ -270,31 +270,25 @@ class EpisodeRunner:
 
         obs, _ = env.reset(seed=seed)
         frame()
-        steps, ret, fail = 0, 0.0, False
+        tally = _Tally(env, frame)  # steps, return and fail of either kind of policy
         if policy is None:  # the expert: the scripted solver steps the env itself
             # the solver (torch, SAPIEN, mplib) only where the expert runs, not for --help
             from embodied_envs.solvers.pick_place import PickPlaceSolver
 
-            tally = _Tally(env, frame)
             PickPlaceSolver(tally, seed=seed).solve()
-            steps, ret, fail = tally.steps, tally.ret, tally.fail
         else:
             shape = tuple(env.action_space.shape)
             policy.reset(seed)
             limit = env.spec.max_episode_steps if env.spec is not None else None
-            while limit is None or steps < limit:
+            while limit is None or tally.steps < limit:
                 action = checked_action(
-                    policy.act(obs), shape, self.plan.policy, steps, seed, layout
+                    policy.act(obs), shape, self.plan.policy, tally.steps, seed, layout
                 )
-                obs, reward, terminated, truncated, info = env.step(action)
-                steps += 1
-                ret += float(torch.as_tensor(reward).reshape(-1)[0])
-                fail |= bool(torch.as_tensor(info["fail"]).reshape(-1)[0])
-                frame()
+                obs, _, terminated, truncated, _ = tally.step(action)
                 if bool(torch.as_tensor(terminated | truncated).reshape(-1)[0]):
                     break
         success = bool(u.evaluate()["success"][0])
-        result = EpisodeResult(layout, seed, success, fail, steps, round(ret, 6))
+        result = EpisodeResult(layout, seed, success, tally.fail, tally.steps, round(tally.ret, 6))
         keep = self.plan.video == "all" or (self.plan.video == "fail" and not success)
         if record and keep and video_dir is not None:
             result.video = write_video(frames, video_dir / f"{Path(layout).stem}_seed{seed}.mp4")
@@ -307,7 +301,8 @@ class EpisodeRunner:
 
 
 class _Tally:
-    """Counts what the expert's steps earn (a pass-through of ``env``'s interface)."""
+    """Counts an episode's steps, return and fail (a pass-through of ``env``'s interface, so
+    the expert's solver steps through it too), and calls ``on_step`` after each step."""
 
     def __init__(self, env, on_step: Callable[[], None]):
         self.env, self.on_step = env, on_step
