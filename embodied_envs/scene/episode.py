@@ -472,8 +472,7 @@ class EpisodeSampler:
         """
         if bool(self._fresh[env_idx].all()):  # a seeded reset: its starts alone, none queued
             self._fresh[env_idx] = False
-            keys = np.asarray(rngs[env_idx.cpu().numpy()].randint(0, 2**31, size=1))
-            return self._starts(env_idx, torch.as_tensor(keys.reshape(-1), device=self.device))
+            return self._starts(env_idx, self._keys(rngs, env_idx, 1))
         empty = self._next[env_idx] >= self._end[env_idx]
         if bool(empty.any()):
             self._refill(env_idx[empty], rngs)
@@ -496,8 +495,7 @@ class EpisodeSampler:
         keys, flat = [], []
         for envs, size in groups:
             if len(envs):
-                drawn = np.asarray(rngs[envs.cpu().numpy()].randint(0, 2**31, size=size))
-                keys.append(torch.as_tensor(drawn.reshape(-1), device=self.device))
+                keys.append(self._keys(rngs, envs, size))
                 flat.append(envs.repeat_interleave(size))
         start = self._starts(torch.cat(flat), torch.cat(keys))
         n = len(self._next)
@@ -518,6 +516,11 @@ class EpisodeSampler:
             offset += len(envs) * size
         self._next[refill] = 0
         self._fresh[refill] = False
+
+    def _keys(self, rngs, envs: torch.Tensor, size: int) -> torch.Tensor:
+        """The next ``size`` episode keys of each env in ``envs`` from its RNG, env-major."""
+        drawn = np.asarray(rngs[envs.cpu().numpy()].randint(0, 2**31, size=size))
+        return torch.as_tensor(drawn.reshape(-1), device=self.device)
 
     def _starts(self, env_idx: torch.Tensor, keys: torch.Tensor) -> EpisodeStart:
         """The episode starts of the keys ``(b,)`` of the envs ``env_idx (b,)``."""
