@@ -85,10 +85,12 @@ def compositing_seconds(n: int, size: int = 128, repeats: int = 10) -> float:
 
     device = "cuda" if torch.cuda.is_available() else "cpu"
     splat = load_layout(default_layout()).gs_model_path()
-    hybrid = HybridRenderer(splat, SPLAT_Y_UP_TO_Z_UP, device=device)
+    hybrid = HybridRenderer({splat: default_layout()}, SPLAT_Y_UP_TO_Z_UP, device=device)
     g = torch.Generator().manual_seed(0)
     ids = torch.randint(1, 60, (n, 12), generator=g)
-    hybrid.configure(ids, ids[:, :1] + 60, [LayoutPose.from_xyz_yaw((0, 0, 0), 0.0)] * n)
+    hybrid.configure(
+        ids, ids[:, :1] + 60, [LayoutPose.from_xyz_yaw((0, 0, 0), 0.0)] * n, [splat] * n
+    )
     model = torch.eye(4, dtype=torch.float64).expand(n, 4, 4)
     intrinsic = torch.eye(3, dtype=torch.float64).expand(n, 3, 3)
     hybrid.preload(
@@ -125,9 +127,8 @@ def background_seconds(n: int, batched: bool, size: int = 128) -> float:
     from embodied_envs.splat import PinholeCamera
 
     device = "cuda" if torch.cuda.is_available() else "cpu"
-    hybrid = HybridRenderer(
-        load_layout(default_layout()).gs_model_path(), SPLAT_Y_UP_TO_Z_UP, device=device
-    )
+    splat = load_layout(default_layout()).gs_model_path()
+    hybrid = HybridRenderer({splat: default_layout()}, SPLAT_Y_UP_TO_Z_UP, device=device)
     angles = np.linspace(0, 2 * np.pi, n, endpoint=False)
     cams = [
         PinholeCamera.look_at(
@@ -136,15 +137,15 @@ def background_seconds(n: int, batched: bool, size: int = 128) -> float:
         for a in angles
     ]
     poses = [LayoutPose.from_xyz_yaw((0, 0, 0), 0.3 * k) for k in range(n)]
-    hybrid.render_backgrounds(cams[:1], poses[:1])  # warm-up
+    hybrid.render_backgrounds(cams[:1], poses[:1], [splat])  # warm-up
     if device == "cuda":
         torch.cuda.synchronize()
     t = time.perf_counter()
     if batched:
-        hybrid.render_backgrounds(cams, poses)
+        hybrid.render_backgrounds(cams, poses, [splat] * n)
     else:
         for cam, pose in zip(cams, poses, strict=True):
-            hybrid.render_backgrounds([cam], [pose])
+            hybrid.render_backgrounds([cam], [pose], [splat])
     if device == "cuda":
         torch.cuda.synchronize()
     return time.perf_counter() - t

@@ -55,13 +55,18 @@ class CheckedEnv(BaseEnv):
 
     @spec.setter
     def spec(self, spec) -> None:
-        # gymnasium sets the spec that RecordEpisode stores as env_kwargs: keep the layout file
-        # absolute there and the config files' values spelled out, so a recorded dataset
-        # re-creates the env from any working directory
+        # gymnasium sets the spec that RecordEpisode stores as env_kwargs: keep the layout files
+        # absolute there (a folder or glob as the files it named) and the config files' values
+        # spelled out, so a recorded dataset re-creates the env from any working directory
         if spec is not None:
             kwargs = self.env_kwargs(**spec.kwargs)
-            if kwargs.get("layout_file") is not None:
-                kwargs["layout_file"] = str(Path(kwargs["layout_file"]).resolve())
+            if kwargs.get("layout_file") is not None:  # a set: its files, spelled out
+                files = self.__dict__.get("layout_file", kwargs["layout_file"])
+                kwargs["layout_file"] = (
+                    [str(Path(f).resolve()) for f in files]
+                    if isinstance(files, list | tuple)
+                    else str(Path(files).resolve())
+                )
             spec = dataclasses.replace(spec, kwargs=kwargs)
         self.__dict__["_spec"] = spec
 

@@ -54,44 +54,49 @@ class HybridRenderer:
     """Background cache and batched compositing for one env instance.
 
     Args:
-        splat_path: the background's ``gs_model.ply`` (Y-up, as stored).
+        rooms: each background splat the env's layouts use, ``{gs_model.ply: layout file}``
+            (Y-up, as stored; the layout file is named in errors).
         init_quat_xyzw: rotation taking the stored splat to Z-up, applied before the layout pose.
         depth_test: hide foreground pixels behind the splat surface.
         backend: splat backend, ``"auto"``, ``"torch"`` or ``"gsplat"``.
         device: where backgrounds are rendered and kept (the env's device).
-        layout_file: named in errors.
 
     Raises:
-        SplatFileError: the splat file is missing or malformed.
+        SplatFileError: a splat file is missing or malformed.
         ValueError: the backend cannot run here.
     """
 
     def __init__(
         self,
-        splat_path: str | os.PathLike,
+        rooms: dict[Path, str | os.PathLike],
         init_quat_xyzw: tuple[float, float, float, float],
         depth_test: bool = True,
         backend: str = "auto",
         device: torch.device | str = "cpu",
-        layout_file: str | os.PathLike = "layout",
     ):
-        splat_path = Path(splat_path)
-        if not splat_path.is_file():
-            raise SplatFileError(
-                splat_path,
-                f'hybrid rendering (render_mode="hybrid" or hybrid_obs=True) needs the '
-                f"background splat of {layout_file}, and this file does not exist",
-                "put a 3DGS gs_model.ply in the background's asset folder (tools/mesh_to_splat.py"
-                ' makes one from a mesh), or use render_mode="rgb_array" and hybrid_obs=False',
-            )
+        for splat_path, layout_file in rooms.items():
+            if not Path(splat_path).is_file():
+                raise SplatFileError(
+                    Path(splat_path),
+                    f'hybrid rendering (render_mode="hybrid" or hybrid_obs=True) needs the '
+                    f"background splat of {layout_file}, and this file does not exist",
+                    "put a 3DGS gs_model.ply in the background's asset folder "
+                    '(tools/mesh_to_splat.py makes one from a mesh), or use render_mode="rgb_array"'
+                    " and hybrid_obs=False",
+                )
         self.backend = resolve_backend(backend)
         self.device = torch.device(device)
         x, y, z, w = (float(v) for v in init_quat_xyzw)
-        # the stored splat turned Z-up once; each env's layout pose moves the camera instead
-        self.splat = pose_splat(read_ply(splat_path), torch.zeros(3), torch.tensor([w, x, y, z]))
-        self.splat = self.splat.to(self.device)
+        # each stored splat turned Z-up once; each env's layout pose moves the camera instead
+        self.splats = {
+            Path(path): pose_splat(read_ply(path), torch.zeros(3), torch.tensor([w, x, y, z])).to(
+                self.device
+            )
+            for path in rooms
+        }
         self.depth_test = bool(depth_test)
         self.poses: list[LayoutPose] = []  # per env, the background node's layout pose
+        self.rooms: list[Path] = []  # per env, its splat file
         self._lut: dict[str, torch.Tensor] = {}  # "sensor" / "human" -> (n, max id + 1) bool
         self._cameras: dict[str, CameraBackgrounds] = {}
         # sensor camera -> (n, H, W) bool: pixels of its last composite showing splat points
@@ -106,7 +111,7 @@ class HybridRenderer:
         device = torch.device(device)
         if device != self.device:
             self.device = device
-            self.splat = self.splat.to(device)
+            self.splats = {k: v.to(device) for k, v in self.splats.items()}
             self._lut = {k: v.to(device) for k, v in self._lut.items()}
             self._cameras.clear()
         return self
@@ -116,8 +121,10 @@ class HybridRenderer:
         foreground_ids: torch.Tensor,
         hidden_ids: torch.Tensor,
         background_poses: list[LayoutPose],
+        rooms: list[Path],
     ) -> None:
-        """Set every env's foreground ids and background pose; cached backgrounds go stale.
+        """Set every env's foreground ids, background pose and room; cached backgrounds go
+        stale.
 
         Args:
             foreground_ids: ``(n, k)`` per-scene segmentation ids drawn over the background in
@@ -125,6 +132,7 @@ class HybridRenderer:
             hidden_ids: ``(n, h)`` ids drawn only in human cameras (objects hidden from
                 sensors, such as the goal marker).
             background_poses: per env, the layout pose of the background node.
+            rooms: per env, its splat file (one of the renderer's ``rooms``).
         """
         n = foreground_ids.shape[0]
         human = torch.cat([foreground_ids, hidden_ids], 1).to(self.device, torch.long)
@@ -138,34 +146,50 @@ class HybridRenderer:
             lut[rows.expand_as(ids), ids] = True
             self._lut[camera_kind] = lut
         self.poses = list(background_poses)
+        self.rooms = [Path(r) for r in rooms]
         for cam in self._cameras.values():
             cam.valid[:] = False
         self._prerender_due = True
 
     # --- backgrounds ---------------------------------------------------------------------
     def render_backgrounds(
-        self, cameras: list[PinholeCamera], poses: list[LayoutPose]
+        self, cameras: list[PinholeCamera], poses: list[LayoutPose], rooms: list[Path]
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The splat posed by ``poses[k]`` seen from ``cameras[k]`` (cameras of one size):
-        uint8 RGB ``(k, H, W, 3)`` and surface depth ``(k, H, W)``, in batched rasterizer calls
-        (``MAX_CAMERAS_PER_CALL``, ``MAX_CAMERA_GAUSSIANS_PER_CALL``)."""
+        """The splat ``rooms[k]`` posed by ``poses[k]`` seen from ``cameras[k]`` (cameras of one
+        size): uint8 RGB ``(k, H, W, 3)`` and surface depth ``(k, H, W)``. Views that are the
+        same (room, camera in the room's frame) are rendered once; each room's views in
+        batched rasterizer calls (``MAX_CAMERAS_PER_CALL``, ``MAX_CAMERA_GAUSSIANS_PER_CALL``)."""
         start = time.perf_counter()
         moved = [cam.in_frame(pose.matrix()) for cam, pose in zip(cameras, poses, strict=True)]
-        per_call = max(
-            1, min(MAX_CAMERAS_PER_CALL, MAX_CAMERA_GAUSSIANS_PER_CALL // len(self.splat))
-        )
-        rgb, depth = [], []
-        for i in range(0, len(moved), per_call):
-            image = render(self.splat, moved[i : i + per_call], backend=self.backend)
-            rgb.append(image.rgb_uint8().to(self.device))
-            depth.append(image.surface_depth(SPLAT_SURFACE_ALPHA).to(self.device))
-        self.renders += len(moved)
+        views: dict[tuple, int] = {}  # (room, camera) -> row of the unique views
+        rows = [views.setdefault((room, cam.key()), len(views)) for room, cam in zip(
+            rooms, moved, strict=True)]  # fmt: skip
+        unique = [next(moved[k] for k, r in enumerate(rows) if r == v) for v in range(len(views))]
+        rgb = torch.zeros((len(views), moved[0].height, moved[0].width, 3), dtype=torch.uint8,
+                          device=self.device)  # fmt: skip
+        depth = torch.zeros((len(views), moved[0].height, moved[0].width), device=self.device)
+        for room in dict.fromkeys(rooms):
+            splat = self.splats[room]
+            idx = [v for (r, _), v in views.items() if r == room]
+            per_call = max(
+                1, min(MAX_CAMERAS_PER_CALL, MAX_CAMERA_GAUSSIANS_PER_CALL // len(splat))
+            )
+            for i in range(0, len(idx), per_call):
+                part = idx[i : i + per_call]
+                image = render(splat, [unique[v] for v in part], backend=self.backend)
+                rgb[part] = image.rgb_uint8().to(self.device)
+                depth[part] = image.surface_depth(SPLAT_SURFACE_ALPHA).to(self.device)
+        self.renders += len(views)
         self.render_seconds += time.perf_counter() - start
-        return torch.cat(rgb), torch.cat(depth)
+        return rgb[rows], depth[rows]
 
-    def render_one(self, camera: PinholeCamera, pose: LayoutPose) -> tuple[torch.Tensor, ...]:
-        """The splat posed by ``pose`` seen from ``camera``: uint8 RGB and surface depth."""
-        rgb, depth = self.render_backgrounds([camera], [pose])
+    def render_one(
+        self, camera: PinholeCamera, pose: LayoutPose, room: Path | None = None
+    ) -> tuple[torch.Tensor, ...]:
+        """The splat ``room`` (default: the only one) posed by ``pose`` seen from ``camera``:
+        uint8 RGB and surface depth."""
+        room = next(iter(self.splats)) if room is None else Path(room)
+        rgb, depth = self.render_backgrounds([camera], [pose], [room])
         return rgb[0], depth[0]
 
     def backgrounds(
@@ -206,7 +230,9 @@ class HybridRenderer:
             cameras = [
                 PinholeCamera.from_opengl(model_np[e], k_np[e], width, height) for e in stale
             ]
-            rgb, depth = self.render_backgrounds(cameras, [self.poses[e] for e in stale])
+            rgb, depth = self.render_backgrounds(
+                cameras, [self.poses[e] for e in stale], [self.rooms[e] for e in stale]
+            )
             cached.rgb[stale], cached.depth[stale] = rgb, depth
             cached.model[stale], cached.intrinsic[stale] = model[stale], k[stale]
             cached.valid[stale] = True

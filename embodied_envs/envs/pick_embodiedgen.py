@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -26,13 +25,14 @@ from embodied_envs.config import (
 from embodied_envs.envs.arguments import check_quaternion, dataclass_arg
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
-from embodied_envs.layout import GoalRegion, LayoutInfo, PlacementLimits, load_layout
+from embodied_envs.layout import GoalRegion, LayoutError, LayoutInfo, PlacementLimits
 from embodied_envs.layout.limits import check_number
 from embodied_envs.layout.placement import place
+from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import default_layout
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID, MAX_EPISODE_STEPS
 from embodied_envs.scene import load_layout_scene
-from embodied_envs.scene.layout_scene import configuration_layouts
+from embodied_envs.scene.layout_scene import configuration_layouts, scene_slots
 
 # arm at the Panda's rest pose, fingers open (0.04 m each)
 REST_QPOS = np.array(
@@ -51,9 +51,13 @@ class PickEmbodiedGenEnv(CheckedEnv):
     floor shows instead of it.
 
     **Randomizations** (``replace_objs=False``: the file's poses, always):
-    - per configuration (construction, ``reconfiguration_freq``, ``reconfigure=True``): table
+    - per configuration (construction, ``reconfiguration_freq``, ``reconfigure=True``): with a
+      layout set (``layout_file`` a list, folder or glob) or asset pools, each env's layout and
+      pooled assets (``layout.sets.LayoutSet.draw``, from the env's seed); then table
       yaw, robot spot and background yaw per env, by the seeded placement (env 0 keeps the
-      file's poses on the first configuration); splat backgrounds are rendered then
+      file's poses on the first configuration, unless the set has pools); splat backgrounds
+      are rendered then. ``env.unwrapped.layouts`` holds each env's layout,
+      ``env.unwrapped.instructions`` its task in words
     - per episode (the reset envs): every object on the table, within the placement limits
     - arm joints: ``REST_QPOS`` plus N(0, ``robot_init_qpos_noise``); fingers open
     - goal: uniform over the table top within the robot's reach (``goal_region``)
@@ -126,7 +130,9 @@ class PickEmbodiedGenEnv(CheckedEnv):
     def __init__(
         self,
         *args,
-        layout_file: str | os.PathLike | None = None,  # default: the shipped default layout
+        # one layout file, a folder of them, a glob, or a list of these (a layout set: each
+        # env draws one per configuration); default: the shipped default layout
+        layout_file: str | os.PathLike | list | None = None,
         replace_objs: bool = True,
         robot_uids: str | None = None,
         robot_init_qpos_noise: float = 0.02,
@@ -148,9 +154,11 @@ class PickEmbodiedGenEnv(CheckedEnv):
         self.camera_spec = CameraSpec.from_cfg(camera_cfg)
         # no eye or target given: the render camera is framed on the robot and the table
         self.frame_render_camera = not {"camera_eye", "camera_target_pt"} & set(camera_cfg or {})
-        self.layout_file = Path(layout_file) if layout_file is not None else default_layout()
-        self.base_layout: LayoutInfo = load_layout(self.layout_file)
-        robot = resolve_robot(self.base_layout.robot, robot_uids, str(self.layout_file))
+        self.layout_set = LayoutSet.load(default_layout() if layout_file is None else layout_file)
+        files = self.layout_set.files
+        self.layout_file = files[0] if len(files) == 1 else files  # absolute
+        self.base_layout: LayoutInfo = self.layout_set.layouts[0]
+        robot = self._one_robot(robot_uids)
         self.placement_limits = dataclass_arg(PlacementLimits, placement_limits, "placement_limits")
         self.goal_region = dataclass_arg(GoalRegion, goal_region, "goal_region")
         self.goal_region.check_reach(self.placement_limits)
@@ -167,25 +175,55 @@ class PickEmbodiedGenEnv(CheckedEnv):
             self.check_keyword(name, value)  # as a config file's values are checked
         init_3dgs_quat = check_quaternion("init_3dgs_quat", init_3dgs_quat)
         self.replace_objs = bool(replace_objs)
-        if self.replace_objs:  # an impossible layout fails here, not mid-simulation
-            place(self.base_layout, 0, self.placement_limits)
+        self._check_layout_set(kwargs.get("num_envs", 1))
         self.robot_init_qpos_noise = float(robot_init_qpos_noise)
         self.objs_z_offset, self.robot_z_offset = float(objs_z_offset), float(robot_z_offset)
         self.hybrid_obs = bool(hybrid_obs)
         self.render_hybrid = render_mode == "hybrid"
         self.hybrid: HybridRenderer | None = None
         if self.render_hybrid or self.hybrid_obs:  # moves to the sim's device when known
+            rooms = {x.gs_model_path(): x.source for x in reversed(self.layout_set.layouts)}
             self.hybrid = HybridRenderer(
-                self.base_layout.gs_model_path(),
+                rooms,
                 tuple(float(v) for v in init_3dgs_quat),
                 depth_test=bool(hybrid_depth_test),
                 backend=splat_backend,
-                layout_file=self.layout_file,
             )
         self._num_configurations = 0
         if self.render_hybrid:  # an rgb_array env to every wrapper; render() composites
             render_mode = "rgb_array"
         super().__init__(*args, robot_uids=robot, render_mode=render_mode, **kwargs)
+
+    def _one_robot(self, robot_uids: str | None) -> str:
+        """The robot every layout of the set names (one agent serves every env)."""
+        robots = {
+            x.source: resolve_robot(x.robot, robot_uids, str(x.source))
+            for x in self.layout_set.layouts
+        }
+        if len(set(robots.values())) > 1:
+            raise LayoutError(
+                f"layout_file: the layouts of a set must name one robot, and these differ: "
+                f"{ {str(k): v for k, v in robots.items()} }. Fix: split the set by robot."
+            )
+        return next(iter(robots.values()))
+
+    def _check_layout_set(self, num_envs: int) -> None:
+        """What a configuration could meet, refused now: a layout or asset pool member that
+        cannot be placed, parallel envs that cannot merge their objects, file poses that do
+        not fit a pool's members."""
+        layout_set = self.layout_set
+        if self.replace_objs:  # an impossible layout fails here, not mid-simulation
+            for member in layout_set.members():
+                place(member, 0, self.placement_limits)
+        elif any(layout_set.pools):
+            pooled = next(x for x, p in zip(layout_set.layouts, layout_set.pools, strict=True) if p)
+            raise LayoutError(
+                f"{pooled.source}: asset pools need replace_objs=True (the file's poses were "
+                "made for one asset, and a drawn one may not rest there). Fix: pass "
+                "replace_objs=True, or name one asset folder."
+            )
+        if num_envs > 1 and layout_set.varies:
+            scene_slots(list(layout_set.layouts))
 
     @property
     def _default_sim_config(self):
@@ -222,7 +260,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
     def _load_scene(self, options: dict):
         self._num_configurations += 1
         self.layouts = configuration_layouts(
-            self.base_layout, self._episode_seed, self.placement_limits,
+            self.layout_set, self._episode_seed, self.placement_limits,
             first=self._num_configurations == 1, replace=self.replace_objs,
         )  # fmt: skip
         ls = self.layout_scene = load_layout_scene(
@@ -252,7 +290,8 @@ class PickEmbodiedGenEnv(CheckedEnv):
                     self.agent.robot.links + list(self.layout_scene.node_actors.values())
                 ),
                 hidden_ids=stacked_ids(self._hidden_objects),
-                background_poses=[x.pose(self.base_layout.background) for x in self.layouts],
+                background_poses=[x.pose(x.background) for x in self.layouts],
+                rooms=[x.gs_model_path() for x in self.layouts],
             )
 
     def _set_episode_rng(self, seed, env_idx: torch.Tensor):

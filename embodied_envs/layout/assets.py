@@ -80,7 +80,13 @@ class AssetSpec:
 
 
 def urdf_path_for(asset_dir: Path, node: str) -> Path:
-    return Path(asset_dir) / f"{node_stem(node)}.urdf"
+    """An asset folder's URDF: ``<node stem>.urdf``, else ``<folder name>.urdf`` (the name a
+    member of an asset pool has, EmbodiedGen's ``<asset>/<asset>.urdf``); the first name when
+    neither exists."""
+    asset_dir = Path(asset_dir)
+    named = asset_dir / f"{node_stem(node)}.urdf"
+    own = asset_dir / f"{asset_dir.name}.urdf"
+    return own if not named.is_file() and own.is_file() else named
 
 
 def _origin(elem: ET.Element | None, urdf: Path, where: str):

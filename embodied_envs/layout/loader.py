@@ -15,16 +15,28 @@ from embodied_envs.layout.assets import (
 )
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.placement import check_file_poses
+from embodied_envs.layout.pools import asset_pools, with_assets, with_first_members
 from embodied_envs.layout.schema import LayoutInfo, label
 
 MAX_LAYOUT_BYTES = 1 << 20  # a layout file over this is refused before it is read
 
 
 def check_asset_files(info: LayoutInfo) -> list[str]:
-    """File checks: every asset folder exists and holds a loadable URDF with its meshes."""
+    """File checks: every asset folder exists and holds a loadable URDF with its meshes; every
+    member of an asset pool is checked in its place, and a bad one is named."""
+    pooled = asset_pools(info)
+    problems = _check_nodes(info, [n for n in info.objs_mapping if n not in pooled])
+    for node, members in pooled.items():
+        for member in members:
+            problems += _check_nodes(with_assets(info, {node: member}), [node])
+    return problems
+
+
+def _check_nodes(info: LayoutInfo, nodes: list[str]) -> list[str]:
     f = label(info.source)
     problems = []
-    for node, cat in info.objs_mapping.items():
+    for node in nodes:
+        cat = info.objs_mapping[node]
         d = info.asset_dir(node)
         if not d.is_dir():
             problems.append(
@@ -39,7 +51,8 @@ def check_asset_files(info: LayoutInfo) -> list[str]:
             found = sorted(p.name for p in d.glob("*.urdf"))
             problems.append(
                 f'{f}: assets["{node}"]: {node_stem(node)}.urdf not found in {d} (found {found}).'
-                " Fix: name the URDF after the node, spaces replaced by underscores."
+                " Fix: name the URDF after the node (spaces replaced by underscores) or after its"
+                " folder; a folder of such asset folders is an asset pool."
             )
             continue
         try:
@@ -126,8 +139,8 @@ def load_layout(path: Path | str, check_files: bool = True, check_poses: bool = 
         raise
     if check_files:
         problems = check_asset_files(info)
-        if not problems and check_poses:
-            problems = check_file_poses(info)
+        if not problems and check_poses:  # a pooled node stands as its first member
+            problems = check_file_poses(with_first_members(info))
         if problems:
             raise LayoutError(problems)
     return info

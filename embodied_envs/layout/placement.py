@@ -10,7 +10,6 @@ rejected the most candidates.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,11 +21,12 @@ from embodied_envs.layout.assets import (
     FileVersion,
     asset_geometry,
     convex_hull_2d,
-    node_stem,
     parse_urdf,
+    urdf_path_for,
 )
 from embodied_envs.layout.errors import PlacementError
 from embodied_envs.layout.limits import PlacementLimits
+from embodied_envs.layout.pools import with_first_members
 from embodied_envs.layout.pose import LayoutPose, wrap_angle
 from embodied_envs.layout.schema import MAX_INTERPENETRATION, REST_TOLERANCE, LayoutInfo
 
@@ -39,8 +39,7 @@ AssetKey = tuple[FileVersion, FileVersion]  # (URDF, collision mesh) of a node's
 def asset_key(layout: LayoutInfo, node: str) -> AssetKey:
     """The versions of a node's URDF and collision mesh: the key of every value derived from
     its geometry (``ASSET_FILES``), so an edited file is read again."""
-    folder = os.path.join(layout.asset_base, layout.assets[node])
-    urdf = FileVersion.of(os.path.join(folder, f"{node_stem(node)}.urdf"))
+    urdf = FileVersion.of(str(urdf_path_for(Path(layout.asset_base, layout.assets[node]), node)))
     return urdf, FileVersion.of(_spec(urdf).collision.path)
 
 
@@ -551,8 +550,8 @@ def place(
         PlacementError: naming the object and the constraint that failed most often.
     """
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-    try:
-        poses = _Placer(layout, rng, limits or PlacementLimits()).run()
+    try:  # a pooled node is placed as its first member (a configuration draws one first)
+        poses = _Placer(with_first_members(layout), rng, limits or PlacementLimits()).run()
     except PlacementError as e:
         if layout.source is None or e.source:
             raise

@@ -192,7 +192,7 @@ def yaw_raw_poses(xy: torch.Tensor, z: torch.Tensor, yaw: torch.Tensor) -> torch
 
 
 @dataclass(frozen=True)
-class _Region:
+class Region:
     """Convex regions per env: ``inside(x) iff normals @ x >= offsets``, with their boxes."""
 
     normals: torch.Tensor  # (b, e, 2)
@@ -202,14 +202,12 @@ class _Region:
     z: torch.Tensor  # (b,) height of the surface
 
     @classmethod
-    def of(cls, poly: torch.Tensor, z: torch.Tensor) -> _Region:
+    def of(cls, poly: torch.Tensor, z: torch.Tensor) -> Region:
         n = inward_normals(poly)
         return cls(n, (n * poly).sum(-1), poly.amin(-2), poly.amax(-2), z)
 
-    def rows(self, idx: torch.Tensor) -> _Region:
-        return _Region(
-            self.normals[idx], self.offsets[idx], self.lo[idx], self.hi[idx], self.z[idx]
-        )
+    def rows(self, idx: torch.Tensor) -> Region:
+        return Region(self.normals[idx], self.offsets[idx], self.lo[idx], self.hi[idx], self.z[idx])
 
     def holds(
         self, shapes: Shapes, shape: torch.Tensor, xy: torch.Tensor, yaw: torch.Tensor
@@ -284,6 +282,10 @@ class EpisodeSampler:
         goal_region: where goals are drawn.
         objs_z_offset: m added to every object's height (as at configuration).
         device: the env's device.
+        env_ids: the env (index into ManiSkill's episode RNGs) of each layout; default
+            ``0 .. len(layouts) - 1``. A scene whose envs hold different layouts has one
+            sampler per layout, each over its own envs (``scene.layout_scene.SceneEpisodes``);
+            every other argument and method indexes the sampler's own rows.
 
     Raises:
         LayoutError: when no point of a table top is within the goal region of its robot.
@@ -296,12 +298,15 @@ class EpisodeSampler:
         goal_region: GoalRegion | None = None,
         objs_z_offset: float = 0.0,
         device: torch.device | str = "cpu",
+        env_ids: torch.Tensor | None = None,
     ):
         base = layouts[0]
         self.limits, self.device = limits, torch.device(device)
         self.goal_region = GoalRegion() if goal_region is None else goal_region
         self.objs_z_offset = float(objs_z_offset)
         self.fallbacks = 0  # envs that kept their configuration's arrangement
+        rows = torch.arange(len(layouts), device=self.device)
+        self.env_ids = rows if env_ids is None else torch.as_tensor(env_ids, device=self.device)
         ctx = self.context = base.context
 
         def t(x) -> torch.Tensor:
@@ -378,8 +383,8 @@ class EpisodeSampler:
                 f" margin ({limits.hull_margin} m). Fix: use a larger table."
             )
         self.top_z = t([ctx_top + p.p[2] for p in ctx_poses])
-        self.table = _Region.of(self._posed(ctx_shrunk, ctx_poses), self.top_z)
-        self.top = _Region.of(self._posed(ctx_hull, ctx_poses), self.top_z)  # whole top
+        self.table = Region.of(self._posed(ctx_shrunk, ctx_poses), self.top_z)
+        self.top = Region.of(self._posed(ctx_hull, ctx_poses), self.top_z)  # whole top
         self.robot_xy = t([r.p[:2] for r in robots])
         self.robot_yaw = t([r.yaw for r in robots])
         self._init_goals(base, ctx, ctx_poses, layouts)
@@ -403,7 +408,7 @@ class EpisodeSampler:
         """The goal region per env: top hull shrunk by the goal margin, reach band, heading."""
         g = self.goal_region
         hull, _, shrunk = local_top(base, ctx, self.limits.top_band, g.margin)
-        self.goal_table = _Region.of(
+        self.goal_table = Region.of(
             self._posed(hull if shrunk is None else shrunk, ctx_poses), self.top_z
         )
         # bounding box of the reach sector (dense arc samples, padded) within the top's box
@@ -519,7 +524,7 @@ class EpisodeSampler:
 
     def _keys(self, rngs, envs: torch.Tensor, size: int) -> torch.Tensor:
         """The next ``size`` episode keys of each env in ``envs`` from its RNG, env-major."""
-        drawn = np.asarray(rngs[envs.cpu().numpy()].randint(0, 2**31, size=size))
+        drawn = np.asarray(rngs[self.env_ids[envs].cpu().numpy()].randint(0, 2**31, size=size))
         return torch.as_tensor(drawn.reshape(-1), device=self.device)
 
     def _starts(self, env_idx: torch.Tensor, keys: torch.Tensor) -> EpisodeStart:
@@ -589,7 +594,7 @@ class EpisodeSampler:
                 poly_normals[:, shape] = rotate(shapes.normals[shape], yaw)
                 origins[:, shape] = xy
             if it.top is not None:
-                regions[it.node] = _Region.of(rotate(it.top, yaw) + xy[:, None], z + it.top_z)
+                regions[it.node] = Region.of(rotate(it.top, yaw) + xy[:, None], z + it.top_z)
         failed = int((~ok_env).sum())
         if failed:
             if self.fallbacks == 0:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -13,23 +14,117 @@ from mani_skill.utils.structs.pose import Pose
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.limits import GoalRegion, PlacementLimits
 from embodied_envs.layout.placement import derive_seed, floor_height, place
-from embodied_envs.layout.schema import LayoutInfo
+from embodied_envs.layout.schema import LayoutInfo, label
+from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.scene.builder import build_asset_actor
-from embodied_envs.scene.episode import EpisodeSampler
+from embodied_envs.scene.episode import NOISE_DIMS, EpisodeSampler, EpisodeStart, Region
 
 if TYPE_CHECKING:
     from mani_skill.envs.scene import ManiSkillScene
 
 
 @dataclass
+class SceneEpisodes:
+    """Per-episode starts of every env: one :class:`EpisodeSampler` per group of envs that
+    hold the same layout (a loop over layouts, never over envs), their starts keyed by slot.
+
+    Attributes:
+        samplers: per group, its sampler (over the group's envs, ascending).
+        slots: per group, each node's slot name.
+        top: the whole table top of every env (``Region``, edges padded).
+        robot_xy, top_z: per env, its robot base's XY and its table top's height.
+    """
+
+    samplers: list[EpisodeSampler]
+    slots: list[dict[str, str]]
+    top: Region
+    robot_xy: torch.Tensor
+    top_z: torch.Tensor
+
+    @classmethod
+    def of(cls, samplers: list[EpisodeSampler], slots: list[dict[str, str]], num_envs: int):
+        if len(samplers) == 1:
+            only = samplers[0]
+            return cls(samplers, slots, only.top, only.robot_xy, only.top_z)
+        device = samplers[0].device
+        edges = max(s.top.normals.shape[1] for s in samplers)
+        normals = torch.zeros((num_envs, edges, 2), device=device)
+        offsets = torch.zeros((num_envs, edges), device=device)  # padded edges: 0 >= 0 holds
+        lo, hi, robot_xy = (torch.zeros((num_envs, 2), device=device) for _ in range(3))
+        z = torch.zeros(num_envs, device=device)
+        for s in samplers:
+            e, rows = s.top.normals.shape[1], s.env_ids
+            normals[rows, :e], offsets[rows, :e] = s.top.normals, s.top.offsets
+            lo[rows], hi[rows], z[rows], robot_xy[rows] = s.top.lo, s.top.hi, s.top.z, s.robot_xy
+        return cls(samplers, slots, Region(normals, offsets, lo, hi, z), robot_xy, z)
+
+    @property
+    def fallbacks(self) -> int:
+        return sum(s.fallbacks for s in self.samplers)
+
+    @property
+    def fallback(self) -> dict[str, torch.Tensor]:
+        """The configuration's pose of each slot's objects, ``(num_envs, 7)`` (one group)."""
+        if len(self.samplers) == 1:
+            return {self.slots[0][n]: p for n, p in self.samplers[0].fallback.items()}
+        raise AttributeError("fallback poses are per group: see samplers[g].fallback")
+
+    def reseeded(self, seed, env_idx, enhanced_determinism: bool) -> None:
+        """After ManiSkill's ``_set_episode_rng(seed, env_idx)`` (``EpisodeSampler.reseeded``)."""
+        if seed is not None:  # every env's episode RNG is new
+            for s in self.samplers:
+                s.invalidate()
+        elif enhanced_determinism:
+            for s, rows in self._rows(torch.as_tensor(env_idx, device=self.top_z.device)):
+                s.invalidate(rows)
+
+    def draw(self, env_idx: torch.Tensor, rngs) -> EpisodeStart:
+        """The next episode start of each env in ``env_idx``, objects keyed by slot."""
+        if len(self.samplers) == 1:
+            start = self.samplers[0].draw(env_idx, rngs)
+            names = self.slots[0]
+            return EpisodeStart({names[n]: p for n, p in start.objects.items()}, start.goal,
+                                start.joint_noise)  # fmt: skip
+        b, device = len(env_idx), self.top_z.device
+        objects: dict[str, torch.Tensor] = {}
+        goal = torch.zeros((b, 3), device=device)
+        noise = torch.zeros((b, NOISE_DIMS), device=device)
+        for s, names in zip(self.samplers, self.slots, strict=True):
+            where = torch.isin(env_idx, s.env_ids).nonzero().reshape(-1)
+            if not len(where):
+                continue
+            rows = torch.searchsorted(s.env_ids, env_idx[where])
+            start = s.draw(rows, rngs)
+            for node, pose in start.objects.items():
+                objects.setdefault(names[node], torch.zeros((b, 7), device=device))[where] = pose
+            goal[where], noise[where] = start.goal, start.joint_noise
+        return EpisodeStart(objects, goal, noise)
+
+    def _rows(self, env_idx: torch.Tensor):
+        """Per sampler, the rows of the envs of ``env_idx`` it holds (samplers with none
+        left out)."""
+        for s in self.samplers:
+            mine = env_idx[torch.isin(env_idx, s.env_ids)]
+            if len(mine):
+                yield s, torch.searchsorted(s.env_ids, mine)
+
+
+@dataclass
 class LayoutScene:
     """The loaded actors of all envs.
 
+    Envs may hold different layouts (a layout set or asset pools): their actors are merged
+    into **slots**, one ManiSkill ``Actor`` over all envs per slot, as ManiSkill's
+    ``PickSingleYCB`` merges its per-env objects. When every env holds the same nodes, each
+    node is its own slot, named after it. Otherwise the slots are ``context``, ``target``
+    (the graded object) and ``object1``, ``object2``, ... (the other objects, in each layout's
+    order), and every layout must have as many objects.
+
     Attributes:
         env_actors: ``env_actors[f"env{i}"][node]``, the actor of each node in env i.
-        node_actors: each node's actors merged over envs (one ManiSkill ``Actor`` per node).
-        dynamic_nodes: nodes whose pose is reset each episode (all but the context).
-        node_poses: each node's configuration raw pose per env, ``(num_envs, 7)`` (the
+        node_actors: each slot's actors merged over envs.
+        dynamic_nodes: the slots whose pose is reset each episode (all but the context).
+        node_poses: each slot's configuration raw pose per env, ``(num_envs, 7)`` (the
             layouts' poses, objects raised by ``objs_z_offset``).
         target_actor: the graded object of each env merged over envs.
         robot_poses: robot base raw pose per env, ``(num_envs, 7)``.
@@ -43,11 +138,11 @@ class LayoutScene:
     node_poses: dict[str, torch.Tensor]
     target_actor: Actor
     robot_poses: torch.Tensor
-    episodes: EpisodeSampler
+    episodes: SceneEpisodes
     floor_z: float
 
     def register_state(self, env) -> None:
-        """Make each dynamic node one entry of ``env``'s state dict, over all envs (its per-env
+        """Make each dynamic slot one entry of ``env``'s state dict, over all envs (its per-env
         actors are views of the merged one and leave the registry)."""
         for actor in (a for actors in self.env_actors.values() for a in actors.values()):
             env.remove_from_state_dict_registry(actor)
@@ -55,7 +150,7 @@ class LayoutScene:
             env.add_to_state_dict_registry(self.node_actors[node])
 
     def set_episode_poses(self, env_idx: torch.Tensor, objects: dict[str, torch.Tensor]) -> None:
-        """Pose every dynamic node of ``env_idx`` at rest: at ``objects[node]`` (raw poses
+        """Pose every dynamic slot of ``env_idx`` at rest: at ``objects[slot]`` (raw poses
         ``(b, 7)``) when given, else at its configuration's pose."""
         zeros = torch.zeros((len(env_idx), 3), device=env_idx.device)
         for node in self.dynamic_nodes:
@@ -93,18 +188,46 @@ class LayoutScene:
 
 
 def configuration_layouts(
-    base: LayoutInfo, seeds: np.ndarray, limits: PlacementLimits, first: bool, replace: bool
+    layout_set: LayoutSet, seeds: np.ndarray, limits: PlacementLimits, first: bool, replace: bool
 ) -> list[LayoutInfo]:
-    """The layout of each env for a configuration: with ``replace``, env k placed by
-    ``derive_seed(seeds[k], k)``, except env 0 on the ``first`` configuration, which keeps the
-    file's poses; without ``replace``, the file's poses everywhere."""
+    """The layout of each env for a configuration: env k draws its scene from the set
+    (``LayoutSet.draw(seeds[k], k)``); with ``replace``, it is placed by
+    ``derive_seed(seeds[k], k)``, except env 0 on the ``first`` configuration of a set without
+    asset pools, which keeps the file's poses; without ``replace``, the file's poses."""
     seeds = np.asarray(seeds).reshape(-1)
+    drawn = [layout_set.draw(s, k) for k, s in enumerate(seeds)]
     if not replace:
-        return [base] * len(seeds)
+        return drawn
+    keep_file = first and not any(layout_set.pools)
     return [
-        base if (first and k == 0) else place(base, derive_seed(s, k), limits)
-        for k, s in enumerate(seeds)
+        layout if (keep_file and k == 0) else place(layout, derive_seed(s, k), limits)
+        for k, (s, layout) in enumerate(zip(seeds, drawn, strict=True))
     ]
+
+
+def scene_slots(layouts: list[LayoutInfo]) -> list[dict[str, str]]:
+    """Each env's slot name per node (``LayoutScene``): the node names when every env holds
+    the same nodes, else ``context``, ``target``, ``object1``, ...
+
+    Raises:
+        LayoutError: the layouts differ in how many objects they hold.
+    """
+    nodes = layouts[0].object_nodes()
+    if all(x.object_nodes() == nodes for x in layouts):
+        return [{n: n for n in nodes} for _ in layouts]
+    counts = {label(x.source): len(x.object_nodes()) for x in layouts}
+    if len(set(counts.values())) > 1:
+        raise LayoutError(
+            f"layouts held by parallel envs must hold as many objects each (each object is one"
+            f" actor merged over envs), and these differ: {counts}. Fix: give every layout of "
+            "the set as many objects (add or drop distractors), or use num_envs=1."
+        )
+    slots = []
+    for x in layouts:
+        others = [n for n in x.object_nodes() if n not in (x.context, x.target_node)]
+        names = {x.context: "context", x.target_node: "target"}
+        slots.append(names | {n: f"object{j + 1}" for j, n in enumerate(others)})
+    return slots
 
 
 def load_layout_scene(
@@ -116,48 +239,61 @@ def load_layout_scene(
     goal_region: GoalRegion,
     device: torch.device,
 ) -> LayoutScene:
-    """Build every env's layout actors and the per-env tensors the task needs."""
+    """Build every env's layout actors, merged into slots, and the per-env tensors the task
+    needs; one episode sampler per group of envs holding the same layout."""
     num_envs = len(layouts)
-    nodes = layouts[0].object_nodes()
-    for i, layout in enumerate(layouts):
-        if layout.object_nodes() != nodes:
-            raise LayoutError(
-                f"env {i}: layout nodes {layout.object_nodes()} differ from env 0's {nodes}"
-            )
-    specs = {node: layouts[0].asset_spec(node) for node in nodes}
+    slots = scene_slots(layouts)
+    names = list(slots[0].values())
     env_actors: dict[str, dict[str, Actor]] = {}
-    node_poses = {node: np.zeros((num_envs, 7), np.float32) for node in nodes}
+    node_poses = {name: np.zeros((num_envs, 7), np.float32) for name in names}
     robot_poses = np.zeros((num_envs, 7), np.float32)
+    specs: dict[tuple[Path, str], object] = {}  # (asset folder, node) -> parsed asset, once
     for i, layout in enumerate(layouts):
         actors = {}
-        for node in nodes:
+        for node in layout.object_nodes():
             static = layout.objs_mapping[node] == "context"
             pose = layout.pose(node).raised(0.0 if static else objs_z_offset)
-            node_poses[node][i] = pose.to_raw()
-            actors[node] = build_asset_actor(
-                scene, specs[node], pose, f"env{i}/{node}", [i], static
-            )
+            node_poses[slots[i][node]][i] = pose.to_raw()
+            key = (layout.asset_dir(node), node)
+            if key not in specs:
+                specs[key] = layout.asset_spec(node)
+            actors[node] = build_asset_actor(scene, specs[key], pose, f"env{i}/{node}", [i], static)
         env_actors[f"env{i}"] = actors
         robot_poses[i] = layout.pose(layout.robot).raised(robot_z_offset).to_raw()
     node_actors = {}
-    for node in nodes:
-        per_env = [env_actors[f"env{i}"][node] for i in range(num_envs)]
-        node_actors[node] = Actor.merge(per_env, name=node)
+    for name in names:
+        per_env = [
+            env_actors[f"env{i}"][next(n for n, s in slots[i].items() if s == name)]
+            for i in range(num_envs)
+        ]
+        node_actors[name] = Actor.merge(per_env, name=name)
     target_actor = Actor.merge(
         [env_actors[f"env{i}"][layouts[i].target_node] for i in range(num_envs)], name="target_obj"
     )
+    groups: dict[tuple, list[int]] = {}  # envs holding the same layout and assets
+    for i, layout in enumerate(layouts):
+        groups.setdefault((layout.source, tuple(sorted(layout.assets.items()))), []).append(i)
+    samplers, group_slots = [], []
+    for envs in groups.values():
+        samplers.append(
+            EpisodeSampler(
+                [layouts[i] for i in envs], limits, goal_region, objs_z_offset, device,
+                env_ids=torch.tensor(envs, device=device),
+            )
+        )  # fmt: skip
+        group_slots.append(slots[envs[0]])
 
     def t(x):
         return torch.as_tensor(x, device=device)
 
-    node_poses = {n: t(p) for n, p in node_poses.items()}
+    context = slots[0][layouts[0].context]
     return LayoutScene(
         env_actors=env_actors,
         node_actors=node_actors,
-        dynamic_nodes=[n for n in nodes if layouts[0].objs_mapping[n] != "context"],
-        node_poses=node_poses,
+        dynamic_nodes=[n for n in names if n != context],
+        node_poses={n: t(p) for n, p in node_poses.items()},
         target_actor=target_actor,
         robot_poses=t(robot_poses),
-        episodes=EpisodeSampler(layouts, limits, goal_region, objs_z_offset, device),
+        episodes=SceneEpisodes.of(samplers, group_slots, num_envs),
         floor_z=min(floor_height(layout) for layout in layouts),
     )

@@ -114,6 +114,13 @@ class PinholeCamera:
             self, world_to_cam=self.world_to_cam @ np.asarray(frame_to_world, dtype=np.float64)
         )
 
+    def key(self, decimals: int = 6) -> tuple:
+        """A hashable identity of the view (pose and intrinsics, rounded): equal keys render
+        the same image."""
+        pose = tuple(np.round(self.world_to_cam, decimals).reshape(-1).tolist())
+        lens = tuple(round(float(v), decimals) for v in (self.fx, self.fy, self.cx, self.cy))
+        return (*pose, *lens, self.width, self.height)
+
     @property
     def center(self) -> np.ndarray:
         """The camera centre in world coordinates."""

@@ -253,7 +253,8 @@ def test_compositing_is_per_env_with_its_own_ids_background_and_depth(tmp_path):
     from embodied_envs.splat.camera import GL_TO_CV
 
     write_ply(occluder_splat(), tmp_path / "gs_model.ply")
-    hybrid = HybridRenderer(tmp_path / "gs_model.ply", (0.7071, 0.0, 0.0, 0.7071))
+    room = tmp_path / "gs_model.ply"
+    hybrid = HybridRenderer({room: "test"}, (0.7071, 0.0, 0.0, 0.7071))
     cam = PinholeCamera.look_at((0.9, 0.0, 1.05), (0.0, 0.0, 1.05), width=32, height=24)
     model = torch.tensor(np.linalg.inv(cam.world_to_cam) @ GL_TO_CV).expand(2, 4, 4)
     intrinsic = torch.tensor(cam.intrinsic).expand(2, 3, 3)
@@ -264,7 +265,9 @@ def test_compositing_is_per_env_with_its_own_ids_background_and_depth(tmp_path):
     seg[:, :, :16] = 5  # left half: id 5, right half: id 7, in both envs
     seg[:, :, 16:] = 7
     depth_mm = torch.full((2, 24, 32, 1), 1500, dtype=torch.int16)  # 1.5 m: behind the wall
-    hybrid.configure(torch.tensor([[5], [7]]), torch.zeros((2, 0), dtype=torch.long), poses)
+    hybrid.configure(
+        torch.tensor([[5], [7]]), torch.zeros((2, 0), dtype=torch.long), poses, [room, room]
+    )
     images = dict(rgb=rgb, segmentation=seg, depth=depth_mm, position=torch.zeros((2, 24, 32, 3)))
     full = hybrid.composite("cam", images, model, intrinsic, human=False)
     out = full["rgb"]
@@ -311,14 +314,14 @@ def test_backgrounds_of_many_envs_in_batched_calls_equal_the_posed_splat(monkeyp
 
     monkeypatch.setattr(hybrid_module, "MAX_CAMERAS_PER_CALL", 2)
     path = load_layout(DEFAULT_LAYOUT).gs_model_path()
-    renderer = hybrid_module.HybridRenderer(path, SPLAT_Y_UP_TO_Z_UP)
+    renderer = hybrid_module.HybridRenderer({path: DEFAULT_LAYOUT}, SPLAT_Y_UP_TO_Z_UP)
     cams = [
         PinholeCamera.look_at((0.6 * math.cos(a), 0.6 * math.sin(a), 1.1), (0, 0, 0.9), (0, 0, 1),
                               48, 40)
         for a in (0.0, 2.0, 4.0)
     ]  # fmt: skip
     poses = [LayoutPose.from_xyz_yaw((0.1 * k, 0.0, 0.0), 0.7 * k) for k in range(3)]
-    rgb, depth = renderer.render_backgrounds(cams, poses)
+    rgb, depth = renderer.render_backgrounds(cams, poses, [path] * 3)
     assert rgb.shape == (3, 40, 48, 3) and depth.shape == (3, 40, 48)
     assert renderer.renders == 3
     stored = read_ply(path)

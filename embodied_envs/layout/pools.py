@@ -1,0 +1,61 @@
+"""Asset pools: an ``assets`` entry naming a folder of asset folders.
+
+The pool's folder holds no URDF of its own; each of its sub-folders holds one asset
+(``<node>.urdf`` or ``<sub-folder>.urdf`` with its meshes). Adding an asset folder to the pool
+adds it to the draw (``layout.sets.LayoutSet.draw``). Where one geometry is needed without a
+draw (the file's own poses, ``place``), a pooled node stands as its first member.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from pathlib import Path
+
+from embodied_envs.layout.assets import urdf_path_for
+from embodied_envs.layout.schema import LayoutInfo
+
+
+def pool_members(layout: LayoutInfo, node: str) -> list[str] | None:
+    """The members of a node's asset pool as ``assets`` entries (relative to the layout's
+    asset folder), sorted; None when the node's folder is one asset."""
+    folder = layout.asset_dir(node)
+    if not folder.is_dir() or urdf_path_for(folder, node).is_file():
+        return None
+    members = [
+        sub
+        for sub in sorted(folder.iterdir())
+        if sub.is_dir() and urdf_path_for(sub, node).is_file()
+    ]
+    if not members:
+        return None  # no URDF anywhere: load_layout names the missing one
+    return [f"{layout.assets[node].rstrip('/')}/{sub.name}" for sub in members]
+
+
+def with_assets(layout: LayoutInfo, choices: dict[str, str]) -> LayoutInfo:
+    """A copy of a layout with some ``assets`` entries replaced by pool members.
+
+    A drawn target is described by its member's folder name (``objs_desc``), and the layout's
+    ``task_desc``, written for no asset in particular, gives way to that description, so the
+    instruction names the object the env holds.
+    """
+    if not choices:
+        return layout
+    assets = dict(layout.assets) | choices
+    desc = dict(layout.objs_desc or {})
+    relation = copy.deepcopy(layout.relation)
+    for node, member in choices.items():
+        desc[node] = Path(member).name.replace("_", " ")
+        if node == layout.target_node:
+            relation.pop("task_desc", None)
+    return dataclasses.replace(layout, assets=assets, objs_desc=desc, relation=relation)
+
+
+def asset_pools(layout: LayoutInfo) -> dict[str, list[str]]:
+    """Each pooled node's members (``assets`` entries)."""
+    return {n: m for n in layout.object_nodes() if (m := pool_members(layout, n))}
+
+
+def with_first_members(layout: LayoutInfo) -> LayoutInfo:
+    """The layout with each asset pool's first member in its place (or itself)."""
+    return with_assets(layout, {n: ms[0] for n, ms in asset_pools(layout).items()})
