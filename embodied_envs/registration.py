@@ -12,6 +12,8 @@ import gymnasium as gym
 from gymnasium.envs.registration import WrapperSpec
 
 ENV_ID = "PickEmbodiedGen-v1"
+# the id with its module, as datasets store it: gymnasium imports the plugin on make
+ENTRY_ID = f"embodied_envs:{ENV_ID}"
 CONTROL_FREQ = 50  # Hz, control steps per second (the simulation runs at twice this)
 # 300 control steps = 6 s at CONTROL_FREQ: the scripted expert's longest successful
 # episode over 50 seeded episodes per shipped layout was 297 steps (mean ~150;

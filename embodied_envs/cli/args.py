@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 from embodied_envs.config import MAX_IMAGE_SIDE, MAX_SEED, ConfigError, load_config
-from embodied_envs.layout import load_layout
+from embodied_envs.layout.sets import LayoutSet, spec_name
 from embodied_envs.paths import default_layout
 
 
@@ -91,17 +91,26 @@ def failure_line(what: str, error: Exception) -> str:
     return f"error: {what}: {type(error).__name__}: {text} (set {DEBUG_ENV}=1 for the traceback)"
 
 
-def checked_layouts(paths: list[Path] | None) -> list[Path]:
-    """The command's layout files (default: the shipped one), absolute, each loaded and
-    checked: bad input fails here, before any simulation.
+def checked_layouts(specs: list[str] | None) -> list[tuple[str, list[Path]]]:
+    """The command's ``--layout`` values (default: the shipped layout) as ``(name, files)``: a
+    layout file, or a folder or glob naming a layout set (its files, absolute). Every layout
+    and asset pool member is loaded and checked: bad input fails here, before any simulation.
 
     Raises:
         embodied_envs.layout.LayoutError
     """
-    layouts = [p.resolve() for p in (paths or [default_layout()])]
-    for path in layouts:
-        load_layout(path)
-    return layouts
+    out = []
+    for spec in specs or [str(default_layout())]:
+        out.append((spec_name(spec), LayoutSet.load(spec).files))
+    return out
+
+
+def layout_value(files: list[Path]) -> str | tuple[str, ...]:
+    """A ``checked_layouts`` entry's files as a plan holds them: one path, or a set's tuple."""
+    return str(files[0]) if len(files) == 1 else tuple(str(f) for f in files)
+
+
+LAYOUT_HELP = "layout file(s); a folder or glob is a layout set (each episode draws its layout)"
 
 
 def note_workers(workers: int) -> None:

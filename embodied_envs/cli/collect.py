@@ -7,11 +7,13 @@ from pathlib import Path
 from tqdm import tqdm
 
 from embodied_envs.cli.args import (
+    LAYOUT_HELP,
     add_config_argument,
     check_seed_span,
     checked_layouts,
     env_config,
     failure_line,
+    layout_value,
     note_workers,
     positive_int,
     seed_int,
@@ -36,12 +38,14 @@ def add_parser(sub) -> None:
         help="scripted demonstrations as a ManiSkill dataset (.h5 + .json)",
         description=(
             "Runs the scripted solver on seeded episodes and writes ManiSkill's trajectory "
-            "format per layout: OUT/<layout stem>/trajectory.h5, trajectory.json, summary.json. "
+            "format per --layout value: OUT/<layout stem>/trajectory.h5, trajectory.json, "
+            "summary.json (a folder or glob: one dataset over the layout set, named after the "
+            "folder; each episode's seed draws its layout). "
             "Shards: collect disjoint seed ranges (--seed) on several machines and join them "
             "with python -m mani_skill.trajectory.merge_trajectory."
         ),
     )
-    p.add_argument("--layout", type=Path, nargs="+", default=None, help="layout file(s)")
+    p.add_argument("--layout", nargs="+", default=None, help=LAYOUT_HELP)
     p.add_argument("--num", type=positive_int, default=10, help="demonstrations per layout")
     p.add_argument("--seed", type=seed_int, default=0, help="first episode seed")
     p.add_argument("--out", type=Path, default=Path("outputs/demos"))
@@ -84,21 +88,23 @@ def cmd_collect(args) -> int:
     try:
         with owned_output(args.out):  # one run writes to --out at a time
             failed = 0
-            for path in layouts:
-                failed += not _collect_one(path, args, workers, config)
+            for name, files in layouts:
+                failed += not _collect_one(name, files, args, workers, config)
     except CollectError as e:
         print(f"error: {e}")
         return 1
     return 1 if failed else 0
 
 
-def _collect_one(path, args, workers: int, config: dict) -> bool:
-    """One layout's dataset; False (after one error line) when it could not be made."""
+def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
+    """One layout's (or layout set's) dataset; False (after one error line) when it could
+    not be made."""
     # the pipeline imports the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.collect import CollectError, CollectPlan, collect
 
     plan = CollectPlan(
-        layout=str(path),
+        layout=layout_value(files),
+        name=name,
         num=args.num,
         seed=args.seed,
         obs_mode=args.obs_mode,
@@ -109,7 +115,7 @@ def _collect_one(path, args, workers: int, config: dict) -> bool:
         video=args.video,
         env_kwargs=config,
     )
-    with tqdm(total=plan.attempts(), desc=path.stem, unit="episode") as bar:
+    with tqdm(total=plan.attempts(), desc=name, unit="episode") as bar:
         try:
             s = collect(plan, args.out, progress=lambda r: bar.update(1))
         except CollectError as e:
@@ -118,11 +124,11 @@ def _collect_one(path, args, workers: int, config: dict) -> bool:
             return False
         except Exception as e:  # a worker's env or solver failed: one line, not a traceback
             bar.close()
-            print(failure_line(f"collecting {path.name} failed", e))
+            print(failure_line(f"collecting {name} failed", e))
             return False
     print(
-        f"{path.name}: {s.kept} demonstrations ({s.successes}/{s.attempted} successful, "
+        f"{name}: {s.kept} demonstrations ({s.successes}/{s.attempted} successful, "
         f"{s.success_rate:.0%}), mean {s.steps_mean:.0f} steps, {s.wall_time_s:.0f} s -> "
-        f"{args.out / path.stem}"
+        f"{args.out / name}"
     )
     return True

@@ -7,11 +7,13 @@ from pathlib import Path
 from tqdm import tqdm
 
 from embodied_envs.cli.args import (
+    LAYOUT_HELP,
     add_config_argument,
     check_seed_span,
     checked_layouts,
     env_config,
     failure_line,
+    layout_value,
     note_workers,
     positive_int,
     seed_int,
@@ -54,7 +56,7 @@ def add_parser(sub) -> None:
         ),
     )
     p.add_argument("--policy", required=True, help="expert | random | zero | module:factory")
-    p.add_argument("--layout", type=Path, nargs="+", default=None, help="layout file(s)")
+    p.add_argument("--layout", nargs="+", default=None, help=LAYOUT_HELP)
     p.add_argument("--episodes", type=positive_int, default=10, help="episodes per layout")
     p.add_argument("--seed", type=seed_int, default=0, help="first episode seed")
     p.add_argument("--out", type=Path, default=Path("outputs/eval"))
@@ -84,7 +86,7 @@ def cmd_eval(args) -> int:
     note_workers(args.workers)
     plan = EvalPlan(
         policy=args.policy,
-        layouts=tuple(str(p) for p in layouts),
+        layouts=tuple(layout_value(files) for _, files in layouts),
         episodes=args.episodes,
         seed=args.seed,
         obs_mode=args.obs_mode,

@@ -24,6 +24,8 @@ from embodied_envs.layout.placement import (
     top_surface,
     world_vertices,
 )
+from embodied_envs.layout.pools import asset_pools
+from embodied_envs.layout.sets import LayoutSet, layout_files
 from embodied_envs.paths import atomic_output
 from embodied_envs.splat import SplatFileError, check_ply
 from embodied_envs.workers import run
@@ -42,7 +44,9 @@ def add_parser(sub) -> None:
     g.set_defaults(func=cmd_generate)
 
     v = lsub.add_parser("validate", help="check layouts and their asset folders")
-    v.add_argument("layouts", type=Path, nargs="+")
+    v.add_argument(
+        "layouts", nargs="+", help="layout files, folders of them or globs (asset pools too)"
+    )
     v.add_argument("--no-placement", action="store_true", help="skip the placement check")
     v.set_defaults(func=cmd_validate)
 
@@ -117,17 +121,25 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
             check_ply(splat)
         except (SplatFileError, OSError) as e:
             problems.append(str(e))
-    if check_placement:
-        try:
-            place(layout, 0)
-        except PlacementError as e:
-            problems.append(f"placement: {e}")
-    return problems
+    if check_placement:  # with every member of each asset pool in its place
+        for member in LayoutSet((layout,), (asset_pools(layout),)).members():
+            try:
+                place(member, 0)
+            except PlacementError as e:
+                problems.append(f"placement: {e}")
+    return list(dict.fromkeys(problems))
 
 
 def cmd_validate(args) -> int:
-    bad = 0
-    for path in args.layouts:
+    bad, paths = 0, []
+    for spec in args.layouts:
+        try:
+            paths += layout_files(spec)
+        except LayoutError as e:
+            bad += 1
+            print(f"FAIL {spec}")
+            print("\n".join(f"  - {p}" for p in e.problems))
+    for path in paths:
         problems = validate_problems(path, not args.no_placement)
         if problems:
             bad += 1

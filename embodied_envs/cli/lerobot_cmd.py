@@ -1,16 +1,21 @@
 """``embodied-envs lerobot``: ManiSkill's LeRobot converter with the dataset's own task, control
 rate and robot.
 
-ManiSkill's ``convert_to_lerobot`` names the task after the env id and writes 30 fps unless
-told otherwise; this command tells it the episodes' instruction (``trajectory.json``, or the
-layout's, :attr:`LayoutInfo.instruction`), the env's control rate and the robot's name.
+ManiSkill's ``convert_to_lerobot`` names the task after the env id, one for every episode, and
+writes 30 fps unless told otherwise; this command tells it the env's control rate and the
+robot's name, then gives each episode its own instruction (``trajectory.json``, or the one its
+seed draws from the dataset's layout set), so a dataset over a layout set keeps its tasks.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from embodied_envs.pipelines.datasets import check_replayable, lerobot_settings
+from embodied_envs.pipelines.datasets import (
+    check_replayable,
+    lerobot_settings,
+    relabel_lerobot_tasks,
+)
 
 
 def add_parser(sub) -> None:
@@ -38,7 +43,7 @@ def cmd_lerobot(args) -> int:
     for note in check_replayable(args.traj_path):
         print(note)
     settings = lerobot_settings(args.traj_path)
-    return convert_to_lerobot.main(
+    code = convert_to_lerobot.main(
         convert_to_lerobot.Args(
             traj_path=str(args.traj_path),
             output_dir=str(args.output_dir),
@@ -47,3 +52,6 @@ def cmd_lerobot(args) -> int:
             **settings,
         )
     )
+    tasks = relabel_lerobot_tasks(args.traj_path, args.output_dir)  # one per episode
+    print(f"{len(tasks)} task(s): {tasks[:3]}")
+    return code

@@ -32,6 +32,20 @@ GLOB_CHARS = "*?["
 LayoutSpec = str | os.PathLike | list | tuple  # what ``layout_file`` accepts (plus None)
 
 
+def spec_name(spec: str | os.PathLike) -> str:
+    """A name for one ``layout_file`` value: a file's stem, a folder's name, or the name of the
+    folder a glob starts in."""
+    text = os.fspath(spec)
+    path = Path(text).expanduser()
+    if path.is_dir():
+        return path.resolve().name
+    if any(c in text for c in GLOB_CHARS) and not path.exists():
+        fixed = text[: min(text.index(c) for c in GLOB_CHARS if c in text)]
+        folder = Path(fixed) if fixed.endswith(("/", os.sep)) or not fixed else Path(fixed).parent
+        return folder.expanduser().resolve().name
+    return path.stem
+
+
 def layout_files(spec: LayoutSpec) -> list[Path]:
     """The layout files a ``layout_file`` value names, absolute, in order, each once.
 

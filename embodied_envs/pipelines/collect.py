@@ -1,10 +1,12 @@
 """Demonstration datasets: the scripted solver recorded in ManiSkill's trajectory format.
 
-One dataset per layout: ``<out>/<layout stem>/trajectory.h5`` + ``trajectory.json`` exactly as
+One dataset per layout or layout set: ``<out>/<name>/trajectory.h5`` + ``trajectory.json`` as
 ManiSkill's ``RecordEpisode`` writes them (``env_info`` with ``env_kwargs`` that re-create the
 env from any working directory, per-episode seed, success and length, ``source_type``
 ``"motionplanning"``), readable by ``ManiSkillTrajectoryDataset`` and replayable by
-``replay_trajectory``; plus ``summary.json``. On CPU each worker is one process with one env; it
+``replay_trajectory``; plus ``summary.json``. Every episode records its ``instruction`` and
+``layout_file``; over a layout set each episode is a reconfiguration (``reset_kwargs`` say so),
+whose seed draws its layout again on replay. On CPU each worker is one process with one env; it
 collects a disjoint block of seeds into its own file, and the blocks are merged with ManiSkill's
 ``merge_trajectories``. Everything is written under a temporary name and renamed when complete.
 """
@@ -28,10 +30,9 @@ import gymnasium as gym
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
 from mani_skill.utils.wrappers.record import RecordEpisode
 
-from embodied_envs.layout import load_layout
 from embodied_envs.paths import atomic_output
 from embodied_envs.pipelines.datasets import RECORD_KEY, has_splat, scene_record
-from embodied_envs.registration import ENV_ID
+from embodied_envs.registration import ENTRY_ID, ENV_ID
 from embodied_envs.solvers.pick_place import PickPlaceSolver
 from embodied_envs.workers import report, run
 
@@ -49,10 +50,11 @@ class CollectError(RuntimeError):
 
 @dataclass(frozen=True)
 class CollectPlan:
-    """What to collect for one layout.
+    """What to collect for one layout or layout set.
 
     Attributes:
-        layout: the layout file (absolute).
+        layout: the layout file (absolute), or a set's files.
+        name: the dataset's folder name (default: the layout file's stem).
         num: demonstrations wanted.
         seed: first episode seed; worker k uses the block ``seed + k * block`` onwards.
         obs_mode: recorded observations (``none``: replay re-renders them).
@@ -65,8 +67,9 @@ class CollectPlan:
             dataset's ``env_kwargs``.
     """
 
-    layout: str
+    layout: str | tuple[str, ...]
     num: int
+    name: str | None = None
     seed: int = 0
     obs_mode: str = "none"
     hybrid_obs: bool = False
@@ -75,6 +78,19 @@ class CollectPlan:
     workers: int = 1
     video: bool = False
     env_kwargs: dict = field(default_factory=dict)
+
+    @property
+    def files(self) -> list[str]:
+        return [self.layout] if isinstance(self.layout, str) else list(self.layout)
+
+    @property
+    def env_layout(self) -> str | list[str]:
+        """The env's ``layout_file``."""
+        return self.layout if isinstance(self.layout, str) else list(self.layout)
+
+    @property
+    def dataset_name(self) -> str:
+        return self.name or Path(self.files[0]).stem
 
     def attempts(self) -> int:
         return (self.max_attempts or 2 * self.num) if self.only_success else self.num
@@ -96,11 +112,13 @@ class EpisodeRecord:
     steps: int
     failure: str | None  # the stage that failed first ("execution" when all plans ran)
     wall_time_s: float
+    layout_file: str = ""  # the layout the episode was drawn in
+    instruction: str = ""  # its task in words
 
 
 @dataclass
 class LayoutSummary:
-    layout: str
+    layout: str | list[str]
     env_id: str
     attempted: int
     kept: int
@@ -121,11 +139,11 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
     env = gym.make(
         ENV_ID,
         **plan.env_kwargs,
-        layout_file=plan.layout,
+        layout_file=plan.env_layout,
         obs_mode=plan.obs_mode,
         hybrid_obs=plan.hybrid_obs,
         control_mode="pd_joint_pos",
-        render_mode=("hybrid" if has_splat(plan.layout) else "rgb_array") if plan.video else None,
+        render_mode=("hybrid" if has_splat(plan.files) else "rgb_array") if plan.video else None,
         sim_backend="physx_cpu",
     )
     env = RecordEpisode(
@@ -140,10 +158,13 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         video_fps=int(round(1 / env.unwrapped.control_timestep)),
     )
     kept, records = 0, []
+    # over a set, each episode's seed draws its layout: a reconfiguration, recorded as such
+    options = dict(reconfigure=True) if env.unwrapped.layout_set.varies else None
     try:
         for seed in seeds:
             t0 = time.perf_counter()
-            env.reset(seed=seed)
+            env.reset(seed=seed, options=options)
+            drawn = env.unwrapped.layouts[0]
             result = PickPlaceSolver(env, seed=seed).solve()
             success = bool(env.unwrapped.evaluate()["success"][0])
             keep = success or not plan.only_success
@@ -154,8 +175,9 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
             failures = result.reports[0].plan_failures
             failure = None if success else (failures[0].split(":")[0] if failures else "execution")
             record = EpisodeRecord(
-                seed, success, keep, result.steps, failure, time.perf_counter() - t0
-            )
+                seed, success, keep, result.steps, failure, time.perf_counter() - t0,
+                str(drawn.source), env.unwrapped.instructions[0],
+            )  # fmt: skip
             records.append(record)
             report(asdict(record))
             if kept >= quota:
@@ -209,7 +231,7 @@ def owned_output(out: Path):
 
 
 def describe_dataset(folder: Path) -> str:
-    """A dataset folder in words: its layout and episode seeds, as far as they can be read."""
+    """A dataset folder in words: its layouts and episode seeds, as far as they can be read."""
     try:
         meta = json.loads((folder / "trajectory.json").read_text())
         seeds = [e["episode_seed"] for e in meta["episodes"]]
@@ -220,7 +242,7 @@ def describe_dataset(folder: Path) -> str:
 
 
 def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
-    """Collect one layout's dataset into ``out/<layout stem>/``.
+    """Collect one layout's (or layout set's) dataset into ``out/<plan.dataset_name>/``.
 
     Args:
         plan: what to collect.
@@ -233,11 +255,16 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
     Raises:
         CollectError: with ``only_success``, when the attempts run out before ``num``
             successes (nothing is written then); ``out`` is held by another run; or
-            ``out/<layout stem>`` exists already (a run never replaces a dataset it did not
+            ``out/<name>`` exists already (a run never replaces a dataset it did not
             write).
     """
-    layout = Path(plan.layout).resolve()
-    target = out / layout.stem
+    plan = dataclasses.replace(
+        plan,
+        layout=str(Path(plan.layout).resolve())
+        if isinstance(plan.layout, str)
+        else tuple(str(Path(f).resolve()) for f in plan.layout),
+    )
+    target = out / plan.dataset_name
     out.mkdir(parents=True, exist_ok=True)
     with owned_output(out):
         if target.exists():
@@ -246,18 +273,18 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
                 "Fix: collect each shard (--seed range) into its own --out and join them with "
                 "python -m mani_skill.trajectory.merge_trajectory, or remove that folder."
             )
-        return _collect_into(plan, layout, out, target, progress)
+        return _collect_into(plan, out, target, progress)
 
 
-def _collect_into(plan: CollectPlan, layout: Path, out: Path, target: Path, progress):
+def _collect_into(plan: CollectPlan, out: Path, target: Path, progress):
     """``collect``'s work, with ``out`` held: the dataset is made in a work folder and renamed
     to ``target`` when complete."""
-    work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{layout.stem}.", dir=out))
+    work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{plan.dataset_name}.", dir=out))
     t0 = time.perf_counter()
+    layout = plan.layout if isinstance(plan.layout, str) else f"{plan.dataset_name} (a layout set)"
     try:
-        layout_plan = dataclasses.replace(plan, layout=str(layout))
         tasks = [
-            (layout_plan, seeds, quota, str(work), f"part{k:03d}")
+            (plan, seeds, quota, str(work), f"part{k:03d}")
             for k, (seeds, quota) in enumerate(plan.blocks())
         ]
         parts = run(
@@ -281,15 +308,19 @@ def _collect_into(plan: CollectPlan, layout: Path, out: Path, target: Path, prog
         merge_trajectories(str(staged), [str(p) for p in parts])
         meta_path = staged.with_suffix(".json")
         meta = json.loads(meta_path.read_text())
-        meta[RECORD_KEY] = scene_record(layout)  # replay checks the scene is unchanged
-        instruction = load_layout(layout).instruction
+        meta[RECORD_KEY] = scene_record(plan.files)  # replay checks the scene is unchanged
+        # gymnasium's module:id form: ManiSkill's replay_trajectory and baselines import the
+        # plugin themselves
+        meta["env_info"]["env_id"] = ENTRY_ID
+        drawn = {r.seed: r for r in kept}
         for episode in meta["episodes"]:  # what each episode was asked, and where
-            episode.update(instruction=instruction, layout_file=str(layout))
+            r = drawn[episode["episode_seed"]]
+            episode.update(instruction=r.instruction, layout_file=r.layout_file)
         with atomic_output(meta_path) as tmp:
             tmp.write_text(json.dumps(meta, indent=2))
         steps = [r.steps for r in kept] or [0]
         summary = LayoutSummary(
-            layout=str(layout),
+            layout=plan.env_layout,
             env_id=ENV_ID,
             attempted=len(records),
             kept=len(kept),

@@ -11,6 +11,9 @@ processes (one env per layout per worker, reused across its episodes), and write
 - ``videos/<layout>_seed<seed>.mp4`` (``video="all"`` or ``"fail"``: unsuccessful episodes),
   hybrid frames when the layout has a splat, the simulator's otherwise.
 
+An entry of ``layouts`` may be a layout set: each of its episodes runs in the layout its seed
+draws (a reconfiguration), and ``per_layout`` reports every layout drawn.
+
 Each file is written under a temporary name and renamed when complete. An episode ends on
 ManiSkill's ``terminated`` (``success`` or ``fail``) or at the env's episode limit; its
 success is ``evaluate()["success"]`` at its end, as ``collect`` grades demonstrations.
@@ -62,8 +65,9 @@ class EvalPlan:
 
     Attributes:
         policy: ``expert``, ``random``, ``zero`` or ``module:factory``.
-        layouts: layout files (absolute).
-        episodes: seeded episodes per layout.
+        layouts: layout files (absolute), or layout sets (tuples of files: each episode's seed
+            draws its layout, a reconfiguration).
+        episodes: seeded episodes per entry of ``layouts``.
         seed: the first episode seed.
         obs_mode: the env's observation mode (what the policy sees).
         control_mode: the env's control mode (None: the env's default; ``expert``:
@@ -74,7 +78,7 @@ class EvalPlan:
     """
 
     policy: str
-    layouts: tuple[str, ...]
+    layouts: tuple[str | tuple[str, ...], ...]
     episodes: int
     seed: int = 0
     obs_mode: str = "state"
@@ -83,22 +87,31 @@ class EvalPlan:
     workers: int = 1
     env_kwargs: dict = field(default_factory=dict)
 
-    def env_make_kwargs(self, layout: str, render: bool) -> dict:
+    def env_make_kwargs(self, layout: str | tuple[str, ...], render: bool) -> dict:
         control = "pd_joint_pos" if self.policy == "expert" else self.control_mode
-        kwargs = dict(self.env_kwargs, layout_file=layout, obs_mode=self.obs_mode)
+        layout_file = layout if isinstance(layout, str) else list(layout)
+        kwargs = dict(self.env_kwargs, layout_file=layout_file, obs_mode=self.obs_mode)
         if control is not None:
             kwargs["control_mode"] = control
         if render:
             kwargs["render_mode"] = "hybrid" if has_splat(layout) else "rgb_array"
         return kwargs | dict(sim_backend="physx_cpu")
 
-    def tasks(self) -> list[tuple[str, int]]:
+    def tasks(self) -> list[tuple[str | tuple[str, ...], int]]:
         return [(lay, self.seed + k) for lay in self.layouts for k in range(self.episodes)]
+
+    def files(self) -> list[str]:
+        """Every layout file the plan may use, in order."""
+        return list(dict.fromkeys(f for x in self.layouts for f in _entry_files(x)))
+
+
+def _entry_files(entry: str | tuple[str, ...]) -> tuple[str, ...]:
+    return (entry,) if isinstance(entry, str) else tuple(entry)
 
 
 @dataclass
 class EpisodeResult:
-    layout: str
+    layout: str  # the layout file the episode ran in (over a set: the one its seed drew)
     seed: int
     success: bool
     fail: bool  # the target fell off the table at some step
@@ -247,7 +260,7 @@ class EpisodeRunner:
         self.envs: dict[str, object] = {}
         self.policies: dict[str, Policy | None] = {}
 
-    def env(self, layout: str):
+    def env(self, layout: str | tuple[str, ...]):
         if layout not in self.envs:
             render = self.plan.video != "none"
             env = gym.make(ENV_ID, **self.plan.env_make_kwargs(layout, render))
@@ -255,7 +268,9 @@ class EpisodeRunner:
             self.policies[layout] = load_policy(self.plan.policy, env)
         return self.envs[layout]
 
-    def run(self, layout: str, seed: int, video_dir: Path | None) -> EpisodeResult:
+    def run(
+        self, layout: str | tuple[str, ...], seed: int, video_dir: Path | None
+    ) -> EpisodeResult:
         import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
 
         env = self.env(layout)
@@ -268,7 +283,10 @@ class EpisodeRunner:
             if record:
                 frames.append(torch.as_tensor(env.render())[0].cpu().numpy())
 
-        obs, _ = env.reset(seed=seed)
+        # over a set, the seed draws the episode's layout: a reconfiguration
+        options = dict(reconfigure=True) if u.layout_set.varies else None
+        obs, _ = env.reset(seed=seed, options=options)
+        drawn = str(u.layouts[0].source)
         frame()
         tally = _Tally(env, frame)  # steps, return and fail of either kind of policy
         if policy is None:  # the expert: the scripted solver steps the env itself
@@ -282,16 +300,16 @@ class EpisodeRunner:
             limit = env.spec.max_episode_steps if env.spec is not None else None
             while limit is None or tally.steps < limit:
                 action = checked_action(
-                    policy.act(obs), shape, self.plan.policy, tally.steps, seed, layout
+                    policy.act(obs), shape, self.plan.policy, tally.steps, seed, drawn
                 )
                 obs, _, terminated, truncated, _ = tally.step(action)
                 if bool(torch.as_tensor(terminated | truncated).reshape(-1)[0]):
                     break
         success = bool(u.evaluate()["success"][0])
-        result = EpisodeResult(layout, seed, success, tally.fail, tally.steps, round(tally.ret, 6))
+        result = EpisodeResult(drawn, seed, success, tally.fail, tally.steps, round(tally.ret, 6))
         keep = self.plan.video == "all" or (self.plan.video == "fail" and not success)
         if record and keep and video_dir is not None:
-            result.video = write_video(frames, video_dir / f"{Path(layout).stem}_seed{seed}.mp4")
+            result.video = write_video(frames, video_dir / f"{Path(drawn).stem}_seed{seed}.mp4")
         return result
 
     def close(self) -> None:
@@ -338,7 +356,7 @@ def _init_runner(plan: EvalPlan) -> None:
     _RUNNER = EpisodeRunner(plan)
 
 
-def _run_episode(layout: str, seed: int, video_dir: str) -> EpisodeResult:
+def _run_episode(layout: str | tuple[str, ...], seed: int, video_dir: str) -> EpisodeResult:
     return _RUNNER.run(layout, seed, Path(video_dir))
 
 
@@ -367,7 +385,11 @@ def summarize(plan: EvalPlan, results: list[EpisodeResult]) -> dict:
         "control_mode": "pd_joint_pos" if plan.policy == "expert" else plan.control_mode,
         "seeds": [plan.seed, plan.seed + plan.episodes - 1],
         **block(results),
-        "per_layout": {lay: block([r for r in results if r.layout == lay]) for lay in plan.layouts},
+        "per_layout": {
+            lay: block([r for r in results if r.layout == lay])
+            for lay in plan.files()
+            if any(r.layout == lay for r in results) or lay in plan.layouts
+        },
     }
 
 
@@ -432,7 +454,7 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
     finally:
         if plan.workers <= 1 and _RUNNER is not None:  # this process's envs
             _RUNNER.close()
-    order = {lay: i for i, lay in enumerate(plan.layouts)}
+    order = {lay: i for i, lay in enumerate(plan.files())}
     results.sort(key=lambda r: (order[r.layout], r.seed))
     summary = summarize(plan, results)
     with atomic_output(out / "episodes.json") as tmp:

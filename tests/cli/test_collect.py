@@ -41,7 +41,7 @@ def dataset(tmp_path_factory):
 def test_dataset_is_maniskill_trajectory_format(dataset):
     meta = json.loads((dataset / "trajectory.json").read_text())
     info = meta["env_info"]
-    assert info["env_id"] == "PickEmbodiedGen-v1"
+    assert info["env_id"] == "embodied_envs:PickEmbodiedGen-v1"  # gymnasium imports us
     assert info["env_kwargs"]["layout_file"] == str(DEFAULT_LAYOUT)  # absolute: any cwd
     assert info["env_kwargs"]["control_mode"] == "pd_joint_pos"
     assert info["env_kwargs"]["goal_region"] == {"inset": 0.12}  # the config file's, spelled out
