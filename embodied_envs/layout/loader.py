@@ -15,7 +15,7 @@ from embodied_envs.layout.assets import (
 )
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.placement import check_file_poses
-from embodied_envs.layout.pools import asset_pools, with_assets, with_first_members
+from embodied_envs.layout.pools import asset_pools, with_assets
 from embodied_envs.layout.schema import LayoutInfo, label
 
 MAX_LAYOUT_BYTES = 1 << 20  # a layout file over this is refused before it is read
@@ -139,8 +139,8 @@ def load_layout(path: Path | str, check_files: bool = True, check_poses: bool = 
         raise
     if check_files:
         problems = check_asset_files(info)
-        if not problems and check_poses:  # a pooled node stands as its first member
-            problems = check_file_poses(with_first_members(info))
+        if not problems and check_poses:
+            problems = check_file_poses(info)
         if problems:
             raise LayoutError(problems)
     return info

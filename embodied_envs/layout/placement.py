@@ -26,7 +26,7 @@ from embodied_envs.layout.assets import (
 )
 from embodied_envs.layout.errors import PlacementError
 from embodied_envs.layout.limits import PlacementLimits
-from embodied_envs.layout.pools import with_first_members
+from embodied_envs.layout.pools import asset_pools, with_first_members
 from embodied_envs.layout.pose import LayoutPose, wrap_angle
 from embodied_envs.layout.schema import MAX_INTERPENETRATION, REST_TOLERANCE, LayoutInfo
 
@@ -438,7 +438,8 @@ def floor_height(layout: LayoutInfo) -> float:
 
 
 def check_file_poses(layout: LayoutInfo) -> list[str]:
-    """Problems of a layout's own poses that the simulator would act out badly.
+    """Problems of a layout's own poses that the simulator would act out badly (asset pools'
+    nodes are left out: their poses are always drawn, for the member drawn).
 
     - an object ``ON`` a parent has its lowest point within ``REST_TOLERANCE`` of the parent's
       top, its origin over the parent's top hull (grown by the tolerance); ``IN`` / ``INSIDE``
@@ -448,7 +449,7 @@ def check_file_poses(layout: LayoutInfo) -> list[str]:
     f = layout.source or "<layout>"
     tol = REST_TOLERANCE
     problems = []
-    objects = set(layout.object_nodes())
+    objects = set(layout.object_nodes()) - set(asset_pools(layout))
     world = {n: world_vertices(node_geometry(layout, n), layout.pose(n)) for n in objects}
     for parent in [*layout.tree]:
         kids = [(c, r) for c, r in layout.children(parent) if c in objects and c != parent]

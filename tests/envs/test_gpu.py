@@ -158,3 +158,51 @@ def test_hybrid_depth_and_points_batched_on_cuda(obs_mode):
         assert (dist[splat] > 0.05).all()
     finally:
         e.close()
+
+
+def test_heterogeneous_sub_scenes_over_a_layout_set(tmp_path):
+    """Eight GPU envs over three layouts with different targets, tables and node names: each
+    env's sub-scene is the layout its seed draws, the merged target is each env's own, the
+    state dict holds one entry per slot over all envs, starts meet each layout's rules,
+    partial resets touch only their envs, and each env composites its own room."""
+    from conftest import DATA
+    from scene_sets import make_scene_set
+
+    from embodied_envs.layout.sets import LayoutSet
+
+    scenes = make_scene_set(tmp_path, DATA)
+    n = 8
+    layout_set = LayoutSet.load(scenes["four"])
+    e = gym.make(ENV_ID, num_envs=n, sim_backend="physx_cuda", obs_mode="state",
+                 layout_file=str(scenes["four"]), render_mode="hybrid")  # fmt: skip
+    try:
+        u = e.unwrapped
+        e.reset(seed=0, options=dict(reconfigure=True))
+        seeds = np.asarray(u._episode_seed).reshape(-1)
+        for k in range(n):
+            want = layout_set.draw(int(seeds[k]), k)
+            assert u.layouts[k].source == want.source, k
+            assert set(u.env_actors[f"env{k}"]) == set(want.object_nodes()), k
+            own = u.env_actors[f"env{k}"][u.layouts[k].target_node]
+            assert torch.allclose(u.obj.pose.p[k], own.pose.p[0]), k
+            assert check_constraints(episode_layout(u, k)) == [], k
+        assert len({x.source for x in u.layouts}) >= 2, "the draw mixes layouts"
+        actors = u.get_state_dict()["actors"]
+        assert {"target", "object1", "object2"} <= set(actors)
+        assert all(v.shape[0] == n for v in actors.values())
+        before = {s: u.layout_scene.node_actors[s].pose.raw_pose.clone() for s in actors}
+        e.reset(options=dict(env_idx=torch.tensor([1, 6], device=u.device)))
+        keep = torch.ones(n, dtype=torch.bool, device=u.device)
+        keep[[1, 6]] = False
+        for slot in ("target", "object1", "object2"):
+            after = u.layout_scene.node_actors[slot].pose.raw_pose
+            assert torch.equal(after[keep], before[slot][keep]), slot
+            assert (after[[1, 6], :2] != before[slot][[1, 6], :2]).any(-1).all(), slot
+        for k in range(n):
+            own = u.env_actors[f"env{k}"][u.layouts[k].target_node]
+            assert torch.allclose(u.obj.pose.p[k], own.pose.p[0]), "the merged target moved"
+        frames = e.render()
+        assert frames.shape[0] == n
+        assert u.hybrid.rooms == [x.gs_model_path() for x in u.layouts]
+    finally:
+        e.close()
