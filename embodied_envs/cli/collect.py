@@ -99,6 +99,7 @@ def cmd_collect(args) -> int:
 def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
     """One layout's (or layout set's) dataset; False (after one error line) when it could
     not be made."""
+    label = files[0].name if len(files) == 1 else f"{name} ({len(files)} layouts)"
     # the pipeline imports the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.collect import CollectError, CollectPlan, collect
 
@@ -115,7 +116,7 @@ def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
         video=args.video,
         env_kwargs=config,
     )
-    with tqdm(total=plan.attempts(), desc=name, unit="episode") as bar:
+    with tqdm(total=plan.attempts(), desc=label, unit="episode") as bar:
         try:
             s = collect(plan, args.out, progress=lambda r: bar.update(1))
         except CollectError as e:
@@ -124,10 +125,10 @@ def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
             return False
         except Exception as e:  # a worker's env or solver failed: one line, not a traceback
             bar.close()
-            print(failure_line(f"collecting {name} failed", e))
+            print(failure_line(f"collecting {label} failed", e))
             return False
     print(
-        f"{name}: {s.kept} demonstrations ({s.successes}/{s.attempted} successful, "
+        f"{label}: {s.kept} demonstrations ({s.successes}/{s.attempted} successful, "
         f"{s.success_rate:.0%}), mean {s.steps_mean:.0f} steps, {s.wall_time_s:.0f} s -> "
         f"{args.out / name}"
     )

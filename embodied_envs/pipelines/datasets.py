@@ -182,8 +182,13 @@ def check_replayable(traj_path: str | Path) -> list[str]:
                 "restore it (with its assets), or edit env_info.env_kwargs.layout_file to its "
                 "new place"
             )
-    held = {str(f) for f in _files(layout)} if layout is not None else set()
-    strays = [e for e in meta.get("episodes", []) if e.get("layout_file", "") not in held | {""}]
+    # by file name: a dataset whose layouts moved (env_kwargs edited to the new place) is fine
+    held = {f.name for f in _files(layout)} if layout is not None else set()
+    strays = [
+        e
+        for e in meta.get("episodes", [])
+        if e.get("layout_file") and Path(e["layout_file"]).name not in held
+    ]
     if layout is not None and strays:
         e = strays[0]
         raise DatasetError(

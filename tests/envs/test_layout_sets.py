@@ -273,7 +273,7 @@ def mixed_dataset(scenes, tmp_path_factory):
          str(first - 3), "--out", "out"],
         cwd=work, env=ENV, capture_output=True, text=True, timeout=600,
     )  # fmt: skip
-    assert "set: 4 demonstrations" in res.stdout, res.stdout + res.stderr
+    assert "set (3 layouts): 4 demonstrations" in res.stdout, res.stdout + res.stderr
     return work / "out" / "set", layout_set, list(range(first - 3, first + 1))
 
 
