@@ -14,14 +14,13 @@ from tqdm import tqdm
 from embodied_envs.cli.args import (
     add_config_argument,
     check_seed_span,
+    checked_layouts,
     env_config,
     image_side,
     positive_int,
     seed_int,
 )
 from embodied_envs.config import CameraSpec, merge_config
-from embodied_envs.layout import load_layout
-from embodied_envs.paths import default_layout
 
 # env keywords the demo sets itself: a --config file may not set them
 OWNED_KEYS = {
@@ -36,7 +35,11 @@ OWNED_KEYS = {
 
 def add_parser(sub) -> None:
     p = sub.add_parser("demo", help="run the scripted pick-and-place and write videos")
-    p.add_argument("--layout", type=Path, default=None, help="layout file (default: shipped)")
+    p.add_argument(
+        "--layout",
+        default=None,
+        help="layout file (default: shipped); a folder or glob is a layout set (env k draws)",
+    )
     p.add_argument(
         "--num-envs",
         type=positive_int,
@@ -74,7 +77,6 @@ def cmd_demo(args) -> int:
     # the pipeline imports the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.demo import DemoPlan, run_demo
 
-    layout_path = (args.layout or default_layout()).resolve()
     if args.num_envs < 1 or args.episodes < 1:
         raise SystemExit("error: --num-envs and --episodes must be at least 1")
     config = env_config(args.config, OWNED_KEYS)
@@ -88,10 +90,11 @@ def cmd_demo(args) -> int:
         config, dict(camera_cfg={k: v for k, v in camera.items() if v is not None})
     )
     CameraSpec.from_cfg(env_kwargs["camera_cfg"])  # a bad camera fails before any output
-    load_layout(layout_path)  # bad input fails here, before any simulation
+    # bad input fails here, before any simulation
+    ((_, files),) = checked_layouts(None if args.layout is None else [args.layout])
     check_seed_span(args.seed, args.num_envs * args.episodes, "env episodes")
     plan = DemoPlan(
-        layout=layout_path,
+        layout=str(files[0]) if len(files) == 1 else [str(f) for f in files],
         num_envs=args.num_envs,
         episodes=args.episodes,
         seed=args.seed,

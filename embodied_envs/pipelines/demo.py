@@ -2,7 +2,8 @@
 
 On CPU each env runs in its own process (ManiSkill's CPU simulation holds one env per process).
 Env 0 uses the layout file's poses; env k > 0 uses ``place(layout, derive_seed(seed, k))``,
-written under the output folder (never beside the input), as on the GPU simulation.
+written under the output folder (never beside the input), as on the GPU simulation. Over a
+layout set, env k shows the layout it draws (``LayoutSet.draw(seed, k)``).
 """
 
 from __future__ import annotations
@@ -19,8 +20,8 @@ import gymnasium as gym
 import imageio.v2 as imageio
 import numpy as np
 
-from embodied_envs.layout import load_layout
 from embodied_envs.layout.placement import derive_seed, place
+from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import atomic_output
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 from embodied_envs.solvers import PickPlaceSolver
@@ -32,7 +33,7 @@ class DemoPlan:
     """What the demo runs.
 
     Attributes:
-        layout: the layout file (absolute).
+        layout: the layout file (absolute), or a layout set's files (env k draws its own).
         num_envs: envs shown side by side, each in its own process on CPU.
         episodes: episodes per env; env k's episode e has seed ``seed + e * num_envs + k``.
         seed: the first seed (and the placement seed of envs k > 0).
@@ -42,7 +43,7 @@ class DemoPlan:
         workers: processes (None: min(envs, cores)).
     """
 
-    layout: Path
+    layout: str | list[str]
     num_envs: int = 1
     episodes: int = 1
     seed: int = 0
@@ -150,12 +151,18 @@ def write_video(path: Path, per_env_frames: list[list[np.ndarray]], fps: int) ->
     return n
 
 
-def env_layouts(layout_path: Path, num_envs: int, seed: int, out: Path) -> list[str]:
-    """Env 0: the file itself; env k > 0: a placed variant written under ``out``."""
-    base = load_layout(layout_path)
-    paths = [str(layout_path.resolve())]
-    for k in range(1, num_envs):
-        placed = place(base, derive_seed(seed, k))
+def env_layouts(layout: str | list[str], num_envs: int, seed: int, out: Path) -> list[str]:
+    """Env k's layout file: the one env k draws from the layout set (``LayoutSet.draw(seed,
+    k)``; a single layout draws itself); env 0 keeps the file's poses, env k > 0 (and env 0
+    when the drawn layout has asset pools) gets a placed variant written under ``out``."""
+    layout_set = LayoutSet.load(layout)
+    paths = []
+    for k in range(num_envs):
+        drawn = layout_set.draw(seed, k)
+        if k == 0 and drawn in layout_set.layouts:  # nothing from a pool: the file as it is
+            paths.append(str(drawn.source))
+            continue
+        placed = place(drawn, derive_seed(seed, k))
         paths.append(str(placed.save(out / "layouts" / f"env{k}.json")))
     return paths
 
@@ -188,7 +195,8 @@ def run_demo(plan: DemoPlan, out: Path, progress: Callable[[int], None] | None =
     )
     fps = max(1, int(round(CONTROL_FREQ / plan.frame_every)))
     summary = dict(
-        layout=str(plan.layout),
+        layout=plan.layout if isinstance(plan.layout, list) else str(plan.layout),
+        layouts=layouts,
         num_envs=plan.num_envs,
         seed=plan.seed,
         render_mode=plan.render_mode,

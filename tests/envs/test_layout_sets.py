@@ -427,3 +427,22 @@ def test_heterogeneous_episode_draws_are_batched_per_layout(scenes):
     for slot, pose in part.objects.items():
         torch.testing.assert_close(pose, start.objects[slot][[1, 4, 5]])
     torch.testing.assert_close(part.goal, start.goal[[1, 4, 5]])
+
+
+def test_demo_shows_the_layout_each_env_draws(scenes, tmp_path):
+    layout_set = LayoutSet.load(scenes["set"])
+    seed = next(s for s in range(200) if len({layout_set.draw(s, k).source for k in (0, 1)}) == 2)
+    subprocess.run(
+        [*CLI, "demo", "--layout", str(scenes["set"]), "--num-envs", "2", "--seed", str(seed),
+         "--render-mode", "rgb_array", "--image-hw", "48", "64", "--frame-every", "10",
+         "--out", str(tmp_path / "demo")],
+        env=ENV, check=True, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
+    for k, path in enumerate(summary["layouts"]):
+        drawn = layout_set.draw(seed, k)
+        shown = json.loads(open(path).read())
+        assert shown["relation"]["manipulated_objs"] == drawn.manipulated_objs, k
+        assert set(shown["assets"]) == set(drawn.assets), k
+    assert summary["layouts"][0] == str(layout_set.draw(seed, 0).source), "env 0: the file"
+    assert (tmp_path / "demo" / "episode_000.mp4").stat().st_size > 1000
