@@ -53,7 +53,8 @@ def main() -> None:
         wall = (time.perf_counter() - t0) / args.episodes
         print(
             f"{path.name:18s} success {ok}/{args.episodes} ({100 * ok / args.episodes:.0f}%), "
-            f"episode length mean {np.mean(steps):.0f} max {max(steps)} of {limit} steps, "
+            f"episode length mean {np.mean(steps or [0]):.0f} max {max(steps or [0])} of {limit} "
+            "steps, "
             f"{wall:.2f} s wall per episode; failures: {dict(stages) or 'none'}"
         )
 

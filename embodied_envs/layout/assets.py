@@ -262,9 +262,38 @@ def convex_hull_2d(points: np.ndarray) -> np.ndarray:
 
 
 def _load_parts(mesh: MeshRef) -> list:
+    """The convex parts the simulator makes of a collision mesh: SAPIEN's
+    ``add_multiple_convex_collisions_from_file`` (assimp) takes one convex hull per object of
+    an OBJ file (``o`` / ``g``), and one of the whole mesh otherwise; parts touching or apart
+    in one object are one hull there, so they are one part here too."""
+    import trimesh  # only where a mesh is read
+
     loaded = _load_parts_checked(mesh)
-    parts = loaded.split(only_watertight=False)
-    return parts if len(parts) else [loaded]
+    if mesh.path.suffix.lower() != ".obj":
+        return [loaded]
+    objects = _obj_objects(mesh.path)
+    if len(objects) <= 1:
+        return [loaded]
+    return [trimesh.Trimesh(vertices=v, process=False) for v in objects if len(v) >= 4]
+
+
+def _obj_objects(path: Path) -> list[np.ndarray]:
+    """The vertices each object (``o`` or ``g``) of an OBJ file uses in its faces."""
+    vertices: list[list[bytes]] = []
+    groups: list[list[int]] = [[]]
+    with open(path, "rb") as fh:
+        for line in fh:
+            if line.startswith(b"v "):
+                vertices.append(line.split()[1:4])
+            elif line.startswith((b"o ", b"g ")):
+                if groups[-1]:
+                    groups.append([])
+            elif line.startswith(b"f "):
+                for token in line.split()[1:]:
+                    i = int(token.split(b"/")[0])
+                    groups[-1].append(i - 1 if i > 0 else len(vertices) + i)
+    table = np.asarray(vertices, dtype=np.float64)
+    return [table[np.unique(g)] for g in groups if g]
 
 
 def _load_parts_checked(mesh: MeshRef, collision: bool = True):

@@ -1,10 +1,14 @@
 """Scripted, motion-planned pick-and-place for the Panda (mplib).
 
-For every env the solver plans from that env's own robot and object state: a top-down grasp
-across the narrow side of the target's footprint (from its collision geometry in its current
-pose), approach, grasp, lift, carry the object to the goal and hold still. Table and distractors
-are obstacles (surface point clouds). A failed plan is recorded per env and stage; that env
-then holds still while the others go on.
+For every env the solver plans from that env's own robot and object state: grasps synthesised
+from the target's collision geometry (``solvers/grasps.py``: antipodal, collision-free against
+the object, the table and the distractors, ranked), posed where the object lies now; approach,
+grasp, lift, carry the object to the goal and hold still. Table and distractors are obstacles
+(surface point clouds). The loop is closed: after closing the fingers and after the lift the
+solver checks the grasp (the object rose with the hand), and on a miss opens, backs off and
+tries the next grasp; after the carry, an object that left its place in the hand (and is not
+held) is grasped again from where it lies, while the episode has steps left. A failed plan is
+recorded per env and stage; that env then holds still while the others go on.
 """
 
 from __future__ import annotations
@@ -19,9 +23,18 @@ import trimesh
 
 from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.solvers.grasps import GraspConfig, GripperModel, asset_grasps, posed_grasps
 
 GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
 GRIPPER_CLOSED = -1.0  # and for closed fingers
+# the Panda's pd_joint_pos gripper maps actions [-1, 1] to finger positions [-0.01, 0.04] m
+FINGER_RANGE = (-0.01, 0.04)
+
+
+def gripper_action(opening: float) -> float:
+    """The gripper action that opens the fingers ``opening`` m apart."""
+    lo, hi = FINGER_RANGE
+    return float(np.clip(2 * (opening / 2 - lo) / (hi - lo) - 1, -1.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -44,6 +57,12 @@ class SolverConfig:
     base_clearance: float = 0.15  # m, obstacle points this close to the base (in XY) and
     # below base_clearance_height are dropped: the base stands on the table's edge
     base_clearance_height: float = 0.10  # m above the base
+    grasp_candidates: int = 6  # posed grasps tried per attempt, best first
+    grasp_attempts: int = 3  # grasp, check, lift rounds per episode (a miss opens and retries)
+    attempt_steps: int = 110  # steps an attempt needs at least: none starts with fewer left
+    settle_steps: int = 6  # control steps at the pre-grasp and the grasp (the arm lags)
+    lift_check: float = 0.5  # the object held rises at least this part of the lift
+    slip_tolerance: float = 0.03  # m, the object moving this far in the hand may be dropped
 
 
 @dataclass
@@ -52,6 +71,7 @@ class EnvReport:
 
     env_index: int
     plan_failures: list[str] = field(default_factory=list)  # "stage: mplib status"
+    misses: list[str] = field(default_factory=list)  # "stage (attempt k)": grasps that slipped
 
     @property
     def planned(self) -> bool:
@@ -159,6 +179,7 @@ class PickPlaceSolver:
         self.last_info: dict = {}
         self._batched_actions = len(self.env.action_space.shape) == 2
         self.gripper = np.full(self.num_envs, GRIPPER_OPEN)
+        self.clouds: list[np.ndarray] = []  # per env, the obstacle surface points (world)
         self._set_obstacles()
 
     # --- state ---------------------------------------------------------------------------
@@ -177,6 +198,7 @@ class PickPlaceSolver:
                 parts = tuple(pose.transform_points(p) for p in geom.parts)
                 clouds.append(_sample_surface(parts, self.cfg.obstacle_points, self.rng))
             cloud = np.concatenate(clouds)
+            self.clouds.append(cloud)
             base = self.base.layout_scene.robot_poses[i, :3].cpu().numpy()
             near_base = (
                 np.linalg.norm(cloud[:, :2] - base[:2], axis=1) < self.cfg.base_clearance
@@ -250,7 +272,12 @@ class PickPlaceSolver:
         self._execute([None] * self.num_envs, extra_steps=self.cfg.gripper_steps)
 
     def _per_env(
-        self, stage: str, targets: list, screw_first: bool = True, obstacles: bool = True
+        self,
+        stage: str,
+        targets: list,
+        screw_first: bool = True,
+        obstacles: bool = True,
+        settle: int = 0,
     ) -> list[sapien.Pose | None]:
         """Plan and execute one stage in every env that has not failed yet.
 
@@ -275,64 +302,158 @@ class PickPlaceSolver:
                         break
             paths.append(path)
             chosen.append(pose if path is not None else None)
-        self._execute(paths)
+        self._execute(paths, extra_steps=settle)  # settle: steps holding the last waypoint
         return chosen
 
     # --- the policy ----------------------------------------------------------------------
-    def grasp_poses(self) -> list[list[sapien.Pose]]:
-        """Per env, the top-down grasps to try: the narrow-side grasp with the closing axis
-        nearer the gripper's current one first, then the same grasp turned by 180 degrees
-        (the same for a parallel gripper, but another wrist angle for IK and joint limits)."""
+    def grasp_poses(self) -> list[list[tuple[sapien.Pose, float]]]:
+        """Per env, the grasps to try where its target lies now, best first, each with the
+        finger opening to approach with: the synthesised grasps that the gripper can take here
+        (``grasps.posed_grasps``, pre-shaped), then the top-down grasp across the footprint's
+        narrow side and its 180-degree turn (a parallel gripper's same grasp at another wrist
+        angle), fully open."""
         agent = self.base.agent
         tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
         poses = []
         for i, layout in enumerate(self.base.layouts):
             actor = self.base.env_actors[f"env{i}"][layout.target_node]
-            geom = asset_geometry(layout.asset_spec(layout.target_node))
+            spec = layout.asset_spec(layout.target_node)
+            geom = asset_geometry(spec)
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
-            verts = pose.transform_points(geom.vertices)
             support = float(self.base.layout_scene.top_z[i])
+            options = [
+                (agent.build_grasp_pose(approach, closing, centre), opening)
+                for centre, closing, approach, opening in posed_grasps(
+                    asset_grasps(spec, self.grasp_config), pose.matrix(), support,
+                    self.clouds[i], self.grasp_config, limit=self.cfg.grasp_candidates,
+                )
+            ]  # fmt: skip
+            verts = pose.transform_points(geom.vertices)
             centre, closing = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
             down = np.array([0, 0, -1.0])
-            poses.append([agent.build_grasp_pose(down, c, centre) for c in (closing, -closing)])
+            options += [
+                (agent.build_grasp_pose(down, c, centre), self.gripper_model.opening)
+                for c in (closing, -closing)
+            ]
+            poses.append(options)
         return poses
 
-    def solve(self) -> SolveResult:
-        """Run the whole pick-and-place in every env; returns per-env reports and the last info."""
+    @property
+    def grasp_config(self) -> GraspConfig:
+        return GraspConfig(sweep=self.cfg.approach_offset)
+
+    @property
+    def gripper_model(self) -> GripperModel:
+        return GripperModel()
+
+    def _in_hand(self) -> np.ndarray:
+        """Per env, the target's position in the TCP's frame now."""
+        tcp = self.base.agent.tcp.pose.to_transformation_matrix().cpu().numpy()
+        obj = self.base.obj.pose.p.cpu().numpy()
+        return np.einsum("nij,ni->nj", tcp[:, :3, :3], obj - tcp[:, :3, 3])
+
+    def _grasping(self) -> np.ndarray:
+        """Per env: both fingers press on the target (ManiSkill's ``is_grasping``)."""
+        return self.base.agent.is_grasping(self.base.obj).cpu().numpy().reshape(-1)
+
+    def _steps_left(self) -> int:
+        limit = getattr(getattr(self.env, "spec", None), "max_episode_steps", None) or 10**9
+        return limit - self.steps
+
+    def _set_gripper(self, envs: np.ndarray, value: float) -> None:
+        """Open or close the gripper of ``envs`` (the others keep theirs)."""
+        self.gripper[envs] = value
+        self._execute([None] * self.num_envs, extra_steps=self.cfg.gripper_steps)
+
+    def _grasp(self, todo: np.ndarray, attempt: int) -> np.ndarray:
+        """One grasp attempt in the envs ``todo``: approach the best reachable grasp, close,
+        lift, and check; returns which envs hold the target after the lift. Envs that miss
+        open and back off to where they came from."""
         cfg = self.cfg
         up = sapien.Pose([0, 0, -cfg.approach_offset])
         candidates = self.grasp_poses()
-        pre = self._per_env(
-            "approach", [[g * up for g in c] for c in candidates], screw_first=False
-        )
-        grasps = [
-            None if p is None else p * up.inv() for p in pre
-        ]  # the grasp whose pre-grasp was reached
-        self._per_env("grasp", grasps, obstacles=False)
-        self._gripper(GRIPPER_CLOSED)
+        targets = [
+            [g * up for g, _ in candidates[i]] if todo[i] else None for i in range(self.num_envs)
+        ]
+        pre = self._per_env("approach", targets, screw_first=False, settle=cfg.settle_steps)
+        grasps = [None if p is None else p * up.inv() for p in pre]
+        # pre-shape: open the fingers to the chosen grasp's opening above the object
+        for i, p in enumerate(pre):
+            if p is not None:
+                k = next(k for k, t in enumerate(targets[i]) if t is p)
+                self.gripper[i] = gripper_action(candidates[i][k][1])
+        self._execute([None] * self.num_envs, extra_steps=cfg.gripper_steps)
+        # the arm lags its joint targets: reach the grasp before the fingers close
+        self._per_env("grasp", grasps, obstacles=False, settle=cfg.settle_steps)
+        self._set_gripper(todo, GRIPPER_CLOSED)
+        z0 = self.base.obj.pose.p[:, 2].cpu().numpy()
         lifts = [
             None
             if g is None
             else [sapien.Pose(g.p + np.array([0, 0, h]), g.q) for h in cfg.lift_heights]
             for g in grasps
         ]
-        lifts = self._per_env("lift", lifts, obstacles=False)
-        # carry: keep the object's offset from the TCP as it is in the hand now
-        tcp = self.base.agent.tcp.pose.p.cpu().numpy()
-        obj = self.base.obj.pose.p.cpu().numpy()
-        goal = self.base.goal_site.pose.p.cpu().numpy()
-        carries = [
-            None if lifts[i] is None else sapien.Pose(goal[i] + (tcp[i] - obj[i]), lifts[i].q)
-            for i in range(self.num_envs)
-        ]
-        self._per_env("carry", carries, screw_first=False)
-        # fine correction: re-measure the in-hand offset and move the last few millimetres
-        tcp = self.base.agent.tcp.pose.p.cpu().numpy()
-        obj = self.base.obj.pose.p.cpu().numpy()
-        fine = [
-            None if lifts[i] is None else sapien.Pose(goal[i] + (tcp[i] - obj[i]), lifts[i].q)
-            for i in range(self.num_envs)
-        ]
-        self._per_env("settle", fine, obstacles=False)
+        self.lifted = self._per_env("lift", lifts, obstacles=False)
+        # held: the object came up with the hand (a physical check, not a contact threshold)
+        rose = self.base.obj.pose.p[:, 2].cpu().numpy() - z0
+        held = (rose > cfg.lift_check * min(cfg.lift_heights)) & todo
+        held &= np.array([p is not None for p in pre])
+        self.hand = self._in_hand()  # where the object sits in the hand after the lift
+        missed = todo & ~held & np.array([not r.plan_failures for r in self.reports])
+        for i in np.flatnonzero(missed):
+            self.reports[i].misses.append(f"grasp (attempt {attempt})")
+        if missed.any():  # open and back off upwards, for the next attempt
+            self._set_gripper(missed, GRIPPER_OPEN)
+            tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+            back = [
+                sapien.Pose(tcp[i, :3] + np.array([0, 0, cfg.approach_offset]), tcp[i, 3:])
+                if missed[i]
+                else None
+                for i in range(self.num_envs)
+            ]
+            self._per_env("retreat", back, obstacles=False)
+        return held
+
+    def solve(self) -> SolveResult:
+        """Run the whole pick-and-place in every env; returns per-env reports and the last info."""
+        cfg = self.cfg
+        self.lifted: list = [None] * self.num_envs
+        self.hand = np.zeros((self.num_envs, 3))
+        holding = np.zeros(self.num_envs, bool)
+        placed = np.zeros(self.num_envs, bool)
+        for attempt in range(cfg.grasp_attempts):
+            todo = ~placed & np.array([not r.plan_failures for r in self.reports])
+            todo &= ~holding
+            if todo.any() and self._steps_left() >= cfg.attempt_steps and not self.ended:
+                holding |= self._grasp(todo, attempt)
+            carry = holding & ~placed
+            if not carry.any():
+                continue
+            self._carry(carry)
+            # dropped: the object left its place in the hand and the fingers hold nothing
+            moved = np.linalg.norm(self._in_hand() - self.hand, axis=1)
+            still = (moved < cfg.slip_tolerance) | self._grasping()
+            for i in np.flatnonzero(carry & ~still):
+                self.reports[i].misses.append(f"carry (attempt {attempt})")
+            placed |= carry & still
+            dropped = carry & ~still
+            holding &= ~dropped
+            if dropped.any():  # grasp again from where the object lies
+                self._set_gripper(dropped, GRIPPER_OPEN)
+            if placed.all():
+                break
         self._execute([None] * self.num_envs, extra_steps=cfg.hold_steps)
         return SolveResult(self.reports, self.steps, self.last_info)
+
+    def _carry(self, envs: np.ndarray) -> None:
+        """Carry the held target of ``envs`` to the goal (keeping its offset from the TCP as
+        it is in the hand now), then correct the last millimetres."""
+        goal = self.base.goal_site.pose.p.cpu().numpy()
+        for stage, screw_first, obstacles in (("carry", False, True), ("settle", True, False)):
+            tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+            obj = self.base.obj.pose.p.cpu().numpy()
+            targets = [
+                sapien.Pose(goal[i] + (tcp[i, :3] - obj[i]), tcp[i, 3:]) if envs[i] else None
+                for i in range(self.num_envs)
+            ]
+            self._per_env(stage, targets, screw_first=screw_first, obstacles=obstacles)

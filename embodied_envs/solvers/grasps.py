@@ -1,0 +1,365 @@
+"""Grasp synthesis from an asset's collision geometry: antipodal, collision-free, ranked.
+
+:func:`asset_grasps` computes an asset's grasps once, in the object's own frame, and caches them
+by the asset's file versions; :func:`posed_grasps` poses them for one episode and keeps those the
+gripper can take there. A grasp is a parallel-jaw grasp of the Panda, described in ManiSkill's
+``panda_hand_tcp`` frame (``build_grasp_pose``: z approaches, y closes):
+
+1. **Antipodal contacts.** Points are sampled on the outer surface of the collision parts (a
+   point inside another part is not on the surface); a ray from each goes into the material
+   along the inward normal and leaves it at the first outer surface point. The pair is kept
+   when the exit normal lies within the friction cone (``GraspConfig.cone_deg``) of the
+   closing line, and the width fits the opening with margin. The grasp centre is the middle
+   of the pair: inside the material.
+2. **Approaches.** Each contact pair is approached from ``approaches`` directions around its
+   closing line (all perpendicular to it); posing keeps those within ``max_tilt_deg`` of
+   straight down (side grasps where top-down cannot reach, e.g. a tall bottle or a handle).
+3. **Collision-free gripper.** Boxes matching the Panda's open fingers and palm
+   (:class:`GripperModel`), swept back along the approach to the pre-grasp, must hold no point
+   of the object; posed, none of the table top nor of the other objects (their surface points).
+4. **Ranking** (lower is better): grasps whose gripper clears the object by ``wide_margin``
+   before the others (the arm tracks its targets within millimetres), then the grasp centre's
+   distance from the centre of mass (a grip near it holds against gravity), the approach's tilt
+   from straight down, and the contact width's distance from the middle of the opening.
+
+The same asset gives the same ranked list (the sampling is seeded by the asset's content).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from embodied_envs.layout.assets import ASSET_FILES, AssetSpec, FileVersion, asset_geometry
+
+
+class GraspError(RuntimeError):
+    """An asset the gripper cannot take anywhere (names the asset and why)."""
+
+
+@dataclass(frozen=True)
+class GripperModel:
+    """The Panda hand as boxes in the ``panda_hand_tcp`` frame (m), fingers open: the
+    bounding boxes of ManiSkill's Panda finger and hand collision meshes.
+
+    ``x``: across the fingers' width; ``y``: the closing direction; ``z``: the approach (the
+    TCP sits between the fingertips; the palm is behind it, at negative z).
+    """
+
+    opening: float = 0.08  # finger gap when open
+    finger_width: float = 0.022  # along x
+    finger_thickness: float = 0.026  # along y, outside the gap
+    finger_tip: float = 0.009  # the fingertips reach this far past the TCP (+z)
+    finger_length: float = 0.054  # from the tips back to the palm
+    palm_size: tuple[float, float] = (0.064, 0.208)  # x, y extents
+    palm_z: tuple[float, float] = (-0.129, -0.037)  # z extent
+
+    def boxes(self, sweep: float = 0.0, opening: np.ndarray | float | None = None) -> np.ndarray:
+        """``(..., 3, 2, 3)`` boxes (min corner, max corner): two fingers and the palm, each
+        stretched back along -z by ``sweep`` (the way in from the pre-grasp), the fingers
+        ``opening`` apart (default: fully open; an array gives one set per opening)."""
+        gap = np.asarray(self.opening if opening is None else opening, dtype=np.float64)
+        half = gap[..., None] / 2
+        t, w = self.finger_thickness, self.finger_width / 2
+        z_top, z_base = self.finger_tip, self.finger_tip - self.finger_length
+        (px, py), (z0, z1) = self.palm_size, self.palm_z
+        one = np.ones_like(half)
+        left = np.stack(
+            [
+                np.concatenate([-w * one, half, (z_base - sweep) * one], -1),
+                np.concatenate([w * one, half + t, z_top * one], -1),
+            ],
+            -2,
+        )
+        right = np.stack(
+            [
+                np.concatenate([-w * one, -half - t, (z_base - sweep) * one], -1),
+                np.concatenate([w * one, -half, z_top * one], -1),
+            ],
+            -2,
+        )
+        palm = np.broadcast_to(
+            np.array([[-px / 2, -py / 2, z0 - sweep], [px / 2, py / 2, z1]]), left.shape
+        )
+        return np.stack([left, right, palm], -3)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class GraspConfig:
+    """The numbers of grasp synthesis."""
+
+    surface_samples: int = 1500  # points sampled on the outer surface
+    check_points: int = 3000  # object points the gripper boxes are checked against
+    cone_deg: float = 15.0  # friction cone half-angle kept (mu 0.6 allows 31)
+    width_margin: float = 0.012  # m, contact width at most opening - margin
+    min_width: float = 0.004  # m
+    approaches: int = 12  # approach directions around each closing line
+    max_tilt_deg: float = 65.0  # approach at most this far from straight down (posed)
+    sweep: float = 0.08  # m, approach distance checked (the solver's pre-grasp offset)
+    clearance: float = 0.002  # m, gripper boxes keep this far from the table top
+    margin: float = 0.006  # m, gripper boxes keep this far from the object (arm precision)
+    wide_margin: float = 0.015  # m, grasps this clear of the object rank first
+    max_pairs: int = 500  # contact pairs kept (a seeded sample over the surface)
+    preshape: float = 0.015  # m per side: the fingers open to the contact width plus this
+
+
+@dataclass(frozen=True)
+class Grasps:
+    """Grasps of one asset in its own frame, best first.
+
+    Attributes:
+        centre: ``(n, 3)`` TCP positions.
+        closing: ``(n, 3)`` unit closing directions (TCP y).
+        approach: ``(n, 3)`` unit approach directions (TCP z).
+        width: ``(n,)`` contact width.
+        opening: ``(n,)`` finger gap to approach with (pre-shaped: width plus margin).
+        score: ``(n,)`` rank before posing (lower is better).
+        com: ``(3,)`` the centre of mass used.
+    """
+
+    centre: np.ndarray
+    closing: np.ndarray
+    approach: np.ndarray
+    width: np.ndarray
+    opening: np.ndarray
+    score: np.ndarray
+    com: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.centre)
+
+
+def _seed(spec: AssetSpec) -> int:
+    """A seed from the collision mesh's bytes: the same asset samples the same points."""
+    return int.from_bytes(hashlib.sha256(spec.collision.path.read_bytes()).digest()[:8], "little")
+
+
+def _outer_surface(parts, n: int, rng: np.random.Generator):
+    """Points and outward normals on the union of convex parts, none inside another part."""
+    import trimesh  # only where grasps are computed (the CLI starts without it)
+
+    hulls = [trimesh.Trimesh(vertices=p).convex_hull for p in parts]
+    areas = np.array([h.area for h in hulls])
+    counts = np.maximum(1, np.round(n * 2 * areas / areas.sum()).astype(int))
+    points, normals = [], []
+    for k, (hull, m) in enumerate(zip(hulls, counts, strict=True)):
+        pts, faces = trimesh.sample.sample_surface(hull, int(m), seed=int(rng.integers(2**31)))
+        nrm = hull.face_normals[faces]
+        outside = np.ones(len(pts), bool)
+        for j, other in enumerate(hulls):
+            if j != k:
+                outside &= ~_inside(other, pts, 1e-4)
+        points.append(pts[outside])
+        normals.append(nrm[outside])
+    points, normals = np.concatenate(points), np.concatenate(normals)
+    keep = rng.permutation(len(points))[:n]
+    return points[keep], normals[keep], hulls
+
+
+def _inside(hull, points: np.ndarray, eps: float) -> np.ndarray:
+    """Points strictly inside a convex hull (deeper than ``eps``)."""
+    normals, origins = hull.face_normals, hull.triangles[:, 0]
+    d = np.einsum("pfk,fk->pf", points[:, None, :] - origins[None], normals)
+    return (d < -eps).all(1)
+
+
+def _exit_points(hulls, points: np.ndarray, normals: np.ndarray):
+    """For each surface point, where a ray into the material (along the inward normal) leaves
+    the union of the convex parts, and the outward normal there; NaN where it never enters.
+
+    Each part's interval along the ray comes from its face planes; the exit is the end of the
+    run of overlapping intervals that starts at the point.
+    """
+    d = -normals
+    n = len(points)
+    t_in = np.full((len(hulls), n), np.inf)
+    t_out = np.full((len(hulls), n), -np.inf)
+    exit_normal = np.zeros((len(hulls), n, 3))
+    for j, hull in enumerate(hulls):
+        fn, c = hull.face_normals, np.einsum("fk,fk->f", hull.face_normals, hull.triangles[:, 0])
+        along = d @ fn.T  # (n, f)
+        gap = c[None] - points @ fn.T  # >= 0 inside each plane
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = gap / along
+        leave = np.where(along > 1e-12, t, np.inf)
+        enter = np.where(along < -1e-12, t, -np.inf)
+        blocked = ((np.abs(along) <= 1e-12) & (gap < 0)).any(1)
+        lo, hi = enter.max(1), leave.min(1)
+        valid = (lo < hi) & ~blocked
+        t_in[j] = np.where(valid, lo, np.inf)
+        t_out[j] = np.where(valid, hi, -np.inf)
+        exit_normal[j] = fn[leave.argmin(1)]
+    end = np.zeros(n)
+    started = np.zeros(n, bool)
+    for _ in range(len(hulls)):  # grow the run of overlapping intervals from t = 0
+        joined = (t_in <= end[None] + 1e-6) & (t_out > end[None] + 1e-6)
+        grows = joined.any(0)
+        if not grows.any():
+            break
+        started |= grows
+        end = np.where(grows, np.where(joined, t_out, -np.inf).max(0), end)
+    out = np.full_like(points, np.nan)
+    out_n = np.full_like(points, np.nan)
+    ok = started & (end > 1e-3)
+    last = np.argmax(np.where(np.isclose(t_out, end[None]), 1, 0), axis=0)
+    out[ok] = points[ok] + end[ok, None] * d[ok]
+    out_n[ok] = exit_normal[last[ok], np.flatnonzero(ok)]
+    return out, out_n
+
+
+def _frames(closing: np.ndarray, count: int) -> np.ndarray:
+    """``count`` unit approach directions perpendicular to each closing line ``(n, 3)``:
+    ``(n, count, 3)``, starting from the one nearest to -z of the object's frame."""
+    down = np.array([0.0, 0.0, -1.0])
+    ref = down - (closing @ down)[:, None] * closing
+    flat = np.linalg.norm(ref, axis=1) < 1e-6  # closing vertical: any perpendicular
+    ref[flat] = np.cross(closing[flat], [1.0, 0.0, 0.0])
+    ref /= np.linalg.norm(ref, axis=1, keepdims=True)
+    side = np.cross(closing, ref)
+    angles = np.arange(count) * 2 * np.pi / count
+    return (
+        np.cos(angles)[None, :, None] * ref[:, None] + np.sin(angles)[None, :, None] * side[:, None]
+    )
+
+
+def to_tcp(points: np.ndarray, centre, closing, approach) -> np.ndarray:
+    """World (or object) points in the TCP frames of grasps: ``(g, p, 3)``."""
+    ortho = np.cross(closing, approach)
+    rot = np.stack([ortho, closing, approach], -1)  # (g, 3, 3): columns x, y, z
+    return np.einsum("gpk,gkj->gpj", points[None] - centre[:, None], rot)
+
+
+def boxes_hit(points_tcp: np.ndarray, boxes: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """``(g,)``: any point (``(g, p, 3)`` in TCP frames) inside any box (grown by margin);
+    ``boxes`` ``(b, 2, 3)`` for every grasp, or ``(g, b, 2, 3)`` one set per grasp."""
+    if boxes.ndim == 3:
+        boxes = np.broadcast_to(boxes, (len(points_tcp), *boxes.shape))
+    lo, hi = boxes[:, None, :, 0] - margin, boxes[:, None, :, 1] + margin
+    inside = (points_tcp[:, :, None] >= lo) & (points_tcp[:, :, None] <= hi)
+    return inside.all(-1).any((1, 2))
+
+
+def _compute(spec: AssetSpec, cfg: GraspConfig, gripper: GripperModel) -> Grasps:
+    import trimesh  # only where grasps are computed
+
+    geom = asset_geometry(spec)
+    rng = np.random.default_rng(_seed(spec))
+    points, normals, hulls = _outer_surface(geom.parts, cfg.surface_samples, rng)
+    mesh = trimesh.util.concatenate(hulls)
+    exits, exit_n = _exit_points(hulls, points, normals)
+    found = ~np.isnan(exits[:, 0])
+    span = exits - points
+    width = np.linalg.norm(span, axis=1)
+    closing = np.zeros_like(span)
+    closing[found] = span[found] / np.maximum(width[found, None], 1e-9)
+    cos_cone = np.cos(np.radians(cfg.cone_deg))
+    ok = (
+        found
+        & (width >= cfg.min_width)
+        & (width <= gripper.opening - cfg.width_margin)
+        & (np.einsum("ij,ij->i", np.nan_to_num(exit_n), closing) >= cos_cone)
+    )
+    vols = np.array([h.volume for h in hulls])
+    com = (np.array([h.center_mass for h in hulls]) * vols[:, None]).sum(0) / vols.sum()
+    if not ok.any():
+        raise GraspError(
+            f"{spec.urdf_path}: no antipodal contact pair of its collision parts fits the "
+            f"gripper's {gripper.opening * 100:.0f} cm opening (with {cfg.width_margin * 100:.1f}"
+            " cm margin). Fix: scale the asset so that some part of it is narrower."
+        )
+    centre = (points[ok] + exits[ok]) / 2
+    closing, width = closing[ok], width[ok]
+    pick = np.sort(rng.permutation(len(centre))[: cfg.max_pairs])  # spread over the surface
+    centre, closing, width = centre[pick], closing[pick], width[pick]
+    approach = _frames(closing, cfg.approaches)  # (n, a, 3)
+    n, a = approach.shape[:2]
+    centre = np.repeat(centre, a, 0)
+    closing = np.repeat(closing, a, 0)
+    width = np.repeat(width, a, 0)
+    approach = approach.reshape(-1, 3)
+    cloud = trimesh.sample.sample_surface(mesh, cfg.check_points, seed=int(rng.integers(2**31)))[0]
+    opening = np.minimum(gripper.opening, width + 2 * cfg.preshape)
+    boxes = gripper.boxes(cfg.sweep, opening)  # (n, 3, 2, 3)
+    free = np.zeros(len(centre), bool)
+    roomy = np.zeros(len(centre), bool)  # clear by the wider margin too
+    for s in range(0, len(centre), 256):
+        part = slice(s, s + 256)
+        local = to_tcp(cloud, centre[part], closing[part], approach[part])
+        free[part] = ~boxes_hit(local, boxes[part], cfg.margin)
+        roomy[part] = ~boxes_hit(local, boxes[part], cfg.wide_margin)
+    if not free.any():
+        raise GraspError(
+            f"{spec.urdf_path}: every antipodal grasp of its collision parts puts the gripper's "
+            "fingers or palm into the object. Fix: check the collision mesh (a closed, "
+            "gripper-sized part is needed)."
+        )
+    centre, closing, approach = centre[free], closing[free], approach[free]
+    width, opening = width[free], opening[free]
+    score = (
+        np.linalg.norm(centre - com, axis=1) / 0.05
+        + np.abs(width - gripper.opening / 2) / 0.08
+        + 2.0 * ~roomy[free]  # a grasp the arm's error could bump comes after the roomy ones
+    )
+    order = np.argsort(score, kind="stable")
+    return Grasps(
+        centre[order], closing[order], approach[order], width[order], opening[order],
+        score[order], com,
+    )  # fmt: skip
+
+
+def asset_grasps(
+    spec: AssetSpec, cfg: GraspConfig | None = None, gripper: GripperModel | None = None
+) -> Grasps:
+    """The grasps of an asset in its own frame, best first; computed once per file version
+    (``ASSET_FILES``) and configuration.
+
+    Raises:
+        GraspError: naming the asset, when no grasp fits the gripper.
+    """
+    cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
+    key = ("grasps", FileVersion.of(spec.collision.path), spec.collision, cfg, gripper)
+    return ASSET_FILES.get(key, lambda: _compute(spec, cfg, gripper))
+
+
+def posed_grasps(
+    grasps: Grasps,
+    object_to_world: np.ndarray,
+    support_z: float,
+    obstacles: np.ndarray | None = None,
+    cfg: GraspConfig | None = None,
+    gripper: GripperModel | None = None,
+    limit: int = 8,
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
+    """The grasps the gripper can take in this episode, best first, as world
+    ``(centre, closing, approach, opening)``: approach within ``max_tilt_deg`` of straight down, the
+    swept gripper above the support surface and clear of ``obstacles`` (world points), ranked
+    by the pre-posing score plus the tilt. At most ``limit``; an empty list when none."""
+    cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
+    rot, t = object_to_world[:3, :3], object_to_world[:3, 3]
+    centre = grasps.centre @ rot.T + t
+    closing = grasps.closing @ rot.T
+    approach = grasps.approach @ rot.T
+    tilt = np.arccos(np.clip(-approach[:, 2], -1.0, 1.0))
+    ok = tilt <= np.radians(cfg.max_tilt_deg)
+    boxes = gripper.boxes(cfg.sweep, grasps.opening)  # (n, 3, 2, 3)
+    corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), -1).reshape(-1, 3)
+    local = np.where(corners[None, None], boxes[:, :, 1][:, :, None], boxes[:, :, 0][:, :, None])
+    local = local.reshape(len(boxes), -1, 3)
+    ortho = np.cross(closing, approach)
+    world = centre[:, None] + np.einsum(
+        "gpk,gkj->gpj", local, np.stack([ortho, closing, approach], 1)
+    )
+    ok &= world[..., 2].min(1) >= support_z + cfg.clearance
+    idx = np.flatnonzero(ok)
+    if obstacles is not None and len(obstacles) and len(idx):
+        hit = np.zeros(len(idx), bool)
+        for s in range(0, len(idx), 128):
+            part = idx[s : s + 128]
+            pts = to_tcp(obstacles, centre[part], closing[part], approach[part])
+            hit[s : s + 128] = boxes_hit(pts, boxes[part], 0.003)
+        idx = idx[~hit]
+    score = grasps.score[idx] + tilt[idx] / np.radians(45.0)
+    best = idx[np.argsort(score, kind="stable")][:limit]
+    return [(centre[i], closing[i], approach[i], float(grasps.opening[i])) for i in best]
