@@ -1,0 +1,177 @@
+"""Grasp synthesis (issue 17): antipodal, within the opening, collision-free, seeded, refused
+with a clear error; the closed-loop solver on zoo shapes, and a re-grasp after a drop."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from conftest import ROOT
+from scipy.spatial import ConvexHull
+
+import embodied_envs  # noqa: F401
+from embodied_envs.layout import LayoutPose, asset_geometry, parse_urdf
+from embodied_envs.solvers.grasps import (
+    GraspConfig,
+    GraspError,
+    GripperModel,
+    _compute,
+    asset_grasps,
+    posed_grasps,
+    to_tcp,
+)
+
+ZOO = ROOT / "zoo"
+SHAPES = ["ring", "handled_cup", "t_shape", "shallow_bowl", "bottle"]
+
+
+def spec_of(name: str):
+    folder = ZOO / "assets" / name
+    return parse_urdf(folder / f"{name}.urdf")
+
+
+def surface_state(parts, q):
+    """Independent of the module: ``q``'s depth outside the union of the convex parts (0 on
+    its surface, < 0 inside) and the outward normal of the face it lies on (scipy hulls)."""
+    best, normal = np.inf, None
+    for p in parts:
+        hull = ConvexHull(p)
+        d = hull.equations[:, :3] @ q + hull.equations[:, 3]
+        if d.max() < best:
+            best, normal = d.max(), hull.equations[d.argmax(), :3]
+    return best, normal
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_grasps_are_antipodal_within_the_opening_and_free_of_the_object(name):
+    spec = spec_of(name)
+    cfg, gripper = GraspConfig(), GripperModel()
+    grasps = asset_grasps(spec, cfg, gripper)
+    geom = asset_geometry(spec)
+    assert len(grasps) >= 10
+    cos = np.cos(np.radians(cfg.cone_deg)) - 1e-6
+    for k in range(0, len(grasps), max(1, len(grasps) // 25)):  # 25 across the ranking
+        c, a, w = grasps.centre[k], grasps.closing[k], grasps.width[k]
+        assert cfg.min_width <= w <= gripper.opening - cfg.width_margin
+        assert grasps.opening[k] <= gripper.opening and grasps.opening[k] > w
+        assert abs(np.linalg.norm(a) - 1) < 1e-6 and abs(a @ grasps.approach[k]) < 1e-6
+        far, near = c + a * w / 2, c - a * w / 2  # the two contacts
+        for q, sign in ((far, 1.0), (near, -1.0)):
+            depth, normal = surface_state(geom.parts, q)
+            assert abs(depth) < 1e-4, (k, depth)  # on the surface
+            assert sign * normal @ a >= cos, (k, sign * normal @ a)  # within the cone
+        assert surface_state(geom.parts, c)[0] < 0, "the centre is inside the material"
+        # no finger or palm box (fingers at the grasp's opening) holds an object point
+        pts = np.concatenate([p for p in geom.parts])
+        local = to_tcp(pts, c[None], a[None], grasps.approach[k][None])[0]
+        for lo, hi in gripper.boxes(0.0, grasps.opening[k]):
+            assert not ((local >= lo) & (local <= hi)).all(1).any(), k
+
+
+def test_the_same_asset_gives_the_same_ranked_list():
+    spec = spec_of("t_shape")
+    a, b = (
+        _compute(spec, GraspConfig(), GripperModel()),
+        _compute(spec, GraspConfig(), GripperModel()),
+    )
+    for field in ("centre", "closing", "approach", "width", "opening", "score"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    assert np.all(np.diff(a.score) >= 0), "best first"
+
+
+def test_posed_grasps_clear_the_table_and_the_obstacles():
+    spec = spec_of("slab")
+    grasps = asset_grasps(spec)
+    gripper = GripperModel()
+    pose = LayoutPose.from_xyz_yaw([0.3, 0.1, 0.76], 0.7)
+    support = 0.76
+    free = posed_grasps(grasps, pose.matrix(), support, limit=50)
+    assert free, "a slab lying on a table can be taken from above"
+    for c, a, d, opening in free:
+        assert np.degrees(np.arccos(-d[2])) <= GraspConfig().max_tilt_deg + 1e-6
+        boxes = gripper.boxes(GraspConfig().sweep, opening)
+        corners = np.array([[b[i, 0], b[j, 1], b[k, 2]] for b in boxes for i in (0, 1)
+                            for j in (0, 1) for k in (0, 1)])  # fmt: skip
+        world = c + corners @ np.stack([np.cross(a, d), a, d])
+        assert world[:, 2].min() >= support + GraspConfig().clearance - 1e-9
+    # a wall of obstacle points over the slab's centre: every grasp through it is dropped
+    c0 = free[0][0]
+    wall = c0 + np.stack(np.meshgrid(np.linspace(-0.1, 0.1, 21), np.linspace(-0.1, 0.1, 21),
+                                     [0.05]), -1).reshape(-1, 3)  # fmt: skip
+    blocked = posed_grasps(grasps, pose.matrix(), support, wall, limit=50)
+    assert len(blocked) < len(free)
+    for c, a, d, opening in blocked:
+        local = to_tcp(wall, c[None], a[None], d[None])[0]
+        for lo, hi in gripper.boxes(GraspConfig().sweep, opening):
+            assert not ((local >= lo - 0.003) & (local <= hi + 0.003)).all(1).any()
+
+
+def test_an_asset_wider_than_the_gripper_everywhere_is_refused(tmp_path):
+    import trimesh
+
+    folder = tmp_path / "crate"
+    (folder / "mesh").mkdir(parents=True)
+    trimesh.creation.box(extents=(0.2, 0.2, 0.2)).export(folder / "mesh" / "crate_collision.obj")
+    trimesh.creation.box(extents=(0.2, 0.2, 0.2)).export(folder / "mesh" / "crate.obj")
+    (folder / "crate.urdf").write_text(
+        (ZOO / "assets" / "slab" / "slab.urdf").read_text().replace("slab", "crate")
+    )
+    with pytest.raises(GraspError) as e:
+        asset_grasps(parse_urdf(folder / "crate.urdf"))
+    assert str(folder / "crate.urdf") in str(e.value) and "opening" in str(e.value)
+
+
+def solve(name: str, seed: int, patch=None, **kwargs):
+    from embodied_envs.solvers import PickPlaceSolver
+
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(ZOO / "layouts" / f"{name}.json"),
+                   control_mode="pd_joint_pos", **kwargs)  # fmt: skip
+    try:
+        env.reset(seed=seed)
+        solver = PickPlaceSolver(env, seed=seed)
+        if patch is not None:
+            patch(solver)
+        result = solver.solve()
+        return bool(env.unwrapped.evaluate()["success"][0]), result, solver
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize(("name", "seed"), [("ring", 2), ("handled_cup", 0), ("t_shape", 5)])
+def test_the_solver_picks_zoo_shapes(name, seed):
+    """Shapes the footprint grasp missed (ring 0/6, cup 1/6, T 0/6 before): picked and held at
+    the goal within the episode limit."""
+    success, result, _ = solve(name, seed)
+    assert success, result.reports[0]
+    assert result.steps <= 300
+
+
+def test_a_dropped_object_is_grasped_again():
+    """The object is knocked out of the hand at the start of the carry: the solver notices
+    (it left its place in the hand), grasps it again from where it lies, lifts it again and
+    places it (with an episode limit that leaves room for a second attempt)."""
+    drops, grasps = [], []
+
+    def patch(solver):
+        carry, grasp = solver._carry, solver._grasp
+
+        def knocked(envs):
+            if not drops:  # once: open the hand and let the object fall before carrying
+                drops.append(solver.base.obj.pose.p[0].tolist())
+                solver._set_gripper(envs, 1.0)
+            carry(envs)
+
+        def recorded(todo, attempt):
+            held = grasp(todo, attempt)
+            grasps.append((attempt, bool(held[0]), solver.base.obj.pose.p[0, 2].item()))
+            return held
+
+        solver._carry, solver._grasp = knocked, recorded
+
+    success, result, solver = solve(SHAPE_DROPPED, SEED_DROPPED, patch, max_episode_steps=600)
+    assert drops, "the carry began"
+    assert result.reports[0].misses[0] == "carry (attempt 0)", result.reports[0]
+    assert [a for a, _, _ in grasps][:2] == [0, 1], "a second grasp after the drop"
+    assert grasps[0][1] and grasps[1][1], (grasps, drops, result.reports[0], result.steps)
+    assert success, result.reports[0]
+
+
+SHAPE_DROPPED, SEED_DROPPED = "slab", 0  # a seed whose plans repeat run to run
