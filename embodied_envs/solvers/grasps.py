@@ -117,6 +117,8 @@ class Grasps:
         opening: ``(n,)`` finger gap to approach with (pre-shaped: width plus margin).
         score: ``(n,)`` rank before posing (lower is better).
         com: ``(3,)`` the centre of mass used.
+        points: ``(m, 3)`` surface points of the object the gripper boxes were checked against.
+        planes: per convex part, its face planes ``(f, 4)``: ``n . x + d <= 0`` inside.
     """
 
     centre: np.ndarray
@@ -126,6 +128,8 @@ class Grasps:
     opening: np.ndarray
     score: np.ndarray
     com: np.ndarray
+    points: np.ndarray
+    planes: tuple[np.ndarray, ...]
 
     def __len__(self) -> int:
         return len(self.centre)
@@ -303,9 +307,14 @@ def _compute(spec: AssetSpec, cfg: GraspConfig, gripper: GripperModel) -> Grasps
         + 2.0 * ~roomy[free]  # a grasp the arm's error could bump comes after the roomy ones
     )
     order = np.argsort(score, kind="stable")
+    planes = tuple(
+        np.concatenate([h.face_normals, -np.einsum("fk,fk->f", h.face_normals,
+                                                   h.triangles[:, 0])[:, None]], 1)
+        for h in hulls
+    )  # fmt: skip
     return Grasps(
         centre[order], closing[order], approach[order], width[order], opening[order],
-        score[order], com,
+        score[order], com, cloud, planes,
     )  # fmt: skip
 
 
@@ -321,6 +330,23 @@ def asset_grasps(
     cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
     key = ("grasps", FileVersion.of(spec.collision.path), spec.collision, cfg, gripper)
     return ASSET_FILES.get(key, lambda: _compute(spec, cfg, gripper))
+
+
+def grasp_is_valid(
+    grasps: Grasps,
+    centre: np.ndarray,
+    closing: np.ndarray,
+    approach: np.ndarray,
+    cfg: GraspConfig | None = None,
+    gripper: GripperModel | None = None,
+) -> bool:
+    """Whether a grasp given in the object's frame (fully open fingers) passes the checks the
+    synthesised ones pass: its centre inside the material, and no object point in the swept
+    gripper boxes."""
+    cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
+    inside = any((p[:, :3] @ centre + p[:, 3] < 0).all() for p in grasps.planes)
+    local = to_tcp(grasps.points, centre[None], closing[None], approach[None])
+    return bool(inside and not boxes_hit(local, gripper.boxes(cfg.sweep), cfg.margin)[0])
 
 
 def posed_grasps(

@@ -13,6 +13,7 @@ recorded per env and stage; that env then holds still while the others go on.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import mplib
@@ -23,7 +24,13 @@ import trimesh
 
 from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
-from embodied_envs.solvers.grasps import GraspConfig, GripperModel, asset_grasps, posed_grasps
+from embodied_envs.solvers.grasps import (
+    GraspConfig,
+    GripperModel,
+    asset_grasps,
+    grasp_is_valid,
+    posed_grasps,
+)
 
 GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
 GRIPPER_CLOSED = -1.0  # and for closed fingers
@@ -308,10 +315,11 @@ class PickPlaceSolver:
     # --- the policy ----------------------------------------------------------------------
     def grasp_poses(self) -> list[list[tuple[sapien.Pose, float]]]:
         """Per env, the grasps to try where its target lies now, best first, each with the
-        finger opening to approach with: the synthesised grasps that the gripper can take here
-        (``grasps.posed_grasps``, pre-shaped), then the top-down grasp across the footprint's
+        finger opening to approach with. First the top-down grasp across the footprint's
         narrow side and its 180-degree turn (a parallel gripper's same grasp at another wrist
-        angle), fully open."""
+        angle), fully open, when it passes the synthesised grasps' checks (the grasp that
+        cans and boxes take); then the synthesised grasps the gripper can take here
+        (``grasps.posed_grasps``, pre-shaped); the footprint grasp last when it failed them."""
         agent = self.base.agent
         tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
         poses = []
@@ -321,21 +329,27 @@ class PickPlaceSolver:
             geom = asset_geometry(spec)
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             support = float(self.base.layout_scene.top_z[i])
-            options = [
+            grasps = asset_grasps(spec, self.grasp_config)
+            synthesised = [
                 (agent.build_grasp_pose(approach, closing, centre), opening)
                 for centre, closing, approach, opening in posed_grasps(
-                    asset_grasps(spec, self.grasp_config), pose.matrix(), support,
-                    self.clouds[i], self.grasp_config, limit=self.cfg.grasp_candidates,
+                    grasps, pose.matrix(), support, self.clouds[i], self.grasp_config,
+                    limit=self.cfg.grasp_candidates,
                 )
             ]  # fmt: skip
             verts = pose.transform_points(geom.vertices)
             centre, closing = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
             down = np.array([0, 0, -1.0])
-            options += [
+            footprint = [
                 (agent.build_grasp_pose(down, c, centre), self.gripper_model.opening)
                 for c in (closing, -closing)
             ]
-            poses.append(options)
+            world_to_object = np.linalg.inv(pose.matrix())
+            rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
+            # the footprint grasp's palm stops just above a can's lid: checked without margin
+            exact = dataclasses.replace(self.grasp_config, margin=0.0)
+            valid = grasp_is_valid(grasps, rot @ centre + t, rot @ closing, rot @ down, exact)
+            poses.append(footprint + synthesised if valid else synthesised + footprint)
         return poses
 
     @property

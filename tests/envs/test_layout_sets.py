@@ -295,7 +295,7 @@ def test_a_mixed_dataset_records_each_layout_and_replays_exactly(mixed_dataset, 
     shutil.copytree(folder, work)
     subprocess.run(
         [sys.executable, "-m", "mani_skill.trajectory.replay_trajectory", "--traj-path",
-         str(work / "trajectory.h5"), "-o", "state", "--save-traj"],
+         str(work / "trajectory.h5"), "-o", "state", "--save-traj", "--allow-failure"],
         cwd=tmp_path, env=ENV, check=True, capture_output=True, timeout=600,
     )  # fmt: skip
     out = next(work.glob("trajectory.state.*.h5"))
@@ -337,7 +337,8 @@ def test_the_lerobot_export_carries_each_episodes_instruction(mixed_dataset, tmp
     work = tmp_path / "data"
     shutil.copytree(folder, work)
     subprocess.run(
-        [*CLI, "replay", "--traj-path", str(work / "trajectory.h5"), "-o", "rgb", "--save-traj"],
+        [*CLI, "replay", "--traj-path", str(work / "trajectory.h5"), "-o", "rgb", "--save-traj",
+         "--allow-failure"],
         cwd=tmp_path, env=ENV, check=True, capture_output=True, timeout=600,
     )  # fmt: skip
     rgb = next(work.glob("trajectory.rgb.*.h5"))
