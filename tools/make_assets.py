@@ -106,34 +106,39 @@ def write_asset(asset: Asset, out: Path) -> None:
     else:
         hulls = [p.mesh.convex_hull for p in parts if p.convex]
     write_obj(folder / "mesh" / f"{asset.stem}_collision.obj", [(h, None) for h in hulls], None)
+    (folder / f"{asset.stem}.urdf").write_text(urdf_text(asset.stem, asset.mu, asset.mass))
+
+
+def urdf_text(stem: str, mu: tuple[float, float] | None, mass: float | None) -> str:
+    """An EmbodiedGen URDF: one link, visual ``mesh/<stem>.obj`` and collision
+    ``mesh/<stem>_collision.obj`` turned Z-up, optional friction and mass."""
     gazebo = ""
-    if asset.mu is not None:
+    if mu is not None:
         gazebo = (
-            f"\n      <gazebo>\n        <mu1>{asset.mu[0]}</mu1>\n        <mu2>{asset.mu[1]}</mu2>"
+            f"\n      <gazebo>\n        <mu1>{mu[0]}</mu1>\n        <mu2>{mu[1]}</mu2>"
             "\n      </gazebo>"
         )
     inertial = ""
-    if asset.mass is not None:
-        inertial = f'\n    <inertial>\n      <mass value="{asset.mass}"/>\n    </inertial>'
-    urdf = f"""<?xml version="1.0"?>
-<robot name="{asset.stem}">
-  <link name="{asset.stem}">
+    if mass is not None:
+        inertial = f'\n    <inertial>\n      <mass value="{mass}"/>\n    </inertial>'
+    return f"""<?xml version="1.0"?>
+<robot name="{stem}">
+  <link name="{stem}">
     <visual>
       <geometry>
-        <mesh filename="mesh/{asset.stem}.obj" scale="1.0 1.0 1.0"/>
+        <mesh filename="mesh/{stem}.obj" scale="1.0 1.0 1.0"/>
       </geometry>
       <origin xyz="0 0 0" rpy="{Y_UP_RPY}"/>
     </visual>
     <collision>
       <geometry>
-        <mesh filename="mesh/{asset.stem}_collision.obj" scale="1.0 1.0 1.0"/>
+        <mesh filename="mesh/{stem}_collision.obj" scale="1.0 1.0 1.0"/>
       </geometry>
       <origin xyz="0 0 0" rpy="{Y_UP_RPY}"/>{gazebo}
     </collision>{inertial}
   </link>
 </robot>
 """
-    (folder / f"{asset.stem}.urdf").write_text(urdf)
 
 
 WOOD = (0.55, 0.36, 0.2)

@@ -20,7 +20,7 @@ import shutil
 from pathlib import Path
 
 import trimesh
-from make_assets import write_obj  # tools/: Z-up parts to a Y-up OBJ, one object per part
+from make_assets import urdf_text, write_obj  # tools/: one object per part, Y-up
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "embodied_envs" / "data"
@@ -112,33 +112,6 @@ def shapes() -> dict[str, tuple[list[trimesh.Trimesh], float, str]]:
     return h
 
 
-URDF = """<?xml version="1.0"?>
-<robot name="{name}">
-  <link name="{name}">
-    <visual>
-      <geometry>
-        <mesh filename="mesh/{name}.obj" scale="1.0 1.0 1.0"/>
-      </geometry>
-      <origin xyz="0 0 0" rpy="1.5708 0 0"/>
-    </visual>
-    <collision>
-      <geometry>
-        <mesh filename="mesh/{name}_collision.obj" scale="1.0 1.0 1.0"/>
-      </geometry>
-      <origin xyz="0 0 0" rpy="1.5708 0 0"/>
-      <gazebo>
-        <mu1>0.7</mu1>
-        <mu2>0.6</mu2>
-      </gazebo>
-    </collision>
-    <inertial>
-      <mass value="{mass}"/>
-    </inertial>
-  </link>
-</robot>
-"""
-
-
 def write_asset(folder: Path, name: str, parts: list[trimesh.Trimesh], mass: float) -> None:
     """The asset's files; each convex part is one object (``o``) of the OBJ files, which is
     how SAPIEN splits a collision mesh into convex shapes."""
@@ -146,7 +119,7 @@ def write_asset(folder: Path, name: str, parts: list[trimesh.Trimesh], mass: flo
     hulls = [p.convex_hull for p in parts]
     write_obj(folder / "mesh" / f"{name}_collision.obj", [(h, None) for h in hulls], None)
     write_obj(folder / "mesh" / f"{name}.obj", [(h, None) for h in hulls], None)
-    (folder / f"{name}.urdf").write_text(URDF.format(name=name, mass=mass))
+    (folder / f"{name}.urdf").write_text(urdf_text(name, (0.7, 0.6), mass))
 
 
 def write_layout(path: Path, name: str, desc: str, assets: Path) -> None:
