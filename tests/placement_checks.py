@@ -1,4 +1,7 @@
-"""Placement constraints checked independently of the placement code (shapely, trimesh)."""
+"""Placement constraints checked independently of the placement code (shapely, trimesh).
+
+The numbers are :class:`PlacementLimits`' (one definition of each rule's limit); the geometry
+is computed here, without the placement helpers."""
 
 import functools
 import math
@@ -8,7 +11,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 from shapely.geometry import MultiPoint, Point
 
-from embodied_envs.layout import LayoutPose, parse_urdf
+from embodied_envs.layout import LayoutPose, PlacementLimits, parse_urdf
 
 
 @functools.lru_cache(maxsize=64)
@@ -26,19 +29,20 @@ def world_points(layout, node):
     return v @ Rotation.from_quat([qx, qy, qz, qw]).as_matrix().T + [x, y, z]
 
 
-def check_constraints(layout):
+def check_constraints(layout, limits: PlacementLimits | None = None):
     """Every placement constraint, checked with shapely; returns a list of violations."""
+    lim = limits or PlacementLimits()
     bad = []
     table = world_points(layout, layout.context)
     top_z = table[:, 2].max()
-    top = MultiPoint(table[table[:, 2] >= top_z - 0.05][:, :2].tolist()).convex_hull
-    inner = top.buffer(-0.02 + 1e-6)
-    if abs(np.percentile(table[:, 2], 1)) > 1e-6:
+    top = MultiPoint(table[table[:, 2] >= top_z - lim.top_band][:, :2].tolist()).convex_hull
+    inner = top.buffer(-lim.hull_margin + 1e-6)
+    if abs(np.percentile(table[:, 2], lim.bottom_percentile)) > 1e-6:
         bad.append("table bottom not at z=0")
     rx, ry, rz = layout.position[layout.robot][:3]
     rq = layout.position[layout.robot][3:]
     heading = Rotation.from_quat(rq).apply([1, 0, 0])
-    if not math.isclose(top.exterior.distance(Point(rx, ry)), 0.02, abs_tol=1e-4):
+    if not math.isclose(top.exterior.distance(Point(rx, ry)), lim.hull_margin, abs_tol=1e-4):
         bad.append("robot not on the shrunk hull boundary")
     if abs(rz - top_z) > 1e-6:
         bad.append("robot not at table-top height")
@@ -46,7 +50,7 @@ def check_constraints(layout):
     cos = np.dot(heading[:2], to_centre) / np.linalg.norm(heading[:2]) / np.linalg.norm(to_centre)
     if cos < math.cos(math.radians(5)):
         bad.append("robot does not face the table centre")
-    half = 0.06
+    half = lim.robot_footprint / 2
     c, s = heading[0] / np.hypot(*heading[:2]), heading[1] / np.hypot(*heading[:2])
     robot_sq = MultiPoint(
         [(rx + c * a - s * b, ry + s * a + c * b) for a in (-half, half) for b in (-half, half)]
@@ -62,19 +66,19 @@ def check_constraints(layout):
         if abs(pts[:, 2].min() - top_z) > 1e-6:
             bad.append(f"{node} does not rest on the table top ({pts[:, 2].min() - top_z:+.4f})")
         for other, f in feet.items():
-            if foot.distance(f) < 0.01 - 1e-6:
+            if foot.distance(f) < lim.clearance - 1e-6:
                 bad.append(f"{node} overlaps {other}")
         feet[node] = foot
         if node in layout.manipulated_objs:
             ox, oy = layout.position[node][:2]
             d = math.hypot(ox - rx, oy - ry)
-            if not 0.2 < d < 0.78:
+            if not lim.reach_min < d < lim.reach_max:
                 bad.append(f"{node} at {d:.3f} m from the robot")
             ang = math.degrees(
                 abs(math.atan2(oy - ry, ox - rx) - math.atan2(heading[1], heading[0]))
             )
             ang = min(ang, 360 - ang)
-            if ang > 60 + 1e-6:
+            if ang > lim.max_heading_deg + 1e-6:
                 bad.append(f"{node} at {ang:.1f} deg off the robot heading")
     return bad
 

@@ -20,6 +20,18 @@ def test_constraints_hold_over_200_seeds(path):
         assert not bad, f"seed {seed}: {bad}"
 
 
+def test_the_oracle_reads_the_limits_it_checks():
+    """The independent check takes its numbers from PlacementLimits: layouts placed with wider
+    limits than the defaults break the default rules it checks, and pass their own."""
+    from embodied_envs.layout import PlacementLimits
+
+    wide = PlacementLimits(reach_max=1.2, max_heading_deg=120.0, clearance=0.0)
+    layouts = [place(load_layout(LAYOUTS[0]), s, wide) for s in range(40)]
+    assert all(check_constraints(x, wide) == [] for x in layouts)
+    broken = [p for x in layouts for p in check_constraints(x)]
+    assert any("m from the robot" in p or "deg off the robot heading" in p for p in broken)
+
+
 def test_same_seed_same_layout_different_seed_different():
     layout = load_layout(LAYOUTS[0])
     a, b, c = place(layout, 7), place(layout, 7), place(layout, 8)
