@@ -17,6 +17,7 @@ from embodied_envs.cli.args import (
     checked_layouts,
     env_config,
     image_side,
+    layout_value,
     positive_int,
     seed_int,
 )
@@ -94,7 +95,7 @@ def cmd_demo(args) -> int:
     ((_, files),) = checked_layouts(None if args.layout is None else [args.layout])
     check_seed_span(args.seed, args.num_envs * args.episodes, "env episodes")
     plan = DemoPlan(
-        layout=str(files[0]) if len(files) == 1 else [str(f) for f in files],
+        layout=layout_value(files),
         num_envs=args.num_envs,
         episodes=args.episodes,
         seed=args.seed,

@@ -10,26 +10,36 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import os
 from pathlib import Path
 
-from embodied_envs.layout.assets import urdf_path_for
+from embodied_envs.layout.assets import ASSET_FILES, FileVersion, urdf_path_for
 from embodied_envs.layout.schema import LayoutInfo
 
 
 def pool_members(layout: LayoutInfo, node: str) -> list[str] | None:
     """The members of a node's asset pool as ``assets`` entries (relative to the layout's
-    asset folder), sorted; None when the node's folder is one asset."""
-    folder = layout.asset_dir(node)
+    asset folder), sorted; None when the node's folder is one asset. Read once per version of
+    the folder (``ASSET_FILES``: adding or removing an asset folder or URDF there re-reads it),
+    so a placement pays one ``stat`` per node."""
+    path = os.path.join(layout.asset_base, layout.assets[node])
+    try:
+        version = FileVersion.of(path)
+    except OSError:
+        return None  # a missing folder: load_layout names it
+    names = ASSET_FILES.get(("pool", version, node), lambda: _members(Path(path), node))
+    return None if names is None else [f"{layout.assets[node].rstrip('/')}/{n}" for n in names]
+
+
+def _members(folder: Path, node: str) -> tuple[str, ...] | None:
     if not folder.is_dir() or urdf_path_for(folder, node).is_file():
         return None
-    members = [
-        sub
+    names = tuple(
+        sub.name
         for sub in sorted(folder.iterdir())
         if sub.is_dir() and urdf_path_for(sub, node).is_file()
-    ]
-    if not members:
-        return None  # no URDF anywhere: load_layout names the missing one
-    return [f"{layout.assets[node].rstrip('/')}/{sub.name}" for sub in members]
+    )
+    return names or None  # no URDF anywhere: load_layout names the missing one
 
 
 def with_assets(layout: LayoutInfo, choices: dict[str, str]) -> LayoutInfo:

@@ -23,7 +23,7 @@ import numpy as np
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.loader import load_layout
 from embodied_envs.layout.pools import asset_pools, with_assets, with_first_members
-from embodied_envs.layout.schema import LayoutInfo, label
+from embodied_envs.layout.schema import LayoutInfo
 
 MAX_SET_SIZE = 10_000  # layouts in one set: more is a mistyped glob, not a task
 DRAW_STREAM = 1  # the configuration seed's stream for scene draws (placement uses another)
@@ -153,7 +153,3 @@ class LayoutSet:
         i = int(rng.integers(len(self.layouts)))
         choices = {n: ms[int(rng.integers(len(ms)))] for n, ms in self.pools[i].items()}
         return with_assets(self.layouts[i], choices)
-
-    def describe(self) -> str:
-        names = [label(x.source) for x in self.layouts]
-        return names[0] if len(names) == 1 else f"{len(names)} layouts ({names[0]}, ...)"

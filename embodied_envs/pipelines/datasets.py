@@ -19,7 +19,7 @@ import gymnasium as gym
 
 from embodied_envs.config import resolve_robot
 from embodied_envs.layout import load_layout
-from embodied_envs.layout.sets import LayoutSet
+from embodied_envs.layout.sets import LayoutSet, layout_files
 from embodied_envs.paths import atomic_output
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 
@@ -30,16 +30,11 @@ class DatasetError(RuntimeError):
     """A dataset that cannot be replayed here (names the file and the fix)."""
 
 
-def _files(layout_file) -> list[Path]:
-    """The files of an env's ``layout_file`` as datasets record it (one path or a list)."""
-    items = layout_file if isinstance(layout_file, list | tuple) else [layout_file]
-    return [Path(f) for f in items]
-
-
 def has_splat(layout_file) -> bool:
     """Whether every layout's background has a splat (videos are then hybrid)."""
     return all(
-        load_layout(f, check_poses=False).gs_model_path().is_file() for f in _files(layout_file)
+        load_layout(f, check_poses=False).gs_model_path().is_file()
+        for f in layout_files(layout_file)
     )
 
 
@@ -47,7 +42,7 @@ def layout_content_hash(layout_file) -> str:
     """SHA-256 of the layout files (one, or a set's, in order) and of every file in their asset
     folders (names and bytes; an asset pool's members are files of its folder)."""
     digest = hashlib.sha256()
-    for file in _files(layout_file):
+    for file in layout_files(layout_file):
         layout = load_layout(file, check_files=False)
         digest.update(file.read_bytes())
         for node in sorted(layout.assets):
@@ -60,7 +55,7 @@ def layout_content_hash(layout_file) -> str:
 
 def scene_record(layout_file) -> dict:
     """What a dataset records about its scene (``trajectory.json[RECORD_KEY]``)."""
-    files = [str(f) for f in _files(layout_file)]
+    files = [str(f) for f in layout_files(layout_file)]
     return {
         "layout_file": files[0] if len(files) == 1 else files,
         "layout_sha256": layout_content_hash(files),
@@ -88,7 +83,7 @@ def lerobot_settings(traj_path: str | Path) -> dict:
     instructions are set per episode by :func:`relabel_lerobot_tasks`)."""
     meta = json.loads(Path(traj_path).with_suffix(".json").read_text())
     kwargs = meta["env_info"]["env_kwargs"]
-    layout = load_layout(_files(kwargs["layout_file"])[0], check_files=False)
+    layout = load_layout(layout_files(kwargs["layout_file"])[0], check_files=False)
     tasks = episode_instructions(traj_path)
     robot = kwargs.get("robot_uids") or resolve_robot(layout.robot, None, str(layout.source))
     return dict(task_name=next(iter(tasks.values()), layout.instruction), fps=CONTROL_FREQ,
@@ -175,7 +170,7 @@ def check_replayable(traj_path: str | Path) -> list[str]:
             ) from None
         return []
     layout = kwargs.get("layout_file")
-    for file in [] if layout is None else _files(layout):
+    for file in [] if layout is None else layout_files(layout):
         if not file.is_file():
             raise DatasetError(
                 f"{meta_path}: the dataset's layout {file} does not exist any more. Fix: "
@@ -183,7 +178,7 @@ def check_replayable(traj_path: str | Path) -> list[str]:
                 "new place"
             )
     # by file name: a dataset whose layouts moved (env_kwargs edited to the new place) is fine
-    held = {f.name for f in _files(layout)} if layout is not None else set()
+    held = {f.name for f in layout_files(layout)} if layout is not None else set()
     strays = [
         e
         for e in meta.get("episodes", [])

@@ -43,7 +43,7 @@ class DemoPlan:
         workers: processes (None: min(envs, cores)).
     """
 
-    layout: str | list[str]
+    layout: str | tuple[str, ...]
     num_envs: int = 1
     episodes: int = 1
     seed: int = 0
@@ -151,7 +151,7 @@ def write_video(path: Path, per_env_frames: list[list[np.ndarray]], fps: int) ->
     return n
 
 
-def env_layouts(layout: str | list[str], num_envs: int, seed: int, out: Path) -> list[str]:
+def env_layouts(layout: str | tuple[str, ...], num_envs: int, seed: int, out: Path) -> list[str]:
     """Env k's layout file: the one env k draws from the layout set (``LayoutSet.draw(seed,
     k)``; a single layout draws itself); env 0 keeps the file's poses, env k > 0 (and env 0
     when the drawn layout has asset pools) gets a placed variant written under ``out``."""
@@ -195,7 +195,7 @@ def run_demo(plan: DemoPlan, out: Path, progress: Callable[[int], None] | None =
     )
     fps = max(1, int(round(CONTROL_FREQ / plan.frame_every)))
     summary = dict(
-        layout=plan.layout if isinstance(plan.layout, list) else str(plan.layout),
+        layout=plan.layout if isinstance(plan.layout, str) else list(plan.layout),
         layouts=layouts,
         num_envs=plan.num_envs,
         seed=plan.seed,

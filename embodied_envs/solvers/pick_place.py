@@ -407,7 +407,7 @@ class PickPlaceSolver:
             else [sapien.Pose(g.p + np.array([0, 0, h]), g.q) for h in cfg.lift_heights]
             for g in grasps
         ]
-        self.lifted = self._per_env("lift", lifts, obstacles=False)
+        self._per_env("lift", lifts, obstacles=False)
         # held: the object came up with the hand (a physical check, not a contact threshold)
         rose = self.base.obj.pose.p[:, 2].cpu().numpy() - z0
         held = (rose > cfg.lift_check * min(cfg.lift_heights)) & todo
@@ -431,7 +431,6 @@ class PickPlaceSolver:
     def solve(self) -> SolveResult:
         """Run the whole pick-and-place in every env; returns per-env reports and the last info."""
         cfg = self.cfg
-        self.lifted: list = [None] * self.num_envs
         self.hand = np.zeros((self.num_envs, 3))
         holding = np.zeros(self.num_envs, bool)
         placed = np.zeros(self.num_envs, bool)
