@@ -309,6 +309,22 @@ class PickEmbodiedGenEnv(CheckedEnv):
             self.agent.reset(qpos)
             ls.set_episode_poses(env_idx, start.objects if self.replace_objs else {})
             self.goal_site.set_pose(Pose.create_from_pq(start.goal))
+        if not self.gpu_sim_enabled:
+            self._restart_sleep_timers()
+
+    def _restart_sleep_timers(self):
+        """Wakes every moving body, as a new scene holds them. PhysX keeps each body's sleep
+        timer across ``set_pose``: without this, when bodies settle and sleep depends on the
+        episodes this process ran before, and one seed gives other states (and other expert
+        actions) after another history, e.g. with another ``collect --workers``. CPU simulation
+        only (one env, a few bodies); not done on the GPU simulation, where all envs share one
+        PhysX scene (untested there)."""
+        px = self.scene.px
+        for body in px.rigid_dynamic_components:
+            if not body.kinematic:
+                body.wake_up()
+        for link in px.articulation_link_components:
+            link.wake_up()
 
     def reset(self, seed: int | list[int] | None = None, options: dict | None = None):
         result = super().reset(seed=seed, options=options)

@@ -31,6 +31,7 @@ from embodied_envs.solvers.grasps import (
     grasp_is_valid,
     posed_grasps,
 )
+from embodied_envs.solvers.motion import MotionConfig, SeededPlanner
 
 GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
 GRIPPER_CLOSED = -1.0  # and for closed fingers
@@ -56,8 +57,7 @@ class SolverConfig:
     hold_steps: int = 10  # control steps holding still at the goal
     joint_vel_scale: float = 2.0  # times mplib's default joint velocity limit (1 rad/s)
     joint_acc_scale: float = 5.0  # times mplib's default joint acceleration limit (1 rad/s^2)
-    rrt_planning_time: float = 1.5  # s, per RRTConnect call
-    rrt_attempts: int = 3  # RRTConnect calls per stage before giving up (it is randomised)
+    motion: MotionConfig = MotionConfig()  # the seeded IK and RRT-Connect (solvers/motion.py)
     max_path_steps: int = 120  # a longer plan (a wrist flip, a detour) is refused as "long"
     obstacle_points: int = 3000  # surface samples per obstacle actor
     obstacle_radius: float = 0.01  # m, radius of each obstacle point
@@ -70,6 +70,8 @@ class SolverConfig:
     settle_steps: int = 6  # control steps at the pre-grasp and the grasp (the arm lags)
     lift_check: float = 0.5  # the object held rises at least this part of the lift
     slip_tolerance: float = 0.03  # m, the object moving this far in the hand may be dropped
+    carry_yaws: tuple[float, ...] = (0.0, np.pi / 2, -np.pi / 2, np.pi)  # rad, hand turns at
+    # the goal about the vertical, tried in order
 
 
 @dataclass
@@ -145,7 +147,8 @@ class PickPlaceSolver:
         env: the env (optionally wrapped); actions go through ``env.step`` so wrappers such as
             video recorders see every step.
         config: tunable numbers.
-        seed: seeds the obstacle point sampling.
+        seed: seeds everything random the solver does (obstacle point sampling, IK restarts,
+            RRT-Connect): the same env state and seed give the same actions.
     """
 
     def __init__(self, env, config: SolverConfig | None = None, seed: int = 0):
@@ -180,6 +183,7 @@ class PickPlaceSolver:
                 np.asarray(planner.joint_acc_limits) * self.cfg.joint_acc_scale
             )
             self.planners.append(planner)
+        self.motion = [SeededPlanner(p, self.cfg.motion) for p in self.planners]
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
         self.steps = 0
         self.ended = False  # the episode was truncated (or terminated) in every env
@@ -225,22 +229,13 @@ class PickPlaceSolver:
         target = np.concatenate([pose.p, pose.q])
         dt = self.base.control_timestep
         statuses = []
-        rrt = ("rrt",) * self.cfg.rrt_attempts
-        attempts = ("screw", *rrt) if screw_first else (*rrt, "screw")
-        for how in attempts:
+        for how in ("screw", "rrt") if screw_first else ("rrt", "screw"):
             if how == "screw":
                 res = planner.plan_screw(
                     target, qpos.copy(), time_step=dt, use_point_cloud=obstacles
                 )
             else:
-                res = planner.plan_qpos_to_pose(
-                    target,
-                    qpos.copy(),
-                    time_step=dt,
-                    use_point_cloud=obstacles,
-                    planning_time=self.cfg.rrt_planning_time,
-                    wrt_world=True,
-                )
+                res = self.motion[i].plan_to_pose(target, qpos, self.rng, dt, obstacles)
             if res["status"] == "Success" and len(res["position"]) > self.cfg.max_path_steps:
                 statuses.append(f"{how}: {len(res['position'])} steps, over max_path_steps")
                 continue
@@ -460,13 +455,24 @@ class PickPlaceSolver:
 
     def _carry(self, envs: np.ndarray) -> None:
         """Carry the held target of ``envs`` to the goal (keeping its offset from the TCP as
-        it is in the hand now), then correct the last millimetres."""
+        it is in the hand now), then correct the last millimetres. The goal is a position, so
+        the hand may arrive turned about the vertical (``carry_yaws``, tried in order): a wrist
+        near its joint limit would otherwise flip over on the way."""
         goal = self.base.goal_site.pose.p.cpu().numpy()
         for stage, screw_first, obstacles in (("carry", False, True), ("settle", True, False)):
             tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
             obj = self.base.obj.pose.p.cpu().numpy()
+            yaws = self.cfg.carry_yaws if stage == "carry" else (0.0,)
             targets = [
-                sapien.Pose(goal[i] + (tcp[i, :3] - obj[i]), tcp[i, 3:]) if envs[i] else None
+                [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in yaws] if envs[i] else None
                 for i in range(self.num_envs)
             ]
             self._per_env(stage, targets, screw_first=screw_first, obstacles=obstacles)
+
+    @staticmethod
+    def _turned(goal: np.ndarray, tcp: np.ndarray, obj: np.ndarray, yaw: float) -> sapien.Pose:
+        """The TCP pose that puts the object at ``goal`` with the hand turned ``yaw`` about the
+        world's vertical from its pose ``tcp`` now (the object turning with it)."""
+        turn = sapien.Pose(q=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
+        hand = turn * sapien.Pose(tcp[:3] - obj, tcp[3:])
+        return sapien.Pose(goal + hand.p, hand.q)

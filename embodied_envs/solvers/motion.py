@@ -1,0 +1,222 @@
+"""Seeded motion planning on mplib's kinematics and collision world.
+
+mplib 0.1.1 (the version ManiSkill 3.0.1 pins) draws its IK restarts from pinocchio's global
+random state and its RRTConnect from OMPL's time-seeded generator, and neither can be seeded
+from Python: the same episode can succeed in one run and fail in the next, and two datasets
+of the same seeds differ. ``SeededPlanner`` keeps mplib for what is deterministic (the robot
+model, forward kinematics, CLIK, FCL collision checks, the screw planner, TOPP-RA time
+parameterisation) and draws everything random from a numpy ``Generator`` the caller seeds:
+
+- IK: joint-limited CLIK from the current configuration first, then from configurations drawn
+  uniformly within the joint limits; collision-free, distinct solutions, nearest first.
+- A path: the straight joint-space line to the nearest solution when every configuration on it
+  (checked every ``check_step`` rad) is free; otherwise RRT-Connect between the start and all
+  solutions, then shortcuts.
+- Time: the path is densified to ``waypoint_step`` waypoints (so the spline TOPP-RA fits stays on
+  the checked segments) and parameterised by mplib's ``TOPP``. What will run is checked
+  again: where the spline's rounded corners graze an obstacle, each straight segment is
+  parameterised alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mplib
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """Tunable numbers of the seeded planner."""
+
+    ik_restarts: int = 20  # random CLIK starts after the current configuration
+    ik_solutions: int = 4  # distinct solutions collected before IK stops
+    ik_tolerance: float = 1e-3  # 6-D pose distance a solution must reach (as mplib's IK)
+    distinct: float = 0.1  # rad, solutions closer than this (joint norm) are one
+    check_step: float = 0.01  # rad, largest joint move between two collision checks (1 cm
+    # at the end of a 1 m lever: obstacle points are 1 cm spheres)
+    waypoint_step: float = 0.05  # rad, largest joint move between the waypoints TOPP-RA fits
+    rrt_step: float = 0.2  # rad, RRT-Connect extension
+    rrt_samples: int = 1500  # RRT-Connect iterations before giving up
+    shortcut_rounds: int = 30  # random shortcut tries on an RRT path
+
+
+class SeededPlanner:
+    """Plans joint paths for one robot with randomness drawn from the caller's generator.
+
+    Args:
+        planner: an ``mplib.Planner`` (its model, collision world and obstacle point cloud).
+        config: tunable numbers.
+    """
+
+    def __init__(self, planner: mplib.Planner, config: MotionConfig | None = None):
+        self.mp = planner
+        self.cfg = config or MotionConfig()
+        self.idx = np.asarray(planner.move_group_joint_indices)
+        self.limits = np.asarray(planner.joint_limits, dtype=np.float64)  # (dof, 2)
+        self.lo, self.hi = self.limits[self.idx, 0], self.limits[self.idx, 1]
+        self.link = planner.link_name_2_idx[planner.move_group]
+
+    # --- collision ---------------------------------------------------------------------
+    def free(self, q: np.ndarray) -> bool:
+        """The move group at ``q`` (its joints only) collides with nothing."""
+        self.mp.planning_world.set_qpos_all(q)
+        return not self.mp.planning_world.collide()
+
+    def edge_free(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Every configuration on the joint-space segment a-b is free (checked every
+        ``check_step`` rad of the largest joint move, ``b`` included)."""
+        n = int(np.ceil(np.abs(b - a).max() / self.cfg.check_step))
+        return all(self.free(a + (b - a) * (k / n)) for k in range(1, n + 1))
+
+    # --- IK ------------------------------------------------------------------------------
+    def ik(self, goal_base: np.ndarray, qpos: np.ndarray, rng: np.random.Generator):
+        """Collision-free joint solutions (move group) reaching ``goal_base`` ([x, y, z, qw, qx,
+        qy, qz] in the robot base frame), nearest to ``qpos`` first; [] when none."""
+        cfg, mp = self.cfg, self.mp
+        start, solutions, best = qpos.copy(), [], np.inf
+        # joint-limited CLIK; the other joints (the fingers) stay where they are
+        q_min, q_max = qpos.copy(), qpos.copy()
+        q_min[self.idx], q_max[self.idx] = self.lo, self.hi
+        for k in range(cfg.ik_restarts + 1):
+            if k:
+                start = qpos.copy()
+                start[self.idx] = rng.uniform(self.lo, self.hi)
+            q = mp.pinocchio_model.compute_IK_CLIK_JL(self.link, goal_base, start, q_min, q_max)
+            q = np.array(q[0])
+            if not mp.wrap_joint_limit(q):
+                continue
+            mp.pinocchio_model.compute_forward_kinematics(q)
+            pose = mp.pinocchio_model.get_link_pose(self.link)
+            dist = mp.distance_6D(goal_base[:3], goal_base[3:], pose[:3], pose[3:])
+            best = min(best, dist)
+            q = q[self.idx]
+            if dist >= cfg.ik_tolerance or not self.free(q):
+                continue
+            if all(np.linalg.norm(s - q) >= cfg.distinct for s in solutions):
+                solutions.append(q)
+                if len(solutions) >= cfg.ik_solutions:
+                    break
+        here = qpos[self.idx]
+        solutions.sort(key=lambda s: float(np.linalg.norm(s - here)))
+        self.ik_distance = best  # for the failure message
+        return solutions
+
+    # --- paths ---------------------------------------------------------------------------
+    def _steer(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        d = b - a
+        n = np.linalg.norm(d)
+        return b if n <= self.cfg.rrt_step else a + d * (self.cfg.rrt_step / n)
+
+    def rrt_connect(self, start: np.ndarray, goals: list[np.ndarray], rng: np.random.Generator):
+        """A collision-free joint path from ``start`` to one of ``goals``, or None."""
+        start_tree = {"q": [start], "parent": [-1]}
+        goal_tree = {"q": list(goals), "parent": [-1] * len(goals)}
+        grow, other = start_tree, goal_tree
+        for _ in range(self.cfg.rrt_samples):
+            new = self._extend(grow, rng.uniform(self.lo, self.hi))
+            if new is not None:
+                reached = self._connect(other, grow["q"][new])
+                if reached is not None:  # the two trees meet at one configuration
+                    i, j = (new, reached) if grow is start_tree else (reached, new)
+                    return self._branch(start_tree, i)[::-1] + self._branch(goal_tree, j)[1:]
+            grow, other = other, grow
+        return None
+
+    def _nearest(self, tree, q) -> int:
+        return int(np.argmin(np.linalg.norm(np.asarray(tree["q"]) - q, axis=1)))
+
+    def _extend(self, tree, target) -> int | None:
+        near = self._nearest(tree, target)
+        q = self._steer(tree["q"][near], target)
+        if not self.edge_free(tree["q"][near], q):
+            return None
+        tree["q"].append(q)
+        tree["parent"].append(near)
+        return len(tree["q"]) - 1
+
+    def _connect(self, tree, target) -> int | None:
+        """Extend ``tree`` towards ``target`` until it reaches it (its node) or is blocked."""
+        i = self._nearest(tree, target)
+        while True:
+            q = self._steer(tree["q"][i], target)
+            if not self.edge_free(tree["q"][i], q):
+                return None
+            tree["q"].append(q)
+            tree["parent"].append(i)
+            i = len(tree["q"]) - 1
+            if np.array_equal(q, target):
+                return i
+
+    @staticmethod
+    def _branch(tree, i) -> list[np.ndarray]:
+        out = []
+        while i != -1:
+            out.append(tree["q"][i])
+            i = tree["parent"][i]
+        return out
+
+    def shortcut(self, path: list[np.ndarray], rng: np.random.Generator) -> list[np.ndarray]:
+        """Drops waypoints between random pairs whose straight segment is free."""
+        path = list(path)
+        for _ in range(self.cfg.shortcut_rounds):
+            if len(path) < 3:
+                break
+            i, j = sorted(rng.choice(len(path), size=2, replace=False))
+            if j - i > 1 and self.edge_free(path[i], path[j]):
+                path = path[: i + 1] + path[j:]
+        return path
+
+    def densify(self, path: list[np.ndarray]) -> np.ndarray:
+        """The path with waypoints every ``waypoint_step`` rad (at most) along its segments."""
+        out = [path[0]]
+        for a, b in zip(path[:-1], path[1:], strict=True):
+            n = int(np.ceil(np.abs(b - a).max() / self.cfg.waypoint_step))
+            out.extend(a + (b - a) * (k / n) for k in range(1, n + 1))
+        return np.vstack(out)
+
+    def plan_to_pose(
+        self,
+        goal_world: np.ndarray,
+        qpos: np.ndarray,
+        rng: np.random.Generator,
+        time_step: float,
+        use_point_cloud: bool,
+    ) -> dict:
+        """mplib's ``plan_qpos_to_pose``, seeded: {"status", "position" (T, move group)}."""
+        mp = self.mp
+        qpos = np.clip(qpos.astype(np.float64), self.limits[:, 0] + 1e-3, self.limits[:, 1] - 1e-3)
+        mp.planning_world.set_use_point_cloud(use_point_cloud)
+        mp.planning_world.set_use_attach(False)
+        mp.robot.set_qpos(qpos, True)  # the fingers stay where they are
+        goals = self.ik(mp.transform_goal_to_wrt_base(goal_world), qpos, rng)
+        if not goals:
+            return {"status": f"IK failed (closest {self.ik_distance:.4f})"}
+        start = qpos[self.idx]
+        path = next(([start, g] for g in goals if self.edge_free(start, g)), None)
+        if path is None:
+            path = self.rrt_connect(start, goals, rng)
+            if path is None:
+                return {"status": "RRT-Connect failed"}
+            path = self.shortcut(path, rng)
+        dense = self.densify(path)
+        if len(dense) < 2:  # already there
+            return {"status": "Success", "position": dense}
+        _, position, *_ = mp.TOPP(dense, time_step)
+        # the spline TOPP-RA fits rounds the corners between segments: when that grazes an
+        # obstacle, each straight segment is parameterised alone (stopping at the corners)
+        if not self.all_free(position):
+            pieces = [
+                mp.TOPP(self.densify([a, b]), time_step)[1]
+                for a, b in zip(path[:-1], path[1:], strict=True)
+                if not np.array_equal(a, b)
+            ]
+            position = np.concatenate([pieces[0]] + [p[1:] for p in pieces[1:]])
+            if not self.all_free(position):
+                return {"status": "the time-parameterised path grazes an obstacle"}
+        return {"status": "Success", "position": position}
+
+    def all_free(self, position: np.ndarray) -> bool:
+        """Every segment between the waypoints that will run is free (the first is the start)."""
+        return all(self.edge_free(a, b) for a, b in zip(position[:-1], position[1:], strict=True))

@@ -1,0 +1,94 @@
+"""The seeded planner (solvers/motion.py): reproducible, collision-free, reaching its goal.
+
+Checked with mplib's own collision queries and forward kinematics, not the planner's."""
+
+import mplib
+import numpy as np
+import pytest
+from mani_skill.agents.robots import Panda
+
+from embodied_envs.solvers.motion import SeededPlanner
+
+REST = np.array([0.0, np.pi / 8, 0, -5 * np.pi / 8, 0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04])
+DOWN = [0.0, 1.0, 0.0, 0.0]  # TCP pointing down (wxyz)
+GOAL = np.array([0.45, 0.35, 0.12, *DOWN])
+DT = 0.02
+
+
+@pytest.fixture(scope="module")
+def planner():
+    mp = mplib.Planner(
+        urdf=Panda.urdf_path,
+        srdf=Panda.urdf_path.replace(".urdf", ".srdf"),
+        move_group="panda_hand_tcp",
+    )
+    mp.set_base_pose([0, 0, 0, 1, 0, 0, 0])
+    # a wall between the rest pose (y = 0) and the goal (y = 0.35), 50 cm tall
+    x, z = np.meshgrid(np.linspace(0.25, 0.9, 66), np.linspace(0.0, 0.5, 51))
+    wall = np.stack([x.ravel(), np.full(x.size, 0.16), z.ravel()], 1)
+    mp.update_point_cloud(wall, radius=0.01)
+    return SeededPlanner(mp)
+
+
+def plan(planner, seed, goal=GOAL):
+    return planner.plan_to_pose(goal, REST.copy(), np.random.default_rng(seed), DT, True)
+
+
+def test_the_wall_blocks_the_straight_line(planner):
+    """The scene needs RRT-Connect: the start is free, the direct joint line to every IK
+    solution collides."""
+    planner.mp.planning_world.set_use_point_cloud(True)
+    planner.mp.robot.set_qpos(REST, True)
+    assert not planner.mp.check_for_env_collision(qpos=REST, with_point_cloud=True)
+    goals = planner.ik(planner.mp.transform_goal_to_wrt_base(GOAL), REST, np.random.default_rng(0))
+    assert goals
+    assert not any(planner.edge_free(REST[:7], g) for g in goals)
+
+
+def test_same_seed_same_path_other_seed_other_path(planner):
+    a, b, c = plan(planner, 7), plan(planner, 7), plan(planner, 8)
+    assert a["status"] == b["status"] == c["status"] == "Success", (a["status"], c["status"])
+    assert np.array_equal(a["position"], b["position"])  # byte for byte
+    assert not np.array_equal(a["position"], c["position"])  # the seed drives the search
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 8])  # 8: the spline grazes, segments run alone
+def test_the_path_is_collision_free_and_reaches_the_goal(planner, seed):
+    mp = planner.mp
+    res = plan(planner, seed)
+    assert res["status"] == "Success", res["status"]
+    path = res["position"]
+    assert np.allclose(path[0], REST[:7], atol=1e-6)
+    for q in path:  # every executed waypoint, checked by mplib's own queries
+        full = np.concatenate([q, REST[7:]])
+        assert not mp.check_for_env_collision(qpos=full, with_point_cloud=True)
+        assert not mp.check_for_self_collision(qpos=full)
+        assert (q >= planner.lo - 1e-3).all() and (q <= planner.hi + 1e-3).all()
+    # no joint jumps more than the planner's velocity limit allows in one control step
+    assert np.abs(np.diff(path, axis=0)).max() <= mp.joint_vel_limits.max() * DT * 1.05
+    mp.pinocchio_model.compute_forward_kinematics(np.concatenate([path[-1], REST[7:]]))
+    pose = mp.pinocchio_model.get_link_pose(planner.link)
+    assert np.linalg.norm(pose[:3] - GOAL[:3]) < 2e-3
+    assert abs(abs(np.dot(pose[3:], GOAL[3:])) - 1) < 1e-4
+
+
+def test_ik_solutions_are_distinct_within_limits_and_nearest_first(planner):
+    mp = planner.mp
+    mp.planning_world.set_use_point_cloud(False)
+    mp.robot.set_qpos(REST, True)
+    goal = mp.transform_goal_to_wrt_base(np.array([0.5, -0.1, 0.3, *DOWN]))
+    sols = planner.ik(goal, REST, np.random.default_rng(3))
+    assert len(sols) >= 2
+    dist = [np.linalg.norm(s - REST[:7]) for s in sols]
+    assert dist == sorted(dist)
+    for i, s in enumerate(sols):
+        assert (s >= planner.lo).all() and (s <= planner.hi).all()
+        assert all(np.linalg.norm(s - t) >= planner.cfg.distinct for t in sols[i + 1 :])
+        mp.pinocchio_model.compute_forward_kinematics(np.concatenate([s, REST[7:]]))
+        assert np.linalg.norm(mp.pinocchio_model.get_link_pose(planner.link)[:3] - goal[:3]) < 1e-3
+
+
+def test_an_unreachable_pose_fails_with_a_status(planner):
+    res = plan(planner, 0, goal=np.array([2.0, 0.0, 0.5, *DOWN]))  # 2 m away
+    assert res["status"].startswith("IK failed"), res["status"]
+    assert "position" not in res
