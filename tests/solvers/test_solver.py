@@ -56,6 +56,7 @@ def test_expert_actions_do_not_depend_on_the_episodes_before():
     the plans are seeded, and the env restarts PhysX's sleep timers at reset (without that,
     round-table seed 4 after seed 3 diverged at step 20, when the fresh env's bodies fell
     asleep). Seed 3 itself turns the hand at the goal (its wrist near its joint limit)."""
+
     def make():
         layout = str(DATA / "layouts" / "round_table.json")
         return _Recorder(gym.make("PickEmbodiedGen-v1", layout_file=layout,
