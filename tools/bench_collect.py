@@ -1,44 +1,77 @@
 #!/usr/bin/env python
-"""Benchmark: demonstration collection (``embodied-envs collect``) on this machine.
+"""Benchmark: demonstration collection against ManiSkill's own motion-planning runner.
 
-Collects ``--num`` demonstrations of the default layout with 1 and with 2 worker processes
-(observations ``none``, as ManiSkill's demos) and prints demonstrations per minute (wall time of
-the whole command: env start-up, solver, writing, merging) and MB per 100 demonstrations.
+In one run, interleaved, each timed as a whole command (start-up, planning, physics, writing):
 
-Usage: python tools/bench_collect.py [--num 12]
+- ManiSkill's ``python -m mani_skill.examples.motionplanning.panda.run -e PickCube-v1
+  -n NUM --only-count-success -b cpu`` (one process, observations ``none``);
+- ``embodied-envs collect --num NUM --only-success --workers 1`` on each layout (observations
+  ``none``, as ManiSkill's demos), and with ``--workers 2`` on the default layout.
+
+Prints successful demonstrations per minute, the ratio to PickCube's runner (the issue's target
+is >= 0.6 with one worker) and MB per 100 demonstrations.
+
+Usage: python tools/bench_collect.py [--num 20] [--layout FILE ...]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
 
-from embodied_envs.paths import default_layout  # noqa: E402
-from embodied_envs.pipelines.collect import CollectPlan, collect  # noqa: E402
+from embodied_envs.paths import default_layout, shipped_layouts  # noqa: E402
+
+
+def timed(cmd: list[str], cwd: str) -> float:
+    """Minutes the command ran (it must succeed)."""
+    t = time.perf_counter()
+    subprocess.run(cmd, cwd=cwd, check=True, capture_output=True, env=os.environ)
+    return (time.perf_counter() - t) / 60
+
+
+def pickcube(num: int) -> float:
+    with tempfile.TemporaryDirectory() as tmp:
+        runner = "mani_skill.examples.motionplanning.panda.run"
+        cmd = [sys.executable, "-m", runner, "-e", "PickCube-v1", "-n", str(num),
+               "--only-count-success", "-b", "cpu", "--record-dir", tmp]  # fmt: skip
+        return num / timed(cmd, tmp)
+
+
+def ours(num: int, layout: Path, workers: int) -> tuple[float, float]:
+    """Demonstrations per minute and MB per 100 demonstrations."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "embodied_envs.cli.main", "collect", "--layout",
+               str(layout), "--num", str(num), "--only-success", "--workers", str(workers),
+               "--out", "out"]  # fmt: skip
+        rate = num / timed(cmd, tmp)
+        size = sum(p.stat().st_size for p in (Path(tmp) / "out" / layout.stem).iterdir())
+    return rate, size / 1e6 / num * 100
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--num", type=int, default=12)
+    ap.add_argument("--num", type=int, default=20)
+    ap.add_argument("--layout", type=Path, nargs="+", default=None)
     args = ap.parse_args()
-    for workers in (1, 2):
-        with tempfile.TemporaryDirectory() as tmp:
-            plan = CollectPlan(layout=str(default_layout()), num=args.num, workers=workers)
-            t = time.perf_counter()
-            summary = collect(plan, Path(tmp))
-            minutes = (time.perf_counter() - t) / 60
-            size = sum(p.stat().st_size for p in (Path(tmp) / "default").iterdir())
+    runs = [(path, 1) for path in args.layout or shipped_layouts()]
+    runs.append((default_layout(), 2))
+    for path, workers in runs:
+        base = pickcube(args.num)
+        rate, mb = ours(args.num, path, workers)
         print(
-            f"{workers} worker(s): {args.num / minutes:5.1f} demonstrations/min "
-            f"({summary.successes}/{summary.attempted} successful), "
-            f"{size / 1e6 / args.num * 100:5.1f} MB per 100 demonstrations (obs none)"
+            f"{path.name:18s} {workers} worker(s): {rate:5.1f} successful demonstrations/min; "
+            f"PickCube-v1 runner (1 process) {base:5.1f}/min; ratio {rate / base:.2f}; "
+            f"{mb:.1f} MB per 100 demonstrations (obs none)",
+            flush=True,
         )
 
 

@@ -78,7 +78,7 @@ def shapes() -> dict[str, tuple[list[trimesh.Trimesh], float, str]]:
         r = 0.055
         rim.append(
             box(
-                (0.008, 0.024, 0.045), (r * math.cos(a), r * math.sin(a), 0.022), yaw=a, pitch=-tilt
+                (0.008, 0.024, 0.045), (r * math.cos(a), r * math.sin(a), 0.022), yaw=a, pitch=tilt
             )  # fmt: skip
         )
     h["shallow_bowl"] = (rim + [cylinder(0.045, 0.008, (0, 0, 0.004))], 0.2, "a shallow bowl")

@@ -16,7 +16,8 @@ gripper can take there. A grasp is a parallel-jaw grasp of the Panda, described 
    straight down (side grasps where top-down cannot reach, e.g. a tall bottle or a handle).
 3. **Collision-free gripper.** Boxes matching the Panda's open fingers and palm
    (:class:`GripperModel`), swept back along the approach to the pre-grasp, must hold no point
-   of the object; posed, none of the table top nor of the other objects (their surface points).
+   of the object; posed, none of the table top nor of the other objects (their surface points;
+   grasps clear of them by ``wide_margin`` first: the arm deviates by a centimetre or two).
 4. **Ranking** (lower is better): grasps whose gripper clears the object by ``wide_margin``
    before the others (the arm tracks its targets within millimetres), then the grasp centre's
    distance from the centre of mass (a grip near it holds against gravity), the approach's tilt
@@ -100,7 +101,9 @@ class GraspConfig:
     sweep: float = 0.08  # m, approach distance checked (the solver's pre-grasp offset)
     clearance: float = 0.002  # m, gripper boxes keep this far from the table top
     margin: float = 0.006  # m, gripper boxes keep this far from the object (arm precision)
-    wide_margin: float = 0.015  # m, grasps this clear of the object rank first
+    wide_margin: float = 0.015  # m, grasps this clear of the object (posed: of the other
+    # objects too) rank first
+    obstacle_margin: float = 0.003  # m, posed gripper boxes keep this far from other objects
     max_pairs: int = 500  # contact pairs kept (a seeded sample over the surface)
     preshape: float = 0.015  # m per side: the fingers open to the contact width plus this
 
@@ -360,32 +363,55 @@ def posed_grasps(
 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
     """The grasps the gripper can take in this episode, best first, as world
     ``(centre, closing, approach, opening)``: approach within ``max_tilt_deg`` of straight down, the
-    swept gripper above the support surface and clear of ``obstacles`` (world points), ranked
-    by the pre-posing score plus the tilt. At most ``limit``; an empty list when none."""
+    swept gripper above the support surface and clear of ``obstacles`` (world points) by
+    ``obstacle_margin``, ranked by the pre-posing score plus the tilt, those clear of the
+    obstacles by ``wide_margin`` first. At most ``limit``; an empty list when none."""
     cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
     rot, t = object_to_world[:3, :3], object_to_world[:3, 3]
     centre = grasps.centre @ rot.T + t
     closing = grasps.closing @ rot.T
     approach = grasps.approach @ rot.T
     tilt = np.arccos(np.clip(-approach[:, 2], -1.0, 1.0))
-    ok = tilt <= np.radians(cfg.max_tilt_deg)
+    idx = np.flatnonzero(tilt <= np.radians(cfg.max_tilt_deg))
+    idx = idx[np.argsort(grasps.score[idx] + tilt[idx] / np.radians(45.0), kind="stable")]
     boxes = gripper.boxes(cfg.sweep, grasps.opening)  # (n, 3, 2, 3)
+    if obstacles is not None and len(obstacles):  # those a gripper box can reach
+        reach = np.abs(boxes).max() * np.sqrt(3) + np.linalg.norm(grasps.points, axis=1).max()
+        obstacles = obstacles[np.linalg.norm(obstacles - t, axis=1) <= reach]
+    roomy, tight = [], []
+    for s in range(0, len(idx), 64):  # best first, until ``limit`` are roomy
+        part = idx[s : s + 64]
+        clear, wide = posed_clearance(
+            centre[part], closing[part], approach[part], boxes[part], support_z, obstacles, cfg
+        )
+        roomy.extend(part[wide])
+        tight.extend(part[clear & ~wide])
+        if len(roomy) >= limit:
+            break
+    best = (roomy + tight)[:limit]
+    return [(centre[i], closing[i], approach[i], float(grasps.opening[i])) for i in best]
+
+
+def posed_clearance(
+    centre: np.ndarray,
+    closing: np.ndarray,
+    approach: np.ndarray,
+    boxes: np.ndarray,
+    support_z: float,
+    obstacles: np.ndarray | None,
+    cfg: GraspConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(clear, roomy)`` per posed grasp (world ``(n, 3)`` arrays, gripper ``boxes (n, 3, 2,
+    3)``): clear when the swept boxes stay ``clearance`` above the support surface and hold no
+    obstacle point (world) within ``obstacle_margin``; roomy when clear and none is within
+    ``wide_margin`` either."""
     corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), -1).reshape(-1, 3)
     local = np.where(corners[None, None], boxes[:, :, 1][:, :, None], boxes[:, :, 0][:, :, None])
-    local = local.reshape(len(boxes), -1, 3)
-    ortho = np.cross(closing, approach)
-    world = centre[:, None] + np.einsum(
-        "gpk,gkj->gpj", local, np.stack([ortho, closing, approach], 1)
-    )
-    ok &= world[..., 2].min(1) >= support_z + cfg.clearance
-    idx = np.flatnonzero(ok)
-    if obstacles is not None and len(obstacles) and len(idx):
-        hit = np.zeros(len(idx), bool)
-        for s in range(0, len(idx), 128):
-            part = idx[s : s + 128]
-            pts = to_tcp(obstacles, centre[part], closing[part], approach[part])
-            hit[s : s + 128] = boxes_hit(pts, boxes[part], 0.003)
-        idx = idx[~hit]
-    score = grasps.score[idx] + tilt[idx] / np.radians(45.0)
-    best = idx[np.argsort(score, kind="stable")][:limit]
-    return [(centre[i], closing[i], approach[i], float(grasps.opening[i])) for i in best]
+    rot = np.stack([np.cross(closing, approach), closing, approach], 1)  # rows: TCP x, y, z
+    world = centre[:, None] + np.einsum("gpk,gkj->gpj", local.reshape(len(boxes), -1, 3), rot)
+    clear = world[..., 2].min(1) >= support_z + cfg.clearance
+    if obstacles is None or not len(obstacles):
+        return clear, clear
+    pts = to_tcp(obstacles, centre, closing, approach)
+    clear &= ~boxes_hit(pts, boxes, cfg.obstacle_margin)
+    return clear, clear & ~boxes_hit(pts, boxes, cfg.wide_margin)

@@ -29,6 +29,7 @@ from embodied_envs.solvers.grasps import (
     GripperModel,
     asset_grasps,
     grasp_is_valid,
+    posed_clearance,
     posed_grasps,
 )
 from embodied_envs.solvers.motion import MotionConfig, SeededPlanner
@@ -65,6 +66,8 @@ class SolverConfig:
     # below base_clearance_height are dropped: the base stands on the table's edge
     base_clearance_height: float = 0.10  # m above the base
     grasp_candidates: int = 6  # posed grasps tried per attempt, best first
+    option_steps: int = 10  # a grasp one rank lower is taken when its approach is this many
+    # steps shorter
     grasp_attempts: int = 3  # grasp, check, lift rounds per episode (a miss opens and retries)
     attempt_steps: int = 110  # steps an attempt needs at least: none starts with fewer left
     settle_steps: int = 6  # control steps at the pre-grasp and the grasp (the arm lags)
@@ -79,7 +82,7 @@ class EnvReport:
     """What happened in one env."""
 
     env_index: int
-    plan_failures: list[str] = field(default_factory=list)  # "stage: mplib status"
+    plan_failures: list[str] = field(default_factory=list)  # "stage: [option k: ]planner statuses"
     misses: list[str] = field(default_factory=list)  # "stage (attempt k)": grasps that slipped
 
     @property
@@ -217,33 +220,26 @@ class PickPlaceSolver:
             self.planners[i].update_point_cloud(cloud[~near_base], radius=self.cfg.obstacle_radius)
 
     # --- planning ------------------------------------------------------------------------
-    def _plan(
-        self, i, pose: sapien.Pose, qpos: np.ndarray, stage: str, screw_first=True, obstacles=True
-    ):
-        """A joint path to ``pose`` for env i, or None (the failure is recorded).
+    def _plan(self, i, pose: sapien.Pose, qpos: np.ndarray, how: str, obstacles: bool):
+        """A joint path to ``pose`` for env i by ``how`` ("screw": mplib's straight screw
+        motion; "rrt": the seeded planner), and a status ("" on success).
 
         ``obstacles=False`` is for the short straight moves next to the support surface (the
         final descent from the pre-grasp and the lift), which the surface's cloud would block.
         """
-        planner = self.planners[i]
         target = np.concatenate([pose.p, pose.q])
         dt = self.base.control_timestep
-        statuses = []
-        for how in ("screw", "rrt") if screw_first else ("rrt", "screw"):
-            if how == "screw":
-                res = planner.plan_screw(
-                    target, qpos.copy(), time_step=dt, use_point_cloud=obstacles
-                )
-            else:
-                res = self.motion[i].plan_to_pose(target, qpos, self.rng, dt, obstacles)
-            if res["status"] == "Success" and len(res["position"]) > self.cfg.max_path_steps:
-                statuses.append(f"{how}: {len(res['position'])} steps, over max_path_steps")
-                continue
-            if res["status"] == "Success" and len(res["position"]):
-                return res["position"]
-            statuses.append(f"{how}: {res['status']}")
-        self.reports[i].plan_failures.append(f"{stage}: " + "; ".join(statuses))
-        return None
+        if how == "screw":
+            res = self.planners[i].plan_screw(
+                target, qpos.copy(), time_step=dt, use_point_cloud=obstacles
+            )
+        else:
+            res = self.motion[i].plan_to_pose(target, qpos, self.rng, dt, obstacles)
+        if res["status"] != "Success" or not len(res["position"]):
+            return None, res["status"]
+        if len(res["position"]) > self.cfg.max_path_steps:
+            return None, f"{len(res['position'])} steps, over max_path_steps"
+        return res["position"], ""
 
     def _execute(self, paths: list[np.ndarray | None], extra_steps: int = 0) -> None:
         """Step all envs along their paths in lockstep; envs without a path hold still."""
@@ -269,23 +265,31 @@ class PickPlaceSolver:
         self.steps += 1
         self.ended = bool(np.all(np.asarray(torch.as_tensor(terminated | truncated).cpu())))
 
-    def _gripper(self, value: float) -> None:
-        self.gripper[:] = value
-        self._execute([None] * self.num_envs, extra_steps=self.cfg.gripper_steps)
-
     def _per_env(
         self,
         stage: str,
         targets: list,
-        screw_first: bool = True,
+        methods: tuple[str, ...] = ("screw", "rrt"),
         obstacles: bool = True,
         settle: int = 0,
+        option_steps: int | None = None,
+        then=None,
     ) -> list[sapien.Pose | None]:
         """Plan and execute one stage in every env that has not failed yet.
 
         Args:
             stage: named in failure reports.
-            targets: per env a pose, a list of poses to try in order, or None (hold still).
+            targets: per env a pose, a list of poses (options, best first), or None (hold
+                still).
+            methods: tried in order, each on every option before the next (a straight screw
+                move to a later option before a planned detour to the first).
+            option_steps: None: the first option a method plans to. Else every option is
+                planned and the one with the fewest steps, plus this many per rank below the
+                first, wins (a grasp ranked a little lower that the arm reaches directly
+                before one behind a wrist turn).
+            then: with ``option_steps``, ``then(i, k, qpos)``: the steps of the move that
+                follows from where option k's path ends (None: it cannot be planned), added
+                to the option's cost.
 
         Returns:
             Per env the pose that was planned to (None where none could be).
@@ -294,16 +298,30 @@ class PickPlaceSolver:
         paths, chosen = [], []
         for i, target in enumerate(targets):
             options = target if isinstance(target, list) else [target]
-            path, pose = None, None
+            best, failures = None, []
             if target is not None and not self.reports[i].plan_failures:
-                for k, pose in enumerate(options):
-                    name = stage if len(options) == 1 else f"{stage} (option {k})"
-                    path = self._plan(i, pose, qpos[i], name, screw_first, obstacles)
-                    if path is not None:  # the options tried before are not failures
-                        self.reports[i].plan_failures.clear()
+                for how in methods:
+                    for k, pose in enumerate(options):
+                        path, status = self._plan(i, pose, qpos[i], how, obstacles)
+                        label = "" if len(options) == 1 else f"option {k}: "
+                        if path is None:
+                            failures.append(f"{label}{how}: {status}")
+                            continue
+                        cost = len(path) + (option_steps or 0) * k
+                        if then is not None:
+                            end = np.concatenate([path[-1][:7], qpos[i, 7:]])
+                            more = then(i, k, end)
+                            cost += self.cfg.max_path_steps if more is None else more
+                        if best is None or cost < best[0]:
+                            best = (cost, path, pose)
+                        if option_steps is None:
+                            break
+                    if best is not None:
                         break
-            paths.append(path)
-            chosen.append(pose if path is not None else None)
+                if best is None:
+                    self.reports[i].plan_failures.append(f"{stage}: " + "; ".join(failures))
+            paths.append(None if best is None else best[1])
+            chosen.append(None if best is None else best[2])
         self._execute(paths, extra_steps=settle)  # settle: steps holding the last waypoint
         return chosen
 
@@ -312,9 +330,10 @@ class PickPlaceSolver:
         """Per env, the grasps to try where its target lies now, best first, each with the
         finger opening to approach with. First the top-down grasp across the footprint's
         narrow side and its 180-degree turn (a parallel gripper's same grasp at another wrist
-        angle), fully open, when it passes the synthesised grasps' checks (the grasp that
-        cans and boxes take); then the synthesised grasps the gripper can take here
-        (``grasps.posed_grasps``, pre-shaped); the footprint grasp last when it failed them."""
+        angle), fully open, when it passes the synthesised grasps' checks and clears the
+        other objects by the wide margin (the grasp that cans and boxes take); then the
+        synthesised grasps the gripper can take here (``grasps.posed_grasps``, pre-shaped);
+        the footprint grasp last when it failed those checks."""
         agent = self.base.agent
         tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
         poses = []
@@ -344,7 +363,13 @@ class PickPlaceSolver:
             # the footprint grasp's palm stops just above a can's lid: checked without margin
             exact = dataclasses.replace(self.grasp_config, margin=0.0)
             valid = grasp_is_valid(grasps, rot @ centre + t, rot @ closing, rot @ down, exact)
-            poses.append(footprint + synthesised if valid else synthesised + footprint)
+            _, roomy = posed_clearance(
+                centre[None], closing[None], down[None],
+                self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
+                self.clouds[i], self.grasp_config,
+            )  # fmt: skip
+            first = valid and bool(roomy[0])
+            poses.append(footprint + synthesised if first else synthesised + footprint)
         return poses
 
     @property
@@ -384,7 +409,15 @@ class PickPlaceSolver:
         targets = [
             [g * up for g, _ in candidates[i]] if todo[i] else None for i in range(self.num_envs)
         ]
-        pre = self._per_env("approach", targets, screw_first=False, settle=cfg.settle_steps)
+
+        def descent(i, k, qpos):  # the straight move from option k's pre-grasp to its grasp
+            return self._plan(i, targets[i][k] * up.inv(), qpos, "screw", False)[0]
+
+        pre = self._per_env(
+            "approach", targets, ("rrt", "screw"), settle=cfg.settle_steps,
+            option_steps=cfg.option_steps,
+            then=lambda i, k, q: None if (p := descent(i, k, q)) is None else len(p),
+        )  # fmt: skip
         grasps = [None if p is None else p * up.inv() for p in pre]
         # pre-shape: open the fingers to the chosen grasp's opening above the object
         for i, p in enumerate(pre):
@@ -459,7 +492,7 @@ class PickPlaceSolver:
         the hand may arrive turned about the vertical (``carry_yaws``, tried in order): a wrist
         near its joint limit would otherwise flip over on the way."""
         goal = self.base.goal_site.pose.p.cpu().numpy()
-        for stage, screw_first, obstacles in (("carry", False, True), ("settle", True, False)):
+        for stage, obstacles in (("carry", True), ("settle", False)):
             tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
             obj = self.base.obj.pose.p.cpu().numpy()
             yaws = self.cfg.carry_yaws if stage == "carry" else (0.0,)
@@ -467,7 +500,7 @@ class PickPlaceSolver:
                 [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in yaws] if envs[i] else None
                 for i in range(self.num_envs)
             ]
-            self._per_env(stage, targets, screw_first=screw_first, obstacles=obstacles)
+            self._per_env(stage, targets, obstacles=obstacles)
 
     @staticmethod
     def _turned(goal: np.ndarray, tcp: np.ndarray, obj: np.ndarray, yaw: float) -> sapien.Pose:
