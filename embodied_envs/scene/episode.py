@@ -271,6 +271,7 @@ class EpisodeStart:
 NOISE_DIMS = 7  # arm joints that get start noise (the fingers start exactly open)
 MANY_OBJECTS = 16  # placing more objects every episode is warned about (resets slow down)
 STARTS_PER_DRAW = 32  # episode starts prepared per sampler call at least (then per env)
+FIRST_CHUNK = 8  # candidates per object tested before the rest (most draws need only these)
 
 
 class EpisodeSampler:
@@ -537,14 +538,14 @@ class EpisodeSampler:
 
     def objects(self, env_idx: torch.Tensor, keys: torch.Tensor) -> dict[str, torch.Tensor]:
         """Each object's start pose ``(b, 7)`` (ManiSkill raw) for the envs ``env_idx``."""
-        lim, k, n = self.limits, self.limits.episode_candidates, len(self.items)
+        k, n = self.limits.episode_candidates, len(self.items)
         b = len(env_idx)
         rows = torch.arange(b, device=self.device)
         regions = {self.context: self.table.rows(env_idx)}
         robot_xy, robot_yaw = self.robot_xy[env_idx], self.robot_yaw[env_idx]
         # placed footprints (shape i: robot base, then the items): world polygons, their
         # normals, origins
-        shapes, radii = self.shapes, self.radii
+        shapes = self.shapes
         polys = robot_xy.new_zeros((b, n + 1, *shapes.vertices.shape[1:]))
         poly_normals, origins = torch.zeros_like(polys), robot_xy.new_zeros((b, n + 1, 2))
         polys[:, 0] = rotate(shapes.vertices[0], robot_yaw) + robot_xy[:, None]
@@ -552,41 +553,13 @@ class EpisodeSampler:
         drawn: dict[str, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
         ok_env = torch.ones(b, dtype=torch.bool, device=self.device)
         u = uniforms(keys, 0, 3 * k * n).view(b, n, 3, k)
-        # candidates of the objects on the table: every rule but the overlaps, all at once
-        table = regions[self.context]
-        xy_t, yaw_t = table.candidates(u[:, self.on_table])
-        ok_t = table.holds(shapes, self.on_table + 1, xy_t, yaw_t)
-        ok_t &= (
-            self._within_reach(xy_t, robot_xy, robot_yaw) | ~self.manipulated[self.on_table, None]
-        )
+        placed = (polys, poly_normals, origins, robot_xy, robot_yaw)
         for j, it in enumerate(self.items):
             region, shape = regions[it.parent], j + 1
-            if it.parent == self.context:
-                t = self.table_slot[j]
-                xy, yaw, ok = xy_t[:, t], yaw_t[:, t], ok_t[:, t]
-            else:  # on another object, whose top is known only now
-                xy, yaw = (x[:, 0] for x in region.candidates(u[:, j : j + 1]))
-                ok = region.holds(shapes, self.shape_idx[j : j + 1], xy[:, None], yaw[:, None])[
-                    :, 0
-                ]
-                if it.manipulated:
-                    ok &= self._within_reach(xy, robot_xy, robot_yaw)
-            # separating-axis tests only where bounding circles meet, all obstacles at once
-            rel = xy[:, :, None] - origins[:, None, :shape]
-            near = torch.hypot(rel[..., 0], rel[..., 1]) < it.radius + radii[:shape]
-            e, c, o = (near & ok[..., None] & it.avoid[:shape]).nonzero(as_tuple=True)
-            pair_yaw = yaw[e, c]
-            hit = overlap(
-                rotate(shapes.vertices[shape], pair_yaw) + xy[e, c, None],
-                polys[e, o],
-                lim.clearance,
-                rotate(shapes.normals[shape], pair_yaw),
-                poly_normals[e, o],
-            )
-            ok[e[hit], c[hit]] = False
-            ok_env &= ok.any(1)
-            first = ok.to(torch.uint8).argmax(1)  # the first candidate that meets every rule
-            xy, yaw = xy[rows, first], yaw[rows, first]
+            first, found = self._first_fit(j, it, region, u[:, j], placed)
+            ok_env &= found
+            chosen = u[rows, j, :, first][:, None, :, None]  # (b, 1, 3, 1)
+            xy, yaw = (x[:, 0, 0] for x in region.candidates(chosen))
             z = region.z - it.min_z
             drawn[it.node] = (xy, z, yaw)
             if j + 1 < n:  # a footprint that later objects keep clear of
@@ -611,6 +584,46 @@ class EpisodeSampler:
             raw = yaw_raw_poses(xy, z + self.objs_z_offset, yaw)
             out[node] = torch.where(ok_env[:, None], raw, self.fallback[node][env_idx])
         return out
+
+    def _first_fit(self, j: int, it, region: Region, u: torch.Tensor, placed):
+        """The first of item j's candidates (uniforms ``u (b, 3, k)``) that meets every rule
+        in each env, and whether one does: ``(first (b,), found (b,))``.
+
+        Candidates are tested in chunks (``FIRST_CHUNK``, then the rest) and the test stops
+        once every env has its first fit: a seeded reset of one env tests a few candidates,
+        not ``episode_candidates``. The first fit does not depend on the chunks.
+        """
+        polys, poly_normals, origins, robot_xy, robot_yaw = placed
+        shapes, radii, shape = self.shapes, self.radii, j + 1
+        b, k = u.shape[0], u.shape[-1]
+        first = torch.zeros(b, dtype=torch.int64, device=self.device)
+        found = torch.zeros(b, dtype=torch.bool, device=self.device)
+        for lo, hi in ((0, min(FIRST_CHUNK, k)), (min(FIRST_CHUNK, k), k)):
+            if lo == hi:
+                continue
+            xy, yaw = (x[:, 0] for x in region.candidates(u[:, None, :, lo:hi]))
+            ok = region.holds(shapes, self.shape_idx[j : j + 1], xy[:, None], yaw[:, None])[:, 0]
+            if it.manipulated:
+                ok &= self._within_reach(xy, robot_xy, robot_yaw)
+            # separating-axis tests only where bounding circles meet, all obstacles at once
+            rel = xy[:, :, None] - origins[:, None, :shape]
+            near = torch.hypot(rel[..., 0], rel[..., 1]) < it.radius + radii[:shape]
+            e, c, o = (near & ok[..., None] & it.avoid[:shape]).nonzero(as_tuple=True)
+            pair_yaw = yaw[e, c]
+            hit = overlap(
+                rotate(shapes.vertices[shape], pair_yaw) + xy[e, c, None],
+                polys[e, o],
+                self.limits.clearance,
+                rotate(shapes.normals[shape], pair_yaw),
+                poly_normals[e, o],
+            )
+            ok[e[hit], c[hit]] = False
+            new = ok.any(1) & ~found
+            first = torch.where(new, lo + ok.to(torch.uint8).argmax(1), first)
+            found |= new
+            if bool(found.all()):
+                break
+        return first, found
 
     def _within_reach(
         self, xy: torch.Tensor, robot_xy: torch.Tensor, robot_yaw: torch.Tensor

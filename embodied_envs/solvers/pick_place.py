@@ -73,6 +73,7 @@ class SolverConfig:
     settle_steps: int = 6  # control steps at the pre-grasp and the grasp (the arm lags)
     lift_check: float = 0.5  # the object held rises at least this part of the lift
     slip_tolerance: float = 0.03  # m, the object moving this far in the hand may be dropped
+    rise_clearance: float = 0.12  # m, above the highest obstacle point before a carry from above
     carry_yaws: tuple[float, ...] = (0.0, np.pi / 2, -np.pi / 2, np.pi)  # rad, hand turns at
     # the goal about the vertical, tried in order
 
@@ -274,6 +275,7 @@ class PickPlaceSolver:
         settle: int = 0,
         option_steps: int | None = None,
         then=None,
+        path_ok=None,
     ) -> list[sapien.Pose | None]:
         """Plan and execute one stage in every env that has not failed yet.
 
@@ -290,6 +292,7 @@ class PickPlaceSolver:
             then: with ``option_steps``, ``then(i, k, qpos)``: the steps of the move that
                 follows from where option k's path ends (None: it cannot be planned), added
                 to the option's cost.
+            path_ok: ``path_ok(i, path)``: why env i's planned path is refused ("" when not).
 
         Returns:
             Per env the pose that was planned to (None where none could be).
@@ -303,6 +306,9 @@ class PickPlaceSolver:
                 for how in methods:
                     for k, pose in enumerate(options):
                         path, status = self._plan(i, pose, qpos[i], how, obstacles)
+                        if path is not None and path_ok is not None:
+                            status = path_ok(i, path)
+                            path = None if status else path
                         label = "" if len(options) == 1 else f"option {k}: "
                         if path is None:
                             failures.append(f"{label}{how}: {status}")
@@ -490,17 +496,66 @@ class PickPlaceSolver:
         """Carry the held target of ``envs`` to the goal (keeping its offset from the TCP as
         it is in the hand now), then correct the last millimetres. The goal is a position, so
         the hand may arrive turned about the vertical (``carry_yaws``, tried in order): a wrist
-        near its joint limit would otherwise flip over on the way."""
+        near its joint limit would otherwise flip over on the way. A path that takes the
+        object out over the table's edge is refused (the episode would end in ``fail``);
+        where no carry plans, the hand first rises ``rise_clearance`` above the highest
+        obstacle point and carries from there."""
         goal = self.base.goal_site.pose.p.cpu().numpy()
-        for stage, obstacles in (("carry", True), ("settle", False)):
+        hand = self._in_hand()
+        over = lambda i, path: self._over_table(i, path, hand[i])  # noqa: E731
+
+        def targets(stage, yaws, todo):
             tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
             obj = self.base.obj.pose.p.cpu().numpy()
-            yaws = self.cfg.carry_yaws if stage == "carry" else (0.0,)
-            targets = [
-                [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in yaws] if envs[i] else None
+            return [
+                [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in yaws] if todo[i] else None
                 for i in range(self.num_envs)
             ]
-            self._per_env(stage, targets, obstacles=obstacles)
+
+        chosen = self._per_env("carry", targets("carry", self.cfg.carry_yaws, envs), path_ok=over)
+        high = envs & np.array([c is None for c in chosen])
+        if high.any():  # over the obstacles: straight up, then the carry from there
+            for i in np.flatnonzero(high):
+                self.reports[i].misses.append("carry (from above)")
+                self.reports[i].plan_failures.clear()
+            tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+            up = [
+                sapien.Pose(
+                    [
+                        *tcp[i, :2],
+                        max(tcp[i, 2], self.clouds[i][:, 2].max() + self.cfg.rise_clearance),
+                    ],
+                    tcp[i, 3:],
+                )
+                if high[i]
+                else None
+                for i in range(self.num_envs)
+            ]
+            self._per_env("rise", up, obstacles=False)
+            self._per_env("carry", targets("carry", self.cfg.carry_yaws, high), path_ok=over)
+        self._per_env("settle", targets("settle", (0.0,), envs), obstacles=False)
+
+    def _over_table(self, i: int, path: np.ndarray, in_hand: np.ndarray) -> str:
+        """Why env i's path is refused: the held object (``in_hand``: its position in the TCP
+        frame) leaves the table top's footprint at a waypoint; "" when it stays over it."""
+        planner = self.planners[i]
+        model = planner.pinocchio_model
+        fingers = self._qpos()[i, 7:]
+        base = sapien.Pose(*np.split(self.base.agent.robot.pose.raw_pose[i].cpu().numpy(), [3]))
+        points = []
+        for q in path:
+            model.compute_forward_kinematics(np.concatenate([q[:7], fingers]))
+            p = model.get_link_pose(self.motion[i].link)
+            tcp = base * sapien.Pose(p[:3], p[3:])
+            points.append(tcp.to_transformation_matrix()[:3] @ np.append(in_hand, 1.0))
+        top = self.base.layout_scene.episodes.top.rows(torch.tensor([i], device=self.base.device))
+        xy = torch.as_tensor(np.array(points)[None, :, :2], dtype=torch.float32)
+        inside = top.contains(xy.to(self.base.device))[0].cpu().numpy()
+        return (
+            ""
+            if inside.all()
+            else f"the object leaves the table at waypoint {int(np.argmin(inside))}"
+        )
 
     @staticmethod
     def _turned(goal: np.ndarray, tcp: np.ndarray, obj: np.ndarray, yaw: float) -> sapien.Pose:

@@ -135,6 +135,30 @@ def test_same_key_same_start_whatever_else_is_drawn():
     assert torch.equal(sampler.goals(torch.tensor([2]), keys[[2]]), goals[[2]])
 
 
+@pytest.mark.parametrize("chunk", [1, 3, 128])
+def test_the_first_fit_does_not_depend_on_the_chunks(monkeypatch, chunk):
+    """Candidates are tested in chunks until every env has its first fit: any chunk size
+    (one candidate at a time, a few, all 128 at once) gives the same starts, fallbacks
+    included (3 candidates per object leave some draws without a fit)."""
+    from embodied_envs.scene import episode
+
+    cases = [(LAYOUTS[0], 4, PlacementLimits()), (LAYOUTS[1], 3, PlacementLimits())]
+    cases.append((LAYOUTS[0], 4, PlacementLimits(episode_candidates=3)))  # falls back at times
+    for path, n, limits in cases:
+        configs = configurations(path, n)
+        env_idx, keys = torch.arange(n).repeat(30), torch.arange(30 * n) * 104729
+        runs = []
+        for size in (episode.FIRST_CHUNK, chunk):
+            monkeypatch.setattr(episode, "FIRST_CHUNK", size)
+            sampler = EpisodeSampler(configs, limits, objs_z_offset=OFFSET)
+            runs.append((sampler.objects(env_idx, keys), sampler.fallbacks))
+        (a, fa), (b, fb) = runs
+        assert fa == fb
+        assert (fa > 0) == (limits.episode_candidates == 3)
+        for node in a:
+            assert torch.equal(a[node], b[node]), node
+
+
 def rng_states(rng):
     return [r.get_state()[1].tobytes() + bytes([r.get_state()[2]]) for r in rng.rngs]
 
