@@ -104,6 +104,7 @@ class GraspConfig:
     wide_margin: float = 0.015  # m, grasps this clear of the object (posed: of the other
     # objects too) rank first
     obstacle_margin: float = 0.003  # m, posed gripper boxes keep this far from other objects
+    posed_scan: int = 512  # posed grasps searched for roomy ones (further only for clear ones)
     max_pairs: int = 500  # contact pairs kept (a seeded sample over the surface)
     preshape: float = 0.015  # m per side: the fingers open to the contact width plus this
 
@@ -238,14 +239,18 @@ def to_tcp(points: np.ndarray, centre, closing, approach) -> np.ndarray:
     return np.einsum("gpk,gkj->gpj", points[None] - centre[:, None], rot)
 
 
-def boxes_hit(points_tcp: np.ndarray, boxes: np.ndarray, margin: float = 0.0) -> np.ndarray:
-    """``(g,)``: any point (``(g, p, 3)`` in TCP frames) inside any box (grown by margin);
-    ``boxes`` ``(b, 2, 3)`` for every grasp, or ``(g, b, 2, 3)`` one set per grasp."""
+def box_clearance(points_tcp: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """``(g,)``: how far the points (``(g, p, 3)`` in TCP frames) stay outside the boxes, the
+    least over points and boxes, per axis the largest (a point lies in a box grown by ``m``
+    exactly when its clearance is at most ``m``; inside, it is negative). ``boxes`` ``(b, 2,
+    3)`` for every grasp, or ``(g, b, 2, 3)`` one set per grasp; no points: infinite."""
+    if points_tcp.shape[1] == 0:
+        return np.full(len(points_tcp), np.inf)
     if boxes.ndim == 3:
         boxes = np.broadcast_to(boxes, (len(points_tcp), *boxes.shape))
-    lo, hi = boxes[:, None, :, 0] - margin, boxes[:, None, :, 1] + margin
-    inside = (points_tcp[:, :, None] >= lo) & (points_tcp[:, :, None] <= hi)
-    return inside.all(-1).any((1, 2))
+    x = points_tcp[:, :, None].astype(np.float32)
+    lo, hi = boxes[:, None, :, 0].astype(np.float32), boxes[:, None, :, 1].astype(np.float32)
+    return np.maximum(lo - x, x - hi).max(-1).min((1, 2))
 
 
 def _compute(spec: AssetSpec, cfg: GraspConfig, gripper: GripperModel) -> Grasps:
@@ -294,8 +299,8 @@ def _compute(spec: AssetSpec, cfg: GraspConfig, gripper: GripperModel) -> Grasps
     for s in range(0, len(centre), 256):
         part = slice(s, s + 256)
         local = to_tcp(cloud, centre[part], closing[part], approach[part])
-        free[part] = ~boxes_hit(local, boxes[part], cfg.margin)
-        roomy[part] = ~boxes_hit(local, boxes[part], cfg.wide_margin)
+        gap = box_clearance(local, boxes[part])
+        free[part], roomy[part] = gap > cfg.margin, gap > cfg.wide_margin
     if not free.any():
         raise GraspError(
             f"{spec.urdf_path}: every antipodal grasp of its collision parts puts the gripper's "
@@ -349,7 +354,7 @@ def grasp_is_valid(
     cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
     inside = any((p[:, :3] @ centre + p[:, 3] < 0).all() for p in grasps.planes)
     local = to_tcp(grasps.points, centre[None], closing[None], approach[None])
-    return bool(inside and not boxes_hit(local, gripper.boxes(cfg.sweep), cfg.margin)[0])
+    return bool(inside and box_clearance(local, gripper.boxes(cfg.sweep))[0] > cfg.margin)
 
 
 def posed_grasps(
@@ -365,7 +370,8 @@ def posed_grasps(
     ``(centre, closing, approach, opening)``: approach within ``max_tilt_deg`` of straight down, the
     swept gripper above the support surface and clear of ``obstacles`` (world points) by
     ``obstacle_margin``, ranked by the pre-posing score plus the tilt, those clear of the
-    obstacles by ``wide_margin`` first. At most ``limit``; an empty list when none."""
+    obstacles by ``wide_margin`` first (among the ``posed_scan`` best, or until ``limit`` are
+    clear). At most ``limit``; an empty list when none."""
     cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
     rot, t = object_to_world[:3, :3], object_to_world[:3, 3]
     centre = grasps.centre @ rot.T + t
@@ -379,14 +385,14 @@ def posed_grasps(
         reach = np.abs(boxes).max() * np.sqrt(3) + np.linalg.norm(grasps.points, axis=1).max()
         obstacles = obstacles[np.linalg.norm(obstacles - t, axis=1) <= reach]
     roomy, tight = [], []
-    for s in range(0, len(idx), 64):  # best first, until ``limit`` are roomy
-        part = idx[s : s + 64]
+    for s in range(0, len(idx), 64):  # best first, until ``limit`` are roomy (or, past the
+        part = idx[s : s + 64]  # ``posed_scan`` best, until ``limit`` are clear)
         clear, wide = posed_clearance(
             centre[part], closing[part], approach[part], boxes[part], support_z, obstacles, cfg
         )
         roomy.extend(part[wide])
         tight.extend(part[clear & ~wide])
-        if len(roomy) >= limit:
+        if len(roomy) >= limit or (s + 64 >= cfg.posed_scan and len(roomy) + len(tight) >= limit):
             break
     best = (roomy + tight)[:limit]
     return [(centre[i], closing[i], approach[i], float(grasps.opening[i])) for i in best]
@@ -413,5 +419,6 @@ def posed_clearance(
     if obstacles is None or not len(obstacles):
         return clear, clear
     pts = to_tcp(obstacles, centre, closing, approach)
-    clear &= ~boxes_hit(pts, boxes, cfg.obstacle_margin)
-    return clear, clear & ~boxes_hit(pts, boxes, cfg.wide_margin)
+    gap = box_clearance(pts, boxes)
+    clear &= gap > cfg.obstacle_margin
+    return clear, clear & (gap > cfg.wide_margin)

@@ -504,7 +504,7 @@ class PickPlaceSolver:
         hand = self._in_hand()
         over = lambda i, path: self._over_table(i, path, hand[i])  # noqa: E731
 
-        def targets(stage, yaws, todo):
+        def targets(yaws, todo):
             tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
             obj = self.base.obj.pose.p.cpu().numpy()
             return [
@@ -512,11 +512,10 @@ class PickPlaceSolver:
                 for i in range(self.num_envs)
             ]
 
-        chosen = self._per_env("carry", targets("carry", self.cfg.carry_yaws, envs), path_ok=over)
+        chosen = self._per_env("carry", targets(self.cfg.carry_yaws, envs), path_ok=over)
         high = envs & np.array([c is None for c in chosen])
         if high.any():  # over the obstacles: straight up, then the carry from there
-            for i in np.flatnonzero(high):
-                self.reports[i].misses.append("carry (from above)")
+            for i in np.flatnonzero(high):  # the carry from above may still plan
                 self.reports[i].plan_failures.clear()
             tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
             up = [
@@ -532,8 +531,8 @@ class PickPlaceSolver:
                 for i in range(self.num_envs)
             ]
             self._per_env("rise", up, obstacles=False)
-            self._per_env("carry", targets("carry", self.cfg.carry_yaws, high), path_ok=over)
-        self._per_env("settle", targets("settle", (0.0,), envs), obstacles=False)
+            self._per_env("carry", targets(self.cfg.carry_yaws, high), path_ok=over)
+        self._per_env("settle", targets((0.0,), envs), obstacles=False)
 
     def _over_table(self, i: int, path: np.ndarray, in_hand: np.ndarray) -> str:
         """Why env i's path is refused: the held object (``in_hand``: its position in the TCP

@@ -28,16 +28,18 @@ def spec_of(name: str):
     return parse_urdf(folder / f"{name}.urdf")
 
 
-def surface_state(parts, q):
+def surface_state(parts, q, tol=1e-4):
     """Independent of the module: ``q``'s depth outside the union of the convex parts (0 on
-    its surface, < 0 inside) and the outward normal of the face it lies on (scipy hulls)."""
-    best, normal = np.inf, None
+    its surface, < 0 inside) and the outward normals of the faces it lies on, within ``tol``
+    (scipy hulls; more than one on an edge or where two parts meet)."""
+    best, normals = np.inf, []
     for p in parts:
         hull = ConvexHull(p)
         d = hull.equations[:, :3] @ q + hull.equations[:, 3]
-        if d.max() < best:
-            best, normal = d.max(), hull.equations[d.argmax(), :3]
-    return best, normal
+        best = min(best, d.max())
+        if abs(d.max()) < tol:
+            normals.append(hull.equations[d > d.max() - tol, :3])
+    return best, np.concatenate(normals) if normals else np.zeros((0, 3))
 
 
 @pytest.mark.parametrize("name", SHAPES)
@@ -55,9 +57,10 @@ def test_grasps_are_antipodal_within_the_opening_and_free_of_the_object(name):
         assert abs(np.linalg.norm(a) - 1) < 1e-6 and abs(a @ grasps.approach[k]) < 1e-6
         far, near = c + a * w / 2, c - a * w / 2  # the two contacts
         for q, sign in ((far, 1.0), (near, -1.0)):
-            depth, normal = surface_state(geom.parts, q)
+            depth, normals = surface_state(geom.parts, q)
             assert abs(depth) < 1e-4, (k, depth)  # on the surface
-            assert sign * normal @ a >= cos, (k, sign * normal @ a)  # within the cone
+            # within the cone (on an edge or a joint of parts: of one of the faces there)
+            assert (sign * normals @ a >= cos).any(), (k, sign * normals @ a)
         assert surface_state(geom.parts, c)[0] < 0, "the centre is inside the material"
         # no finger or palm box (fingers at the grasp's opening) holds an object point
         pts = np.concatenate([p for p in geom.parts])
