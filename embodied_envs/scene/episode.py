@@ -357,10 +357,6 @@ class EpisodeSampler:
                 stacklevel=2,
             )
         self.shape_idx = torch.arange(1, n + 1, device=self.device)  # item j is shape j + 1
-        self.manipulated = torch.tensor([it.manipulated for it in self.items], device=self.device)
-        table = [j for j, it in enumerate(self.items) if it.parent == ctx]
-        self.on_table = torch.tensor(table, dtype=torch.int64, device=self.device)
-        self.table_slot = {j: t for t, j in enumerate(table)}
         # bounding radius of each shape (robot base, items), clearance included
         self.radii = (
             torch.tensor(

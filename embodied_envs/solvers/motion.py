@@ -73,7 +73,8 @@ class SeededPlanner:
     # --- IK ------------------------------------------------------------------------------
     def ik(self, goal_base: np.ndarray, qpos: np.ndarray, rng: np.random.Generator):
         """Collision-free joint solutions (move group) reaching ``goal_base`` ([x, y, z, qw, qx,
-        qy, qz] in the robot base frame), nearest to ``qpos`` first; [] when none."""
+        qy, qz] in the robot base frame), nearest to ``qpos`` first ([] when none), and the
+        closest 6-D distance any restart reached (for the failure message)."""
         cfg, mp = self.cfg, self.mp
         start, solutions, best = qpos.copy(), [], np.inf
         # joint-limited CLIK; the other joints (the fingers) stay where they are
@@ -100,8 +101,7 @@ class SeededPlanner:
                     break
         here = qpos[self.idx]
         solutions.sort(key=lambda s: float(np.linalg.norm(s - here)))
-        self.ik_distance = best  # for the failure message
-        return solutions
+        return solutions, best
 
     # --- paths ---------------------------------------------------------------------------
     def _steer(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -190,9 +190,9 @@ class SeededPlanner:
         mp.planning_world.set_use_point_cloud(use_point_cloud)
         mp.planning_world.set_use_attach(False)
         mp.robot.set_qpos(qpos, True)  # the fingers stay where they are
-        goals = self.ik(mp.transform_goal_to_wrt_base(goal_world), qpos, rng)
+        goals, closest = self.ik(mp.transform_goal_to_wrt_base(goal_world), qpos, rng)
         if not goals:
-            return {"status": f"IK failed (closest {self.ik_distance:.4f})"}
+            return {"status": f"IK failed (closest {closest:.4f})"}
         start = qpos[self.idx]
         path = next(([start, g] for g in goals if self.edge_free(start, g)), None)
         if path is None:

@@ -537,8 +537,7 @@ class PickPlaceSolver:
     def _over_table(self, i: int, path: np.ndarray, in_hand: np.ndarray) -> str:
         """Why env i's path is refused: the held object (``in_hand``: its position in the TCP
         frame) leaves the table top's footprint at a waypoint; "" when it stays over it."""
-        planner = self.planners[i]
-        model = planner.pinocchio_model
+        model = self.planners[i].pinocchio_model
         fingers = self._qpos()[i, 7:]
         base = sapien.Pose(*np.split(self.base.agent.robot.pose.raw_pose[i].cpu().numpy(), [3]))
         points = []

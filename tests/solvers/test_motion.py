@@ -40,7 +40,9 @@ def test_the_wall_blocks_the_straight_line(planner):
     planner.mp.planning_world.set_use_point_cloud(True)
     planner.mp.robot.set_qpos(REST, True)
     assert not planner.mp.check_for_env_collision(qpos=REST, with_point_cloud=True)
-    goals = planner.ik(planner.mp.transform_goal_to_wrt_base(GOAL), REST, np.random.default_rng(0))
+    goals, _ = planner.ik(
+        planner.mp.transform_goal_to_wrt_base(GOAL), REST, np.random.default_rng(0)
+    )
     assert goals
     assert not any(planner.edge_free(REST[:7], g) for g in goals)
 
@@ -77,7 +79,7 @@ def test_ik_solutions_are_distinct_within_limits_and_nearest_first(planner):
     mp.planning_world.set_use_point_cloud(False)
     mp.robot.set_qpos(REST, True)
     goal = mp.transform_goal_to_wrt_base(np.array([0.5, -0.1, 0.3, *DOWN]))
-    sols = planner.ik(goal, REST, np.random.default_rng(3))
+    sols, _ = planner.ik(goal, REST, np.random.default_rng(3))
     assert len(sols) >= 2
     dist = [np.linalg.norm(s - REST[:7]) for s in sols]
     assert dist == sorted(dist)
