@@ -19,12 +19,12 @@ from embodied_envs.layout.placement import (
     node_footprint,
     node_geometry,
     place,
-    rotation_2d,
     square,
     top_surface,
     world_vertices,
 )
 from embodied_envs.layout.pools import asset_pools
+from embodied_envs.layout.rules import rotate
 from embodied_envs.layout.sets import LayoutSet, layout_files
 from embodied_envs.paths import atomic_output
 from embodied_envs.splat import SplatFileError, check_ply
@@ -183,7 +183,7 @@ def draw_top_down(layout: LayoutInfo, size: int = 640, limits: PlacementLimits |
         if cat == "context":
             continue
         pose = layout.pose(node)
-        foot = node_footprint(layout, node) @ rotation_2d(np.float64(pose.yaw)).T + pose.p[:2]
+        foot = rotate(node_footprint(layout, node), np.float64(pose.yaw)) + pose.p[:2]
         d.polygon(px(foot), outline=colours.get(cat, (90, 90, 90)), width=2)
         cx, cy = px(pose.p[:2])[0]
         d.text((cx + 4, cy - 12), node, fill=colours.get(cat, (40, 40, 40)))

@@ -27,7 +27,14 @@ from embodied_envs.layout.assets import (
 from embodied_envs.layout.errors import PlacementError
 from embodied_envs.layout.limits import PlacementLimits
 from embodied_envs.layout.pools import asset_pools, with_first_members
-from embodied_envs.layout.pose import LayoutPose, wrap_angle
+from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.layout.rules import (
+    candidates_fit,
+    half_planes,
+    inward_normals,
+    overlap,
+    rotate,
+)
 from embodied_envs.layout.schema import MAX_INTERPENETRATION, REST_TOLERANCE, LayoutInfo
 
 SUPPORT_RELATIONS = ("ON", "IN", "INSIDE")
@@ -108,10 +115,11 @@ def _surface_at(key: AssetKey, pose: LayoutPose, band: float, margin: float) -> 
     asset in its own frame.
     """
     hull, top_z, shrunk = _top(key, band, margin)
-    rot = rotation_2d(np.float64(pose.yaw)).T
-    xy = np.asarray(pose.p[:2])
+    yaw, xy = np.float64(pose.yaw), np.asarray(pose.p[:2])
     return Surface(
-        hull @ rot + xy, top_z + pose.p[2], None if shrunk is None else shrunk @ rot + xy
+        rotate(hull, yaw) + xy,
+        top_z + pose.p[2],
+        None if shrunk is None else rotate(shrunk, yaw) + xy,
     )
 
 
@@ -136,18 +144,8 @@ def polygon_centroid(poly: np.ndarray) -> np.ndarray:
     return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
 
 
-def rotation_2d(yaw: np.ndarray) -> np.ndarray:
-    """``(..., 2, 2)`` rotation matrices for yaw angles of any shape."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
 
 
-def half_planes(poly: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Inward unit normals ``n`` and offsets ``c`` of a CCW polygon: inside iff ``n @ p >= c``."""
-    edges = np.roll(poly, -1, axis=0) - poly
-    normals = np.stack([-edges[:, 1], edges[:, 0]], axis=1)
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    return normals, np.einsum("ij,ij->i", normals, poly)
 
 
 def shrink_polygon(poly: np.ndarray, margin: float) -> np.ndarray:
@@ -166,51 +164,16 @@ def shrink_polygon(poly: np.ndarray, margin: float) -> np.ndarray:
     return convex_hull_2d(pts[keep])
 
 
-def edge_normals(poly: np.ndarray) -> np.ndarray:
-    """Unit normals of the edges of (batched) polygons ``(..., m, 2)``."""
-    e = np.roll(poly, -1, axis=-2) - poly
-    nrm = np.stack([-e[..., 1], e[..., 0]], axis=-1)
-    return nrm / np.maximum(np.linalg.norm(nrm, axis=-1, keepdims=True), 1e-12)
 
 
-def polygons_overlap(
-    p: np.ndarray,
-    q: np.ndarray,
-    clearance: float,
-    p_normals: np.ndarray | None = None,
-    q_normals: np.ndarray | None = None,
-) -> np.ndarray:
-    """Separating-axis test of batched convex polygons against one polygon.
-
-    Args:
-        p: ``(b, m, 2)`` candidate polygons.
-        q: ``(k, 2)`` an obstacle polygon.
-        clearance: polygons closer than this along every axis count as overlapping.
-        p_normals, q_normals: their :func:`edge_normals`, when already known.
-
-    Returns:
-        ``(b,)`` bool, True where a candidate overlaps (or is closer than ``clearance`` to) q.
-    """
-    p_normals = edge_normals(p) if p_normals is None else p_normals
-    q_normals = edge_normals(q) if q_normals is None else q_normals
-    axes = np.concatenate([p_normals, np.broadcast_to(q_normals, (p.shape[0], *q.shape))], 1)
-    proj_p = np.einsum("bad,bmd->bam", axes, p)
-    proj_q = np.einsum("bad,kd->bak", axes, q)
-    separated = (proj_p.max(-1) + clearance <= proj_q.min(-1)) | (
-        proj_q.max(-1) + clearance <= proj_p.min(-1)
-    )
-    return ~separated.any(-1)
 
 
 def square(center: np.ndarray, side: float, yaw: float) -> np.ndarray:
     h = side / 2.0
     local = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
-    return local @ rotation_2d(np.float64(yaw)).T + center[:2]
+    return rotate(local, np.float64(yaw)) + center[:2]
 
 
-def angle_diff(a: np.ndarray, b: float) -> np.ndarray:
-    """``|a - b|`` wrapped to [0, pi]."""
-    return np.abs(wrap_angle(a - b))
 
 
 @dataclass(frozen=True)
@@ -262,124 +225,116 @@ class _Placer:
         self.limits = limits
         self.poses: dict[str, LayoutPose] = {}
         self.obstacles: dict[str, np.ndarray] = {}  # node -> world footprint polygon
-        self.obstacle_info: dict[str, tuple] = {}  # node -> (normals, centre, radius)
-        self.regions: dict[str, tuple] = {}  # parent -> (shrunk hull, normals, offsets)
         # resolve each node's asset once per call (file lookups are the slow part)
         self.keys = {n: asset_key(layout, n) for n in layout.object_nodes()}
         self.foot = {n: _footprint(k) for n, k in self.keys.items()}
-        self.foot_normals = {n: edge_normals(f) for n, f in self.foot.items()}
+        self.foot_normals = {n: inward_normals(f) for n, f in self.foot.items()}
         self.min_z = {n: _geometry(k).min_z for n, k in self.keys.items()}
 
-    def add_obstacle(self, node: str, poly: np.ndarray) -> None:
-        """Record a placed footprint with its edge normals and bounding circle."""
-        centre = poly.mean(0)
-        radius = float(np.linalg.norm(poly - centre, axis=1).max())
-        self.obstacles[node] = poly
-        self.obstacle_info[node] = (edge_normals(poly), centre, radius)
+    def placed(self, nodes: list[str], extra: list[np.ndarray] = ()) -> tuple:
+        """The world footprints of ``nodes`` (and ``extra`` polygons) as ``candidates_fit``'s
+        ``placed``: one env, padded to a common vertex count, with bounding circles."""
+        polys = [self.obstacles[n] for n in nodes] + list(extra)
+        k = max([len(p) for p in polys], default=3)
+        padded = np.zeros((1, len(polys), k, 2))
+        for i, p in enumerate(polys):  # repeating the last vertex adds zero-length edges
+            padded[0, i] = np.concatenate([p, np.repeat(p[-1:], k - len(p), 0)])
+        centres = padded.mean(2)
+        radii = np.linalg.norm(padded - centres[:, :, None], axis=-1).max(-1)[0]
+        return padded, inward_normals(padded), centres, radii
+
+    def draws(self, node: str, region, placed, reach, fails, xy_draw) -> LayoutPose | None:
+        """Candidates of ``node`` in batches until one meets every rule (``candidates_fit``);
+        its ``(x, y, yaw)``, or None after ``max_attempts``. Rejections are added to ``fails``
+        (per rule; the clearance among the candidates meeting the others)."""
+        lim = self.limits
+        foot = self.foot[node]
+        radius = float(np.linalg.norm(foot, axis=1).max())
+        tried = 0
+        while tried < lim.max_attempts:
+            b = min(lim.batch, lim.max_attempts - tried)
+            tried += b
+            yaw = self.rng.uniform(-np.pi, np.pi, b)
+            xy = xy_draw(b)
+            masks = candidates_fit(
+                xy[None], yaw[None], foot, self.foot_normals[node], radius, region, placed,
+                lim.clearance, reach,
+            )  # fmt: skip
+            ok = np.ones(b, bool)
+            for rule in ("inside", "in_band", "facing"):
+                if rule in masks:
+                    fails[rule] += int((~masks[rule][0]).sum())
+                    ok &= masks[rule][0]
+            clear = masks["clear"][0]
+            fails["clear"] += int((ok & ~clear).sum())
+            hits = np.flatnonzero(ok & clear)
+            if len(hits):
+                k = hits[0]
+                self.obstacles[node] = rotate(foot, yaw[k]) + xy[k]
+                return float(xy[k, 0]), float(xy[k, 1]), float(yaw[k])
+        return None
 
     def sample_object(
         self, node: str, parent: str, surface: Surface, ancestors: set[str]
     ) -> LayoutPose:
         lim = self.limits
         layout = self.layout
-        foot = self.foot[node]
-        if parent not in self.regions:
-            region = surface.shrunk
-            if region is None:
-                raise PlacementError(
-                    node,
-                    "footprint inside parent top",
-                    0,
-                    "the parent's top is smaller than twice the hull margin",
-                )
-            self.regions[parent] = (region, *half_planes(region))
-        region, normals, offsets = self.regions[parent]
+        region = surface.shrunk
+        if region is None:
+            raise PlacementError(
+                node,
+                "footprint inside parent top",
+                0,
+                "the parent's top is smaller than twice the hull margin",
+            )
         lo, hi = region.min(0), region.max(0)
-        manipulated = node in layout.manipulated_objs
-        robot = self.poses[layout.robot]
-        robot_xy = np.array(robot.p[:2])
-        near_nodes = [n for n in self.obstacles if n not in ancestors]
-        obstacles = [self.obstacles[n] for n in near_nodes]
-        obstacle_normals = [self.obstacle_info[n][0] for n in near_nodes]
-        inside_key, free_key = "footprint inside parent top", "no overlap with placed footprints"
-        reach_key = f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base"
-        heading_key = f"within {lim.max_heading_deg:g} deg of the robot heading"
-        fails = {inside_key: 0, free_key: 0}
-        if manipulated:
-            fails |= {reach_key: 0, heading_key: 0}
-        foot_r = float(np.linalg.norm(foot, axis=1).max())
-        obstacle_circles = [self.obstacle_info[n][1:] for n in near_nodes]
-        tried = 0
-        while tried < lim.max_attempts:
-            b = min(lim.batch, lim.max_attempts - tried)
-            tried += b
-            yaw = self.rng.uniform(-np.pi, np.pi, b)
-            xy = self.rng.uniform(lo, hi, (b, 2))
-            # cheap constraints first, then the separating-axis test on the survivors only
-            poly = rotation_2d(yaw) @ foot.T  # (b, 2, m)
-            poly = np.swapaxes(poly, 1, 2) + xy[:, None, :]
-            inside = ((poly @ normals.T) >= offsets - 1e-9).all(axis=(1, 2))
-            fails[inside_key] += int((~inside).sum())
-            ok = inside
-            if manipulated:
-                d = np.linalg.norm(xy - robot_xy, axis=1)
-                reach = (d > lim.reach_min) & (d < lim.reach_max)
-                bearing = np.arctan2(xy[:, 1] - robot_xy[1], xy[:, 0] - robot_xy[0])
-                facing = angle_diff(bearing, robot.yaw) <= np.deg2rad(lim.max_heading_deg)
-                fails[reach_key] += int((~reach).sum())
-                fails[heading_key] += int((~facing).sum())
-                ok = ok & reach & facing
-            idx = np.flatnonzero(ok)
-            free = np.ones(len(idx), bool)
-            cand_normals = None
-            for (centre, radius), q, qn in zip(
-                obstacle_circles, obstacles, obstacle_normals, strict=True
-            ):
-                near = np.linalg.norm(xy[idx] - centre, axis=1) < foot_r + radius + lim.clearance
-                cand = np.flatnonzero(near & free)
-                if len(cand):
-                    if cand_normals is None:  # the rotated footprint's normals, once per batch
-                        rot = rotation_2d(yaw[idx])  # (c, 2, 2)
-                        cand_normals = np.einsum("cij,mj->cmi", rot, self.foot_normals[node])
-                    free[cand] = ~polygons_overlap(
-                        poly[idx[cand]], q, lim.clearance, cand_normals[cand], qn
-                    )
-            fails[free_key] += int((~free).sum())
-            hits = idx[free]
-            if len(hits):
-                k = hits[0]
-                z = surface.z - self.min_z[node]
-                self.add_obstacle(node, poly[k])
-                return LayoutPose.from_xyz_yaw([xy[k, 0], xy[k, 1], z], float(yaw[k]))
-        worst = max(fails, key=fails.get)
-        raise PlacementError(node, worst, tried, f"rejections per constraint: {fails}")
+        normals, offsets = half_planes(region)
+        reach = None
+        if node in layout.manipulated_objs:
+            robot = self.poses[layout.robot]
+            reach = (
+                np.array([robot.p[:2]]), np.array([robot.yaw]),
+                (lim.reach_min, lim.reach_max), lim.max_heading_deg,
+            )  # fmt: skip
+        placed = self.placed([n for n in self.obstacles if n not in ancestors])
+        fails = dict.fromkeys(["inside", "in_band", "facing", "clear"] if reach else
+                              ["inside", "clear"], 0)  # fmt: skip
+        found = self.draws(
+            node, (normals[None], offsets[None]), placed, reach, fails,
+            lambda b: self.rng.uniform(lo, hi, (b, 2)),
+        )  # fmt: skip
+        if found is None:
+            names = {
+                "inside": "footprint inside parent top",
+                "clear": "no overlap with placed footprints",
+                "in_band": f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base",
+                "facing": f"within {lim.max_heading_deg:g} deg of the robot heading",
+            }
+            named = {names[k]: v for k, v in fails.items()}
+            worst = max(named, key=named.get)
+            raise PlacementError(node, worst, lim.max_attempts,
+                                 f"rejections per constraint: {named}")  # fmt: skip
+        x, y, yaw = found
+        return LayoutPose.from_xyz_yaw([x, y, surface.z - self.min_z[node]], yaw)
 
     def sample_floor_object(self, node: str, ctx_poly: np.ndarray) -> LayoutPose:
         """An object standing on the floor (z = 0) around the table (world footprint
         ``ctx_poly``), clear of everything."""
         lim = self.limits
-        foot = node_footprint(self.layout, node)
-        geom = node_geometry(self.layout, node)
-        tried = 0
-        fails = {"no overlap with placed footprints": 0}
-        while tried < lim.max_attempts:
-            b = min(lim.batch, lim.max_attempts - tried)
-            tried += b
-            yaw = self.rng.uniform(-np.pi, np.pi, b)
+
+        def disc(b: int) -> np.ndarray:
             r = lim.floor_radius * np.sqrt(self.rng.uniform(0, 1, b))
             t = self.rng.uniform(-np.pi, np.pi, b)
-            xy = np.stack([r * np.cos(t), r * np.sin(t)], 1)
-            poly = np.einsum("bij,mj->bmi", rotation_2d(yaw), foot) + xy[:, None, :]
-            free = ~polygons_overlap(poly, ctx_poly, lim.clearance)
-            for q in self.obstacles.values():
-                free &= ~polygons_overlap(poly, q, lim.clearance)
-            fails["no overlap with placed footprints"] += int((~free).sum())
-            hits = np.flatnonzero(free)
-            if len(hits):
-                k = hits[0]
-                self.add_obstacle(node, poly[k])
-                return LayoutPose.from_xyz_yaw([xy[k, 0], xy[k, 1], -geom.min_z], float(yaw[k]))
-        raise PlacementError(node, "no overlap with placed footprints", tried, str(fails))
+            return np.stack([r * np.cos(t), r * np.sin(t)], 1)
+
+        fails = {"clear": 0}
+        placed = self.placed(list(self.obstacles), [ctx_poly])
+        found = self.draws(node, None, placed, None, fails, disc)
+        if found is None:
+            rule = "no overlap with placed footprints"
+            raise PlacementError(node, rule, lim.max_attempts, str({rule: fails["clear"]}))
+        x, y, yaw = found
+        return LayoutPose.from_xyz_yaw([x, y, -self.min_z[node]], yaw)
 
     def run(self) -> dict[str, LayoutPose]:
         layout, lim, rng = self.layout, self.limits, self.rng
@@ -396,7 +351,7 @@ class _Placer:
         # 3. robot on the table's edge, facing its centre
         robot = robot_base_pose(surfaces[ctx], rng.uniform(0, 1))
         self.poses[layout.robot] = robot
-        self.add_obstacle(layout.robot, square(np.array(robot.p), lim.robot_footprint, robot.yaw))
+        self.obstacles[layout.robot] = square(np.array(robot.p), lim.robot_footprint, robot.yaw)
         # 4. objects, breadth first from the table, larger footprints first
         ancestors = {ctx: {ctx}}
         for kid, parent in support_order(layout):
@@ -410,7 +365,7 @@ class _Placer:
             for c, r in layout.children(layout.background)
             if r == "FLOOR" and c not in self.poses and c != layout.robot
         ]
-        ctx_poly = self.foot[ctx] @ rotation_2d(np.float64(ctx_pose.yaw)).T
+        ctx_poly = rotate(self.foot[ctx], np.float64(ctx_pose.yaw))
         for kid in floor_kids:
             self.poses[kid] = self.sample_floor_object(kid, ctx_poly)
         missing = [n for n in layout.object_nodes() if n not in self.poses]
@@ -488,7 +443,9 @@ def check_file_poses(layout: LayoutInfo) -> list[str]:
         for i, a in enumerate(names):
             for b in names[i + 1 :]:
                 if len(feet[a]) >= 3 and len(feet[b]) >= 3:
-                    if polygons_overlap(feet[a][None], feet[b], -MAX_INTERPENETRATION)[0]:
+                    pa, pb = feet[a], feet[b]
+                    normals_a, normals_b = inward_normals(pa), inward_normals(pb)
+                    if overlap(pa, pb, -MAX_INTERPENETRATION, normals_a, normals_b):
                         problems.append(
                             f'{f}: position["{a}"] and position["{b}"]: their footprints '
                             f"overlap by more than {MAX_INTERPENETRATION} m. Fix: move them "
