@@ -174,9 +174,9 @@ def candidates_fit(
     rel = xy[:, :, None] - origins[:, None]  # (b, c, o, 2)
     near = xp.hypot(rel[..., 0], rel[..., 1]) < radius + radii + clearance
     e, c, o = nonzero(near & ok[..., None])
-    pair_normals = rotate(foot_normals, yaw[e, c])
-    hit = overlap(poly[e, c], polys[e, o], clearance, pair_normals, normals[e, o])
-    clear = xp.ones_like(ok)
-    clear[e[hit], c[hit]] = False
-    masks["clear"] = clear
+    masks["clear"] = clear = xp.ones_like(ok)
+    if len(e):
+        pair_normals = rotate(foot_normals, yaw[e, c])
+        hit = overlap(poly[e, c], polys[e, o], clearance, pair_normals, normals[e, o])
+        clear[e[hit], c[hit]] = False
     return masks

@@ -43,19 +43,25 @@ class SceneEpisodes:
 
     @classmethod
     def of(cls, samplers: list[EpisodeSampler], slots: list[dict[str, str]], num_envs: int):
+        device = samplers[0].device
+
+        def tensor(x):  # the samplers' arrays (numpy on the CPU) as tensors for the env
+            return torch.as_tensor(x, device=device)
+
         if len(samplers) == 1:
             only = samplers[0]
-            return cls(samplers, slots, only.top, only.robot_xy, only.top_z)
-        device = samplers[0].device
+            return cls(samplers, slots, only.top.map(tensor), tensor(only.robot_xy),
+                       tensor(only.top_z))  # fmt: skip
         edges = max(s.top.normals.shape[1] for s in samplers)
         normals = torch.zeros((num_envs, edges, 2), device=device)
         offsets = torch.zeros((num_envs, edges), device=device)  # padded edges: 0 >= 0 holds
         lo, hi, robot_xy = (torch.zeros((num_envs, 2), device=device) for _ in range(3))
         z = torch.zeros(num_envs, device=device)
         for s in samplers:
-            e, rows = s.top.normals.shape[1], s.env_ids
-            normals[rows, :e], offsets[rows, :e] = s.top.normals, s.top.offsets
-            lo[rows], hi[rows], z[rows], robot_xy[rows] = s.top.lo, s.top.hi, s.top.z, s.robot_xy
+            top, rows = s.top.map(tensor), s.env_ids
+            e = top.normals.shape[1]
+            normals[rows, :e], offsets[rows, :e] = top.normals, top.offsets
+            lo[rows], hi[rows], z[rows], robot_xy[rows] = top.lo, top.hi, top.z, tensor(s.robot_xy)
         return cls(samplers, slots, Region(normals, offsets, lo, hi, z), robot_xy, z)
 
     @property

@@ -382,7 +382,8 @@ def test_parallel_envs_need_as_many_objects_in_every_layout(scenes):
     }
 
 
-def test_heterogeneous_episode_draws_are_batched_per_layout(scenes):
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_heterogeneous_episode_draws_are_batched_per_layout(scenes, backend):
     """Six envs over three layouts with different nodes and tables (as on the GPU): one
     sampler per layout, starts keyed by slot, each env's start
     meets its own layout's constraints, a partial reset draws for its envs only, and a
@@ -399,12 +400,12 @@ def test_heterogeneous_episode_draws_are_batched_per_layout(scenes):
     groups = [[0, 3], [1, 4], [2, 5]]
     samplers = [
         EpisodeSampler([layouts[i] for i in g], PlacementLimits(), GoalRegion(),
-                       env_ids=torch.tensor(g))
+                       env_ids=torch.tensor(g), backend=backend)
         for g in groups
     ]  # fmt: skip
     episodes = SceneEpisodes.of(samplers, [slots[g[0]] for g in groups], 6)
-    assert torch.equal(episodes.top_z, torch.stack([samplers[k % 3].top_z[k // 3]
-                                                    for k in range(6)]))  # fmt: skip
+    assert torch.equal(episodes.top_z, torch.tensor([float(samplers[k % 3].top_z[k // 3])
+                                                     for k in range(6)]))  # fmt: skip
     rngs = BatchedRNG.from_seeds(list(range(6)))
     episodes.reseeded(0, torch.arange(6), False)
     start = episodes.draw(torch.arange(6), rngs)

@@ -12,17 +12,14 @@ from placement_checks import check_constraints
 from shapely.geometry import MultiPoint, Point, Polygon
 from shapely.ops import unary_union
 
-from embodied_envs.layout import LayoutPose, load_layout
+from embodied_envs.layout import LayoutPose, load_layout, rules
 from embodied_envs.layout.limits import GoalRegion, PlacementLimits
 from embodied_envs.layout.placement import place
-from embodied_envs.scene.episode import (
-    EpisodeSampler,
-    Shapes,
-    overlap,
-    uniforms,
-)
+from embodied_envs.scene.episode import EpisodeSampler, uniforms
 
 OFFSET = 0.002  # objs_z_offset of the sampler under test
+# the sampler's arrays: numpy (CPU envs) and torch (GPU envs; here on the CPU)
+BACKENDS = pytest.mark.parametrize("backend", ["numpy", "torch"])
 
 
 def configurations(path, n):
@@ -60,54 +57,57 @@ def test_uniforms_are_splitmix64_of_key_stream_and_index():
     assert (counts - big.numel() / 10).abs().max() < 5 * math.sqrt(big.numel() / 10)
 
 
-def test_torch_overlap_agrees_with_the_placement_rule():
-    from embodied_envs.layout.placement import polygons_overlap
-
+def test_the_rules_give_the_same_answers_in_numpy_and_torch():
+    """``layout/rules.py`` runs on either library: the per-configuration placer's numpy
+    float64 and the GPU sampler's torch float32 agree (up to float32 at the boundary)."""
     rng = np.random.default_rng(0)
     square = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 0.05
     a = np.linspace(0, 2 * np.pi, 17)[:-1]
     disc = 0.04 * np.stack([np.cos(a), np.sin(a)], 1)
-    shapes = Shapes.of([square, disc], torch.device("cpu"))
     xy = rng.uniform(-0.12, 0.12, (2000, 2))
     yaw = rng.uniform(-np.pi, np.pi, 2000)
-    c, s = np.cos(yaw), np.sin(yaw)
-    rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-    moved = disc @ rot.transpose(0, 2, 1) + xy[:, None]
-    want = polygons_overlap(moved, square, 0.01)
-    t = torch.as_tensor
-    p = t(moved, dtype=torch.float32)
-    q = t(square, dtype=torch.float32).expand(2000, 4, 2)
-    got = overlap(
-        p,
-        q,
-        0.01,
-        torch.einsum("bij,mj->bmi", t(rot, dtype=torch.float32), shapes.normals[1, :16]),
-        shapes.normals[0, :4].expand(2000, 4, 2),
-    )
-    assert 0.2 < want.mean() < 0.8
+    moved = rules.rotate(disc, yaw) + xy[:, None]
+    moved_normals = rules.rotate(rules.inward_normals(disc), yaw)
+    want = rules.overlap(moved, square, 0.01, moved_normals, rules.inward_normals(square))
+    region = rules.half_planes(square * 2)
+    inside = rules.inside(moved, *region)
+
+    def t(x):
+        return torch.as_tensor(x, dtype=torch.float32)
+
+    square_normals = t(rules.inward_normals(square))
+    got = rules.overlap(t(moved), t(square), 0.01, t(moved_normals), square_normals)
+    got_inside = rules.inside(t(moved), *(t(r) for r in region))
+    assert isinstance(got, torch.Tensor) and 0.2 < want.mean() < 0.8 and 0.2 < inside.mean() < 0.8
     assert (got.numpy() == want).mean() > 0.999  # float32 vs float64 at the boundary
+    assert (got_inside.numpy() == inside).mean() > 0.999
+    # against shapely: overlap means closer than the clearance
+    dist = np.array([Polygon(m).distance(Polygon(square)) for m in moved])
+    assert ((dist < 0.01 - 1e-9) <= want).all() and ((dist > 0.01 + 1e-9) <= ~want).all()
+    held = np.array([Polygon(square * 2).contains(Polygon(m)) for m in moved])
+    assert (held == inside).all()
 
 
-def test_support_function_is_the_max_projection():
-    rng = np.random.default_rng(1)
-    pts = rng.normal(size=(40, 2))
-    hull = np.asarray(MultiPoint(pts.tolist()).convex_hull.exterior.coords)[:-1]
-    if Polygon(hull).exterior.is_ccw is False:
-        hull = hull[::-1]
-    tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.5]])
-    shapes = Shapes.of([hull, tri], torch.device("cpu"))
-    phi = torch.linspace(-7, 7, 1001, dtype=torch.float64).float()
-    for k, poly in enumerate((hull, tri)):
-        d = np.stack([np.cos(phi.numpy()), np.sin(phi.numpy())], 1)
-        want = (d @ poly.T).max(1)
-        got = shapes.support(torch.tensor([k]), phi[None])[0].numpy()
-        np.testing.assert_allclose(got, want, atol=1e-5)
+def test_padded_edges_are_never_separating_axes():
+    """Shapes pad polygons by repeating their last vertex; the zero normals of those edges
+    must not count as separating axes, at clearance 0 too (they once did: an overlap test
+    with no clearance found every pair apart)."""
+    tri = np.array([[0.0, 0.0], [0.1, 0.0], [0.0, 0.1]])
+    padded = np.concatenate([tri, tri[-1:], tri[-1:]])
+    n = rules.inward_normals(padded)
+    assert (n[2:4] == 0).all()
+    shifted = padded + 0.02
+    for clearance in (0.0, 0.01):
+        assert rules.overlap(padded, shifted, clearance, n, n)
+    far = padded + 0.5
+    assert not rules.overlap(padded, far, 0.0, n, n)
 
 
+@BACKENDS
 @pytest.mark.parametrize("path", LAYOUTS, ids=[p.stem for p in LAYOUTS])
-def test_every_start_satisfies_every_placement_constraint(path):
+def test_every_start_satisfies_every_placement_constraint(path, backend):
     configs = configurations(path, 4)
-    sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
+    sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET, backend=backend)
     env_idx = torch.arange(4).repeat(40)  # 40 episodes of each of 4 envs in one call
     starts = sampler.objects(env_idx, torch.arange(160) * 7919)
     assert sampler.fallbacks == 0
@@ -119,9 +119,10 @@ def test_every_start_satisfies_every_placement_constraint(path):
             assert abs(q[0]) < 1e-6 and abs(q[1]) < 1e-6
 
 
-def test_same_key_same_start_whatever_else_is_drawn():
+@BACKENDS
+def test_same_key_same_start_whatever_else_is_drawn(backend):
     configs = configurations(LAYOUTS[0], 4)
-    sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
+    sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET, backend=backend)
     keys = torch.tensor([11, 22, 33, 44])
     everyone = sampler.objects(torch.arange(4), keys)
     some = sampler.objects(torch.tensor([3, 1]), keys[[3, 1]])
@@ -135,8 +136,27 @@ def test_same_key_same_start_whatever_else_is_drawn():
     assert torch.equal(sampler.goals(torch.tensor([2]), keys[[2]]), goals[[2]])
 
 
+@pytest.mark.parametrize("path", LAYOUTS, ids=[p.stem for p in LAYOUTS])
+def test_numpy_and_torch_samplers_draw_the_same_starts(path):
+    """A CPU env draws with numpy, a GPU env with torch: the same keys give the same starts,
+    goals and noise (float32 both; the libraries' sine and cosine may differ in the last bit,
+    which can flip a candidate that touches a boundary, so nearly all rows agree exactly)."""
+    configs = configurations(path, 3)
+    env_idx, keys = torch.arange(3).repeat(100), torch.arange(300) * 15485863
+    draws = []
+    for backend in ("numpy", "torch"):
+        sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET, backend=backend)
+        draws.append((sampler.objects(env_idx, keys), sampler.goals(env_idx, keys)))
+    (objects_np, goals_np), (objects_t, goals_t) = draws
+    for node in objects_np:
+        same = (objects_np[node] - objects_t[node]).abs().amax(1) < 1e-5
+        assert same.float().mean() > 0.98, node
+    assert ((goals_np - goals_t).abs().amax(1) < 1e-5).all()
+
+
+@BACKENDS
 @pytest.mark.parametrize("chunk", [1, 3, 128])
-def test_the_first_fit_does_not_depend_on_the_chunks(monkeypatch, chunk):
+def test_the_first_fit_does_not_depend_on_the_chunks(monkeypatch, chunk, backend):
     """Candidates are tested in chunks until every env has its first fit: any chunk size
     (one candidate at a time, a few, all 128 at once) gives the same starts, fallbacks
     included (3 candidates per object leave some draws without a fit)."""
@@ -150,7 +170,7 @@ def test_the_first_fit_does_not_depend_on_the_chunks(monkeypatch, chunk):
         runs = []
         for size in (episode.FIRST_CHUNK, chunk):
             monkeypatch.setattr(episode, "FIRST_CHUNK", size)
-            sampler = EpisodeSampler(configs, limits, objs_z_offset=OFFSET)
+            sampler = EpisodeSampler(configs, limits, objs_z_offset=OFFSET, backend=backend)
             runs.append((sampler.objects(env_idx, keys), sampler.fallbacks))
         (a, fa), (b, fb) = runs
         assert fa == fb
@@ -163,11 +183,12 @@ def rng_states(rng):
     return [r.get_state()[1].tobytes() + bytes([r.get_state()[2]]) for r in rng.rngs]
 
 
-def test_partial_draws_only_touch_env_idx():
+@BACKENDS
+def test_partial_draws_only_touch_env_idx(backend):
     from mani_skill.envs.utils.randomization.batched_rng import BatchedRNG
 
     configs = configurations(LAYOUTS[0], 4)
-    sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
+    sampler = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET, backend=backend)
     assert sampler.block == 8  # few envs: blocks of starts are prepared per env
     rng = BatchedRNG.from_seeds([10, 11, 12, 13])
     first = sampler.draw(torch.arange(4), rng)
@@ -191,14 +212,15 @@ def test_partial_draws_only_touch_env_idx():
     assert torch.equal(again.joint_noise[0], first.joint_noise[1])
 
 
-def test_a_seeded_reset_draws_one_start_and_the_stream_is_unchanged():
+@BACKENDS
+def test_a_seeded_reset_draws_one_start_and_the_stream_is_unchanged(backend):
     """After a reseed only the start in use is made (one key from the RNG), yet every env
     gets the same starts, in the same order, as when they are prepared in blocks."""
     from mani_skill.envs.utils.randomization.batched_rng import BatchedRNG
 
     configs = configurations(LAYOUTS[0], 2)
-    seeded = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
-    blocks = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET)
+    seeded = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET, backend=backend)
+    blocks = EpisodeSampler(configs, PlacementLimits(), objs_z_offset=OFFSET, backend=backend)
     rng_s, rng_b = BatchedRNG.from_seeds([7, 8]), BatchedRNG.from_seeds([7, 8])
     seeded.invalidate()  # as ManiSkill's reset(seed=...) does
     first = seeded.draw(torch.arange(2), rng_s)
