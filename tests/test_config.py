@@ -181,7 +181,9 @@ def test_goals_follow_the_configured_reach_and_inset(tmp_path):
         for seed in range(40):
             env.reset(seed=seed)
             dists.append(float((u.goal_site.pose.p[0, :2] - robot).norm()))
-        assert min(dists) >= 0.20 + 0.2 - 1e-5 and max(dists) <= 0.8 - 0.2 + 1e-5
+        near, far = GoalRegion(inset=0.2).distance_band(PlacementLimits(reach_max=0.8))
+        assert (near, far) == (PlacementLimits().reach_min + 0.2, 0.8 - 0.2)
+        assert min(dists) >= near - 1e-5 and max(dists) <= far + 1e-5
         assert max(dists) - min(dists) > 0.1  # spread over the band, not one point
     finally:
         env.close()

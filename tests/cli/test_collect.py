@@ -29,7 +29,8 @@ def dataset(tmp_path_factory):
     layout = os.path.relpath(DEFAULT_LAYOUT, work)
     (work / "cfg.yaml").write_text("goal_region: {inset: 0.12}\n")
     args = ["--num", "3", "--seed", "5", "--out", "out", "--config", "cfg.yaml"]
-    res = run(["collect", "--layout", layout, *args], work)
+    res = run(["collect", "--layout", layout, *args], work, check=False)
+    assert res.returncode == 0, res.stdout + res.stderr
     assert "default.json: 3 demonstrations" in res.stdout, res.stdout + res.stderr
     (work / "cfg.yaml").unlink()  # replays must not need it
     moved = work / "moved"
