@@ -239,18 +239,65 @@ def to_tcp(points: np.ndarray, centre, closing, approach) -> np.ndarray:
     return np.einsum("gpk,gkj->gpj", points[None] - centre[:, None], rot)
 
 
-def box_clearance(points_tcp: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """``(g,)``: how far the points (``(g, p, 3)`` in TCP frames) stay outside the boxes, the
-    least over points and boxes, per axis the largest (a point lies in a box grown by ``m``
-    exactly when its clearance is at most ``m``; inside, it is negative). ``boxes`` ``(b, 2,
-    3)`` for every grasp, or ``(g, b, 2, 3)`` one set per grasp; no points: infinite."""
-    if points_tcp.shape[1] == 0:
-        return np.full(len(points_tcp), np.inf)
-    if boxes.ndim == 3:
-        boxes = np.broadcast_to(boxes, (len(points_tcp), *boxes.shape))
-    x = points_tcp[:, :, None].astype(np.float32)
-    lo, hi = boxes[:, None, :, 0].astype(np.float32), boxes[:, None, :, 1].astype(np.float32)
-    return np.maximum(lo - x, x - hi).max(-1).min((1, 2))
+def box_clearance(
+    points: np.ndarray,
+    centre: np.ndarray,
+    closing: np.ndarray,
+    approach: np.ndarray,
+    boxes: np.ndarray,
+    bound: float | None = None,
+) -> np.ndarray:
+    """``(g,)``: how far ``points (p, 3)`` stay outside the gripper boxes of each grasp (TCP
+    at ``centre``, axes from ``closing`` and ``approach``, all ``(g, 3)`` in the points' frame;
+    ``boxes (g, b, 2, 3)`` in each TCP frame): the least over points and boxes of the largest
+    per-axis distance outside (a point lies in a box grown by ``m`` exactly when its clearance
+    is at most ``m``; inside, it is negative; no points: infinite).
+
+    With ``bound`` (for points mostly far from the grasps: the other objects), exact up to
+    ``bound`` and some value above it for a grasp whose clearance is larger: a point within
+    ``m`` of a box lies in the box's bounding box (in the points' frame) grown by
+    ``m * sqrt(3)``, so only the (grasp, point) pairs there are measured and a far point costs
+    one comparison. Without, every pair is measured (the object's own points, near them all).
+    """
+    gap = np.full(len(centre), np.inf, dtype=np.float32)
+    if not len(points) or not len(centre):
+        return gap
+    if bound is None:
+        local = to_tcp(points, centre, closing, approach)
+        return _outside(local[:, :, None], boxes[:, None]).min((1, 2))
+    rot = _tcp_axes(closing, approach)
+    world = _box_corners(centre, rot, boxes)  # (g, 8 b, 3)
+    grow = max(bound, 0.0) * np.sqrt(3.0)
+    lo, hi = world.min(1) - grow, world.max(1) + grow
+    near = points[((points >= lo.min(0)) & (points <= hi.max(0))).all(1)]
+    g, k = np.nonzero(((near[None] >= lo[:, None]) & (near[None] <= hi[:, None])).all(-1))
+    if len(g):  # g ascends: each grasp's pairs are one run
+        local = np.einsum("pk,pjk->pj", near[k] - centre[g], rot[g])
+        out = _outside(local[:, None], boxes[g]).min(-1)
+        starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+        gap[g[starts]] = np.minimum.reduceat(out, starts)
+    return gap
+
+
+def _tcp_axes(closing: np.ndarray, approach: np.ndarray) -> np.ndarray:
+    """``(g, 3, 3)``: rows the TCP's x, y (closing) and z (approach) axes."""
+    return np.stack([np.cross(closing, approach), closing, approach], 1)
+
+
+def _box_corners(centre: np.ndarray, rot: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """``(g, 8 b, 3)``: the corners of each grasp's boxes ``(g, b, 2, 3)`` (TCP frames) in the
+    frame of ``centre (g, 3)`` and ``rot`` (:func:`_tcp_axes`)."""
+    corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), -1).reshape(-1, 3)
+    local = np.where(corners[None, None], boxes[:, :, 1][:, :, None], boxes[:, :, 0][:, :, None])
+    return centre[:, None] + np.einsum("gpk,gkj->gpj", local.reshape(len(boxes), -1, 3), rot)
+
+
+def _outside(x: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """How far points ``x (..., 3)`` lie outside boxes ``(..., 2, 3)`` (broadcast), per axis
+    the largest (negative inside), in float32."""
+    x = x.astype(np.float32)
+    lo, hi = boxes[..., 0, :].astype(np.float32), boxes[..., 1, :].astype(np.float32)
+    return np.maximum(lo - x, x - hi).max(-1)
 
 
 def _compute(spec: AssetSpec, cfg: GraspConfig, gripper: GripperModel) -> Grasps:
@@ -298,8 +345,7 @@ def _compute(spec: AssetSpec, cfg: GraspConfig, gripper: GripperModel) -> Grasps
     roomy = np.zeros(len(centre), bool)  # clear by the wider margin too
     for s in range(0, len(centre), 256):
         part = slice(s, s + 256)
-        local = to_tcp(cloud, centre[part], closing[part], approach[part])
-        gap = box_clearance(local, boxes[part])
+        gap = box_clearance(cloud, centre[part], closing[part], approach[part], boxes[part])
         free[part], roomy[part] = gap > cfg.margin, gap > cfg.wide_margin
     if not free.any():
         raise GraspError(
@@ -353,8 +399,9 @@ def grasp_is_valid(
     gripper boxes."""
     cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
     inside = any((p[:, :3] @ centre + p[:, 3] < 0).all() for p in grasps.planes)
-    local = to_tcp(grasps.points, centre[None], closing[None], approach[None])
-    return bool(inside and box_clearance(local, gripper.boxes(cfg.sweep))[0] > cfg.margin)
+    gap = box_clearance(grasps.points, centre[None], closing[None], approach[None],
+                        gripper.boxes(cfg.sweep)[None])  # fmt: skip
+    return bool(inside and gap[0] > cfg.margin)
 
 
 def posed_grasps(
@@ -411,14 +458,15 @@ def posed_clearance(
     3)``): clear when the swept boxes stay ``clearance`` above the support surface and hold no
     obstacle point (world) within ``obstacle_margin``; roomy when clear and none is within
     ``wide_margin`` either."""
-    corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), -1).reshape(-1, 3)
-    local = np.where(corners[None, None], boxes[:, :, 1][:, :, None], boxes[:, :, 0][:, :, None])
-    rot = np.stack([np.cross(closing, approach), closing, approach], 1)  # rows: TCP x, y, z
-    world = centre[:, None] + np.einsum("gpk,gkj->gpj", local.reshape(len(boxes), -1, 3), rot)
+    world = _box_corners(centre, _tcp_axes(closing, approach), boxes)
     clear = world[..., 2].min(1) >= support_z + cfg.clearance
-    if obstacles is None or not len(obstacles):
+    if obstacles is None or not len(obstacles) or not clear.any():
         return clear, clear
-    pts = to_tcp(obstacles, centre, closing, approach)
-    gap = box_clearance(pts, boxes)
+    rows = np.flatnonzero(clear)  # only grasps clear of the table meet the obstacles
+    gap = np.full(len(centre), np.inf, dtype=np.float32)
+    gap[rows] = box_clearance(
+        obstacles, centre[rows], closing[rows], approach[rows], boxes[rows],
+        max(cfg.wide_margin, cfg.obstacle_margin),
+    )  # fmt: skip
     clear &= gap > cfg.obstacle_margin
     return clear, clear & (gap > cfg.wide_margin)

@@ -14,8 +14,8 @@ parameterisation) and draws everything random from a numpy ``Generator`` the cal
   solutions, then shortcuts.
 - Time: the path is densified to ``waypoint_step`` waypoints (so the spline TOPP-RA fits stays on
   the checked segments) and parameterised by mplib's ``TOPP``. What will run is checked
-  again: where the spline's rounded corners graze an obstacle, each straight segment is
-  parameterised alone.
+  again where the path has corners: where the spline rounds one into an obstacle, each
+  straight segment is parameterised alone.
 """
 
 from __future__ import annotations
@@ -205,8 +205,10 @@ class SeededPlanner:
             return {"status": "Success", "position": dense}
         _, position, *_ = mp.TOPP(dense, time_step)
         # the spline TOPP-RA fits rounds the corners between segments: when that grazes an
-        # obstacle, each straight segment is parameterised alone (stopping at the corners)
-        if not self.all_free(position):
+        # obstacle, each straight segment is parameterised alone (stopping at the corners).
+        # A straight line has no corners: its spline (which reproduces linear functions) is
+        # the segment already checked.
+        if len(path) > 2 and not self.all_free(position):
             pieces = [
                 mp.TOPP(self.densify([a, b]), time_step)[1]
                 for a, b in zip(path[:-1], path[1:], strict=True)

@@ -94,3 +94,21 @@ def test_an_unreachable_pose_fails_with_a_status(planner):
     res = plan(planner, 0, goal=np.array([2.0, 0.0, 0.5, *DOWN]))  # 2 m away
     assert res["status"].startswith("IK failed"), res["status"]
     assert "position" not in res
+
+
+def test_a_straight_line_runs_on_the_checked_segment(planner):
+    """Without the wall the direct joint line is free: the time-parameterised path stays on
+    that segment (the planner checks the line once and not the spline again, which is only
+    sound because TOPP-RA's spline reproduces a straight line)."""
+    mp = planner.mp
+    res = planner.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, False)
+    assert res["status"] == "Success", res["status"]
+    path = res["position"]
+    start, end = path[0], path[-1]
+    along = (path - start) @ (end - start) / np.dot(end - start, end - start)
+    off = path - start - along[:, None] * (end - start)
+    assert np.abs(off).max() < 1e-6
+    assert along.min() > -1e-6 and along.max() < 1 + 1e-6
+    assert np.all(np.diff(along) >= -1e-9)  # forwards only
+    for q in path[:: max(1, len(path) // 20)]:
+        assert not mp.check_for_self_collision(qpos=np.concatenate([q, REST[7:]]))
