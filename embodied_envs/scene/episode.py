@@ -357,6 +357,9 @@ class EpisodeSampler:
         self.top = Region.of(self._posed(ctx_hull, ctx_poses), self.top_z)  # whole top
         self.robot_xy = a([r.p[:2] for r in robots])
         self.robot_yaw = a([r.yaw for r in robots])
+        # the robot base's footprint per env (fixed for the configuration) and its normals
+        self.robot_foot = rotate(self.shapes.vertices[0], self.robot_yaw) + self.robot_xy[:, None]
+        self.robot_foot_normals = rotate(self.shapes.normals[0], self.robot_yaw)
         self._init_goals(base, ctx, ctx_poses, layouts)
         # prepared starts: per env a block of its next episodes, and which one comes next
         self.block = max(1, STARTS_PER_DRAW // len(layouts))
@@ -520,8 +523,8 @@ class EpisodeSampler:
         shapes = self.shapes
         polys = a.zeros((b, n + 1, *shapes.vertices.shape[1:]))
         poly_normals, origins = a.zeros(polys.shape), a.zeros((b, n + 1, 2))
-        polys[:, 0] = rotate(shapes.vertices[0], robot_yaw) + robot_xy[:, None]
-        poly_normals[:, 0], origins[:, 0] = rotate(shapes.normals[0], robot_yaw), robot_xy
+        polys[:, 0], poly_normals[:, 0] = self.robot_foot[env_idx], self.robot_foot_normals[env_idx]
+        origins[:, 0] = robot_xy
         placed = (polys, poly_normals, origins)
         drawn = {}
         ok_env = a.zeros(b, "bool") | True
