@@ -72,7 +72,9 @@ class SceneEpisodes:
     def fallback(self) -> dict[str, torch.Tensor]:
         """The configuration's pose of each slot's objects, ``(num_envs, 7)`` (one group)."""
         if len(self.samplers) == 1:
-            return {self.slots[0][n]: p for n, p in self.samplers[0].fallback.items()}
+            device = self.top_z.device
+            fallback = self.samplers[0].fallback.items()
+            return {self.slots[0][n]: torch.as_tensor(p, device=device) for n, p in fallback}
         raise AttributeError("fallback poses are per group: see samplers[g].fallback")
 
     def reseeded(self, seed, env_idx, enhanced_determinism: bool) -> None:

@@ -56,8 +56,10 @@ class SolverConfig:
     lift_heights: tuple[float, ...] = (0.10, 0.05)  # m, lifts after grasping, tried in order
     gripper_steps: int = 8  # control steps to close the gripper
     hold_steps: int = 10  # control steps holding still at the goal
-    joint_vel_scale: float = 2.0  # times mplib's default joint velocity limit (1 rad/s)
-    joint_acc_scale: float = 5.0  # times mplib's default joint acceleration limit (1 rad/s^2)
+    # rad/s and rad/s^2 per arm joint, within the Panda's (Franka's datasheet: velocity 2.175
+    # for joints 1-4 and 2.61 for 5-7, acceleration 7.5 at least)
+    joint_vel_limits: tuple[float, ...] = (2.0, 2.0, 2.0, 2.0, 2.5, 2.5, 2.5)
+    joint_acc_limits: tuple[float, ...] = (7.0,) * 7
     motion: MotionConfig = MotionConfig()  # the seeded IK and RRT-Connect (solvers/motion.py)
     max_path_steps: int = 120  # a longer plan (a wrist flip, a detour) is refused as "long"
     obstacle_points: int = 3000  # surface samples per obstacle actor
@@ -180,12 +182,8 @@ class PickPlaceSolver:
                 move_group="panda_hand_tcp",
             )
             planner.set_base_pose(base_poses[i])
-            planner.joint_vel_limits = (
-                np.asarray(planner.joint_vel_limits) * self.cfg.joint_vel_scale
-            )
-            planner.joint_acc_limits = (
-                np.asarray(planner.joint_acc_limits) * self.cfg.joint_acc_scale
-            )
+            planner.joint_vel_limits = np.asarray(self.cfg.joint_vel_limits, dtype=np.float64)
+            planner.joint_acc_limits = np.asarray(self.cfg.joint_acc_limits, dtype=np.float64)
             self.planners.append(planner)
         self.motion = [SeededPlanner(p, self.cfg.motion) for p in self.planners]
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
