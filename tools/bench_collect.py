@@ -11,13 +11,14 @@ In one run, interleaved, each timed as a whole command (start-up, planning, phys
 Prints successful demonstrations per minute, the ratio to PickCube's runner (the issue's target
 is >= 0.6 with one worker) and MB per 100 demonstrations.
 
-Usage: python tools/bench_collect.py [--num 20] [--layout FILE ...]
+Usage: python tools/bench_collect.py [--num 20] [--repeats 1] [--layout FILE ...]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -60,16 +61,22 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     ap.add_argument("--num", type=int, default=20)
+    ap.add_argument("--repeats", type=int, default=1, help="pairs per case (median ratio)")
     ap.add_argument("--layout", type=Path, nargs="+", default=None)
     args = ap.parse_args()
     runs = [(path, 1) for path in args.layout or shipped_layouts()]
     runs.append((default_layout(), 2))
     for path, workers in runs:
-        base = pickcube(args.num)
-        rate, mb = ours(args.num, path, workers)
+        pairs = []
+        for _ in range(args.repeats):  # each pair back to back: the machine drifts
+            base = pickcube(args.num)
+            pairs.append((*ours(args.num, path, workers), base))
+        rate, mb, base = (statistics.median(x) for x in zip(*pairs, strict=True))
+        ratio = statistics.median(r / b for r, _, b in pairs)
         print(
             f"{path.name:18s} {workers} worker(s): {rate:5.1f} successful demonstrations/min; "
-            f"PickCube-v1 runner (1 process) {base:5.1f}/min; ratio {rate / base:.2f}; "
+            f"PickCube-v1 runner (1 process) {base:5.1f}/min; median ratio {ratio:.2f} of "
+            f"{args.repeats} pair(s) {[round(r / b, 2) for r, _, b in pairs]}; "
             f"{mb:.1f} MB per 100 demonstrations (obs none)",
             flush=True,
         )
