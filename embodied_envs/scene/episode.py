@@ -49,6 +49,7 @@ from embodied_envs.layout.rules import (
     candidates_fit,
     first_true,
     half_planes,
+    inside,
     inward_normals,
     rotate,
     within_reach,
@@ -213,10 +214,10 @@ class Region:
         return lo + u[:, :2].swapaxes(-1, -2) * (hi - lo), (2 * u[:, 2] - 1) * math.pi
 
     def contains(self, points):
-        """``points (b, ..., 2)`` -> ``(b, ...)`` bool."""
+        """``points (b, ..., 2)`` -> ``(b, ...)`` bool (``rules.inside`` of each point)."""
         b = self.offsets.shape[0]
-        flat = points.reshape(b, -1, 2)
-        ok = (flat @ self.normals.swapaxes(1, 2) >= self.offsets[:, None] - 1e-9).all(-1)
+        flat = points.reshape(b, -1, 1, 2)  # each point a one-vertex polygon
+        ok = inside(flat, self.normals[:, None], self.offsets[:, None])
         return ok.reshape(points.shape[:-1])
 
 
