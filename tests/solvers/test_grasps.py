@@ -15,6 +15,7 @@ from embodied_envs.solvers.grasps import (
     GripperModel,
     _compute,
     asset_grasps,
+    box_clearance,
     posed_grasps,
     to_tcp,
 )
@@ -78,6 +79,40 @@ def test_the_same_asset_gives_the_same_ranked_list():
     for field in ("centre", "closing", "approach", "width", "opening", "score"):
         np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
     assert np.all(np.diff(a.score) >= 0), "best first"
+
+
+def test_the_coarse_first_check_changes_no_grasp(monkeypatch):
+    """Synthesis checks each grasp against a sixth of the object's points first and drops
+    those it hits: the ranked list is the one every point gives (a coarse set of all points)."""
+    from embodied_envs.solvers import grasps as module
+
+    spec = spec_of("handled_cup")
+    fast = _compute(spec, GraspConfig(), GripperModel())
+    monkeypatch.setattr(module, "COARSE_FRACTION", 1)
+    full = _compute(spec, GraspConfig(), GripperModel())
+    for field in ("centre", "closing", "approach", "width", "opening", "score"):
+        np.testing.assert_array_equal(getattr(fast, field), getattr(full, field))
+
+
+def test_bounded_box_clearance_is_exact_up_to_its_bound():
+    """With a bound, only points near a grasp's boxes are measured: below the bound the
+    clearance is the one every point gives, above it some value above the bound."""
+    grasps = asset_grasps(spec_of("ring"))
+    rng = np.random.default_rng(0)
+    k = rng.choice(len(grasps), 200, replace=False)
+    centre, closing, approach = grasps.centre[k], grasps.closing[k], grasps.approach[k]
+    boxes = GripperModel().boxes(GraspConfig().sweep, grasps.opening[k])
+    points = centre[rng.integers(0, 200, 100)] + rng.normal(0, 0.35, (100, 3))  # sparse
+    full = box_clearance(points, centre, closing, approach, boxes)
+    dense = to_tcp(points, centre, closing, approach)[:, :, None]  # the definition, spelled out
+    want = np.maximum(boxes[:, None, :, 0] - dense, dense - boxes[:, None, :, 1]).max(-1)
+    np.testing.assert_allclose(full, want.min((1, 2)), atol=1e-6)
+    for bound in (0.0, 0.003, 0.015, 0.05):
+        got = box_clearance(points, centre, closing, approach, boxes, bound)
+        near = full <= bound
+        assert 0.1 < near.mean() < 0.95, bound  # both sides are exercised
+        np.testing.assert_allclose(got[near], full[near], atol=1e-6)
+        assert (got[~near] > bound).all()
 
 
 def test_posed_grasps_clear_the_table_and_the_obstacles():
