@@ -33,6 +33,7 @@ from embodied_envs.layout.rules import (
     half_planes,
     inward_normals,
     overlap,
+    pad_polygons,
     rotate,
 )
 from embodied_envs.layout.schema import MAX_INTERPENETRATION, REST_TOLERANCE, LayoutInfo
@@ -234,16 +235,12 @@ class _Placer:
     def placed(self, nodes: list[str], extra: list[np.ndarray] = ()) -> tuple:
         """The world footprints of ``nodes`` (and ``extra`` polygons) as ``candidates_fit``'s
         ``placed``: one env, padded to a common vertex count, with bounding circles."""
-        polys = [self.obstacles[n] for n in nodes] + list(extra)
-        k = max([len(p) for p in polys], default=3)
-        padded = np.zeros((1, len(polys), k, 2))
-        for i, p in enumerate(polys):  # repeating the last vertex adds zero-length edges
-            padded[0, i] = np.concatenate([p, np.repeat(p[-1:], k - len(p), 0)])
+        padded = pad_polygons([self.obstacles[n] for n in nodes] + list(extra))[None]
         centres = padded.mean(2)
         radii = np.linalg.norm(padded - centres[:, :, None], axis=-1).max(-1)[0]
         return padded, inward_normals(padded), centres, radii
 
-    def draws(self, node: str, region, placed, reach, fails, xy_draw) -> LayoutPose | None:
+    def draws(self, node: str, region, placed, reach, fails, xy_draw):
         """Candidates of ``node`` in batches until one meets every rule (``candidates_fit``);
         its ``(x, y, yaw)``, or None after ``max_attempts``. Rejections are added to ``fails``
         (per rule; the clearance among the candidates meeting the others)."""

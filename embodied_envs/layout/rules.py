@@ -50,6 +50,15 @@ def inward_normals(poly):
     return n / xp.clip(xp.hypot(n[..., 0], n[..., 1]), 1e-12, None)[..., None]
 
 
+def pad_polygons(polygons) -> np.ndarray:
+    """Polygons ``[(m_i, 2)]`` as one array ``(n, max m_i, 2)``, each padded by repeating its
+    last vertex: the padded edges have zero length and zero normals, which are never
+    separating axes (:func:`overlap`) and change no support."""
+    size = max(len(p) for p in polygons)
+    return np.array([np.concatenate([p, np.repeat(p[-1:], size - len(p), 0)])
+                     for p in polygons])  # fmt: skip
+
+
 def half_planes(poly):
     """``(normals, offsets)`` of a CCW polygon: a point p is inside iff ``normals @ p >=
     offsets`` on every edge."""
@@ -133,7 +142,7 @@ def first_true(mask):
 
 
 def candidates_fit(
-    xy, yaw, foot, foot_normals, radius: float, region, placed, clearance: float, reach=None
+    xy, yaw, foot, foot_normals, radius, region, placed, clearance: float, reach=None
 ):
     """Which candidate poses of one object meet every rule, in each env; the one test both
     placements run.

@@ -51,6 +51,7 @@ from embodied_envs.layout.rules import (
     half_planes,
     inside,
     inward_normals,
+    pad_polygons,
     rotate,
     within_reach,
 )
@@ -124,8 +125,8 @@ class Arrays:
             if isinstance(x, torch.Tensor):
                 x = x.detach().cpu().numpy()
             return np.asarray(x, dtype=dtype)
-        if isinstance(x, list | tuple):
-            x = np.array(x)
+        if not isinstance(x, torch.Tensor):
+            x = np.array(x)  # a copy: cached asset arrays are read-only
         return torch.as_tensor(x, dtype=getattr(torch, dtype), device=self.device)
 
     def zeros(self, shape, dtype: str = "float32"):
@@ -152,8 +153,7 @@ class Arrays:
 class Shapes:
     """Convex polygons in their own frames, as the placement rules take them.
 
-    Padded to a common vertex count ``M`` by repeating the last vertex: the padded edges have
-    zero length and zero normals, which are never separating axes (``rules.overlap``).
+    Padded to a common vertex count ``M`` (``rules.pad_polygons``).
 
     Attributes:
         vertices: ``(S, M, 2)`` counter-clockwise vertices.
@@ -167,9 +167,7 @@ class Shapes:
 
     @classmethod
     def of(cls, polygons: list[np.ndarray], arrays: Arrays) -> Shapes:
-        size = max(len(p) for p in polygons)
-        verts = np.array([np.concatenate([p, np.repeat(p[-1:], size - len(p), 0)])
-                          for p in polygons])  # fmt: skip
+        verts = pad_polygons(polygons)
         radii = np.linalg.norm(verts, axis=-1).max(-1)
         return cls(arrays(verts), arrays(inward_normals(verts)), arrays(radii))
 
@@ -227,7 +225,6 @@ class _Item:
 
     node: str
     parent: str
-    radius: float  # of the footprint around the actor origin
     min_z: float  # lowest collision point in its own frame
     manipulated: bool
     avoid: object  # int array: the placed footprints it keeps clear of (shape indices: robot
@@ -305,7 +302,7 @@ class EpisodeSampler:
         obstacles = ["robot"] + [node for node, _ in order]
         ancestors = {ctx: {ctx}}
         self.items: list[_Item] = []
-        for j, ((node, parent), foot) in enumerate(zip(order, feet, strict=True)):
+        for j, (node, parent) in enumerate(order):
             ancestors[node] = ancestors[parent] | {node}
             top = None
             hull, top_z, shrunk = local_top(base, node, limits.top_band, limits.hull_margin)
@@ -322,7 +319,6 @@ class EpisodeSampler:
                 _Item(
                     node=node,
                     parent=parent,
-                    radius=float(np.linalg.norm(foot, axis=1).max()),
                     min_z=node_geometry(base, node).min_z,
                     manipulated=node in base.manipulated_objs,
                     avoid=a.index(avoid),
@@ -586,7 +582,7 @@ class EpisodeSampler:
                 continue
             xy, yaw = region.candidates(u[..., lo:hi])
             masks = candidates_fit(
-                xy, yaw, shapes.vertices[shape], shapes.normals[shape], it.radius,
+                xy, yaw, shapes.vertices[shape], shapes.normals[shape], shapes.radii[shape],
                 (region.normals, region.offsets), keep_clear, lim.clearance, reach,
             )  # fmt: skip
             ok = masks.pop("clear")
