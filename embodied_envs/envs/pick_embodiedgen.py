@@ -24,6 +24,7 @@ from embodied_envs.config import (
 )
 from embodied_envs.envs.arguments import check_quaternion, dataclass_arg
 from embodied_envs.envs.base import CheckedEnv
+from embodied_envs.envs.contacts import is_grasping
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
 from embodied_envs.layout import GoalRegion, LayoutError, LayoutInfo, PlacementLimits
 from embodied_envs.layout.limits import check_number
@@ -341,7 +342,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
             "fail": self.layout_scene.off_table(self.obj.pose.p, self.fail_drop),
             "is_obj_placed": is_obj_placed,
             "is_robot_static": is_robot_static,
-            "is_grasped": self.agent.is_grasping(self.obj),
+            "is_grasped": is_grasping(self.agent, self.obj),
             "obj_to_goal_pos": obj_to_goal_pos,
         }
 

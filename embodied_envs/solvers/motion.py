@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import mplib
 import numpy as np
 
+BOUND_SLACK = 0.9  # min_steps' bound is this part of the time-optimal rest-to-rest time
+
 
 @dataclass(frozen=True)
 class MotionConfig:
@@ -176,6 +178,17 @@ class SeededPlanner:
             out.extend(a + (b - a) * (k / n) for k in range(1, n + 1))
         return np.vstack(out)
 
+    def min_steps(self, start: np.ndarray, goals: list[np.ndarray], time_step: float) -> int:
+        """A lower bound on the waypoints of any time-parameterised path from ``start`` to one
+        of ``goals`` (move group): every joint at most at its velocity and acceleration limits,
+        from rest to rest (``BOUND_SLACK`` below that time, for the spline's rounding)."""
+        v = np.asarray(self.mp.joint_vel_limits, dtype=np.float64)
+        a = np.asarray(self.mp.joint_acc_limits, dtype=np.float64)
+        d = np.abs(np.asarray(goals, dtype=np.float64) - start)
+        # a joint moving d: accelerate to v, cruise, brake; or accelerate and brake (triangle)
+        t = np.where(d <= v * v / a, 2 * np.sqrt(d / a), d / v + v / a)
+        return int(BOUND_SLACK * t.max(axis=1).min() / time_step)
+
     def plan_to_pose(
         self,
         goal_world: np.ndarray,
@@ -183,8 +196,14 @@ class SeededPlanner:
         rng: np.random.Generator,
         time_step: float,
         use_point_cloud: bool,
+        within: int | None = None,
     ) -> dict:
-        """mplib's ``plan_qpos_to_pose``, seeded: {"status", "position" (T, move group)}."""
+        """mplib's ``plan_qpos_to_pose``, seeded: {"status", "position" (T, move group)}.
+
+        ``within``: a path of this many waypoints or more is not wanted (a better one is known);
+        when the IK solutions show that no path can be shorter (:meth:`min_steps`), nothing is
+        planned and the status says so.
+        """
         mp = self.mp
         qpos = np.clip(qpos.astype(np.float64), self.limits[:, 0] + 1e-3, self.limits[:, 1] - 1e-3)
         mp.planning_world.set_use_point_cloud(use_point_cloud)
@@ -194,6 +213,8 @@ class SeededPlanner:
         if not goals:
             return {"status": f"IK failed (closest {closest:.4f})"}
         start = qpos[self.idx]
+        if within is not None and self.min_steps(start, goals, time_step) >= within:
+            return {"status": f"no path shorter than {within} steps"}
         path = next(([start, g] for g in goals if self.edge_free(start, g)), None)
         if path is None:
             path = self.rrt_connect(start, goals, rng)

@@ -22,6 +22,7 @@ import sapien
 import torch
 import trimesh
 
+from embodied_envs.envs.contacts import is_grasping
 from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.solvers.grasps import (
@@ -161,7 +162,9 @@ class PickPlaceSolver:
         self.env = env
         self.base = env.unwrapped
         self.cfg = config or SolverConfig()
-        self.rng = np.random.default_rng(seed)
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)  # the obstacle clouds
+        self.stages = 0  # _per_env calls so far: part of each plan's random key
         self.num_envs = self.base.num_envs
         if self.base.control_mode != "pd_joint_pos":
             raise ValueError(
@@ -219,12 +222,18 @@ class PickPlaceSolver:
             self.planners[i].update_point_cloud(cloud[~near_base], radius=self.cfg.obstacle_radius)
 
     # --- planning ------------------------------------------------------------------------
-    def _plan(self, i, pose: sapien.Pose, qpos: np.ndarray, how: str, obstacles: bool):
+    def _plan(
+        self, i, pose: sapien.Pose, qpos: np.ndarray, how: str, obstacles: bool,
+        key: tuple = (), within: int | None = None,
+    ):  # fmt: skip
         """A joint path to ``pose`` for env i by ``how`` ("screw": mplib's straight screw
         motion; "rrt": the seeded planner), and a status ("" on success).
 
         ``obstacles=False`` is for the short straight moves next to the support surface (the
         final descent from the pre-grasp and the lift), which the surface's cloud would block.
+        ``key`` names the plan within the episode: its random draws come from the solver's
+        seed and this key alone, so skipping one plan changes no other. ``within``: a path of
+        this many steps or more is not wanted (a better option is known; "rrt" only).
         """
         target = np.concatenate([pose.p, pose.q])
         dt = self.base.control_timestep
@@ -233,7 +242,8 @@ class PickPlaceSolver:
                 target, qpos.copy(), time_step=dt, use_point_cloud=obstacles
             )
         else:
-            res = self.motion[i].plan_to_pose(target, qpos, self.rng, dt, obstacles)
+            rng = np.random.default_rng([self.seed, i, *key])
+            res = self.motion[i].plan_to_pose(target, qpos, rng, dt, obstacles, within)
         if res["status"] != "Success" or not len(res["position"]):
             return None, res["status"]
         if len(res["position"]) > self.cfg.max_path_steps:
@@ -274,6 +284,7 @@ class PickPlaceSolver:
         option_steps: int | None = None,
         then=None,
         path_ok=None,
+        on_choice=None,
     ) -> list[sapien.Pose | None]:
         """Plan and execute one stage in every env that has not failed yet.
 
@@ -291,19 +302,27 @@ class PickPlaceSolver:
                 follows from where option k's path ends (None: it cannot be planned), added
                 to the option's cost.
             path_ok: ``path_ok(i, path)``: why env i's planned path is refused ("" when not).
+            on_choice: ``on_choice(i, k)``: env i will run option k (before any env moves).
 
         Returns:
             Per env the pose that was planned to (None where none could be).
         """
         qpos = self._qpos()
         paths, chosen = [], []
+        self.stages += 1
         for i, target in enumerate(targets):
             options = target if isinstance(target, list) else [target]
             best, failures = None, []
             if target is not None and not self.reports[i].plan_failures:
-                for how in methods:
+                for m, how in enumerate(methods):
                     for k, pose in enumerate(options):
-                        path, status = self._plan(i, pose, qpos[i], how, obstacles)
+                        # branch and bound: an option whose rank alone, or whose shortest
+                        # possible path, costs what the best so far does is not planned
+                        within = None if best is None else best[0] - (option_steps or 0) * k
+                        if within is not None and within <= 0:
+                            break  # later options rank lower still
+                        key = (self.stages, m, k)
+                        path, status = self._plan(i, pose, qpos[i], how, obstacles, key, within)
                         if path is not None and path_ok is not None:
                             status = path_ok(i, path)
                             path = None if status else path
@@ -312,18 +331,22 @@ class PickPlaceSolver:
                             failures.append(f"{label}{how}: {status}")
                             continue
                         cost = len(path) + (option_steps or 0) * k
+                        if best is not None and cost >= best[0]:
+                            continue  # what follows only adds steps
                         if then is not None:
                             end = np.concatenate([path[-1][:7], qpos[i, 7:]])
                             more = then(i, k, end)
                             cost += self.cfg.max_path_steps if more is None else more
                         if best is None or cost < best[0]:
-                            best = (cost, path, pose)
+                            best = (cost, path, pose, k)
                         if option_steps is None:
                             break
                     if best is not None:
                         break
                 if best is None:
                     self.reports[i].plan_failures.append(f"{stage}: " + "; ".join(failures))
+                elif on_choice is not None:
+                    on_choice(i, best[3])
             paths.append(None if best is None else best[1])
             chosen.append(None if best is None else best[2])
         self._execute(paths, extra_steps=settle)  # settle: steps holding the last waypoint
@@ -391,8 +414,8 @@ class PickPlaceSolver:
         return np.einsum("nij,ni->nj", tcp[:, :3, :3], obj - tcp[:, :3, 3])
 
     def _grasping(self) -> np.ndarray:
-        """Per env: both fingers press on the target (ManiSkill's ``is_grasping``)."""
-        return self.base.agent.is_grasping(self.base.obj).cpu().numpy().reshape(-1)
+        """Per env: both fingers press on the target (ManiSkill's ``is_grasping`` rule)."""
+        return is_grasping(self.base.agent, self.base.obj).cpu().numpy().reshape(-1)
 
     def _steps_left(self) -> int:
         limit = getattr(getattr(self.env, "spec", None), "max_episode_steps", None) or 10**9
@@ -417,18 +440,16 @@ class PickPlaceSolver:
         def descent(i, k, qpos):  # the straight move from option k's pre-grasp to its grasp
             return self._plan(i, targets[i][k] * up.inv(), qpos, "screw", False)[0]
 
+        def pre_shape(i, k):  # the fingers open to the chosen grasp's opening on the way
+            self.gripper[i] = gripper_action(candidates[i][k][1])
+
         pre = self._per_env(
             "approach", targets, ("rrt", "screw"), settle=cfg.settle_steps,
             option_steps=cfg.option_steps,
             then=lambda i, k, q: None if (p := descent(i, k, q)) is None else len(p),
+            on_choice=pre_shape,
         )  # fmt: skip
         grasps = [None if p is None else p * up.inv() for p in pre]
-        # pre-shape: open the fingers to the chosen grasp's opening above the object
-        for i, p in enumerate(pre):
-            if p is not None:
-                k = next(k for k, t in enumerate(targets[i]) if t is p)
-                self.gripper[i] = gripper_action(candidates[i][k][1])
-        self._execute([None] * self.num_envs, extra_steps=cfg.gripper_steps)
         # the arm lags its joint targets: reach the grasp before the fingers close
         self._per_env("grasp", grasps, obstacles=False, settle=cfg.settle_steps)
         self._set_gripper(todo, GRIPPER_CLOSED)

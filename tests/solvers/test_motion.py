@@ -112,3 +112,44 @@ def test_a_straight_line_runs_on_the_checked_segment(planner):
     assert np.all(np.diff(along) >= -1e-9)  # forwards only
     for q in path[:: max(1, len(path) // 20)]:
         assert not mp.check_for_self_collision(qpos=np.concatenate([q, REST[7:]]))
+
+
+def test_min_steps_bounds_every_time_parameterised_path(planner):
+    """``min_steps`` (the branch-and-bound of the solver's options) is below the waypoints
+    TOPP-RA gives, for straight lines and detours of every length, at the solver's joint
+    limits and at mplib's defaults; and it is not loose (within 80% on straight lines)."""
+    mp = planner.mp
+    rng = np.random.default_rng(0)
+    defaults = mp.joint_vel_limits.copy(), mp.joint_acc_limits.copy()
+    solver = np.array([2.0] * 4 + [2.5] * 3), np.full(7, 7.0)
+    try:
+        for vel, acc in (defaults, solver):
+            mp.joint_vel_limits, mp.joint_acc_limits = vel, acc
+            tight = []
+            for scale in (0.01, 0.05, 0.2, 0.5, 1.0) * 20:
+                a = rng.uniform(planner.lo, planner.hi)
+                b = np.clip(a + rng.uniform(-1, 1, 7) * scale * (planner.hi - planner.lo),
+                            planner.lo, planner.hi)  # fmt: skip
+                detour = rng.random() < 0.5
+                via = [a, (a + b) / 2 + rng.uniform(-0.3, 0.3, 7) * scale, b] if detour else [a, b]
+                dense = planner.densify(via)
+                steps = len(mp.TOPP(dense, DT)[1])
+                bound = planner.min_steps(a, [b, b + 10.0], DT)  # the nearer goal counts
+                assert bound <= steps, (scale, detour, bound, steps)
+                if not detour and steps >= 10:
+                    tight.append(bound / steps)
+            assert min(tight) > 0.8, tight
+    finally:
+        mp.joint_vel_limits, mp.joint_acc_limits = defaults
+
+
+def test_within_skips_what_cannot_be_shorter(planner):
+    """``within``: no path is planned when the IK solutions show none can be shorter; with
+    room the plan is the one planned without a bound."""
+    free = planner.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, False)
+    steps = len(free["position"])
+    tight = planner.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, False, 1)
+    assert tight["status"] == "no path shorter than 1 steps" and "position" not in tight
+    roomy = planner.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, False, steps + 1)
+    assert roomy["status"] == "Success"
+    assert np.array_equal(roomy["position"], free["position"])

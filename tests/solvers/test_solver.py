@@ -72,3 +72,40 @@ def test_expert_actions_do_not_depend_on_the_episodes_before():
     finally:
         fresh.close()
         used.close()
+
+
+def test_bounded_options_give_the_actions_of_planning_them_all(monkeypatch):
+    """The approach's branch and bound skips options that cannot beat the best so far
+    (``SeededPlanner.min_steps``); with the bound switched off every option is planned, and
+    the actions are the same byte for byte (each plan draws from its own random key, so a
+    skipped plan changes no other)."""
+    from embodied_envs.solvers.motion import SeededPlanner
+
+    statuses = []
+    plan = SeededPlanner.plan_to_pose
+
+    def recorded(self, *args, **kwargs):
+        res = plan(self, *args, **kwargs)
+        statuses.append(res["status"])
+        return res
+
+    monkeypatch.setattr(SeededPlanner, "plan_to_pose", recorded)
+
+    def actions():  # each in a new env, as each collect run starts one
+        env = _Recorder(gym.make("PickEmbodiedGen-v1", control_mode="pd_joint_pos"))
+        try:
+            taken = _expert_actions(env, 2)
+            assert bool(env.unwrapped.evaluate()["success"][0])
+            return taken
+        finally:
+            env.close()
+
+    bounded = actions()
+    before = list(statuses)
+    assert sum(s.startswith("no path shorter") for s in before) >= 2, before
+    monkeypatch.setattr(SeededPlanner, "min_steps", lambda self, *a: 0)
+    statuses.clear()
+    full = actions()
+    assert not any(s.startswith("no path shorter") for s in statuses)
+    assert len(statuses) == len(before)  # the skipped options are planned now
+    assert bounded.tobytes() == full.tobytes()
