@@ -145,10 +145,6 @@ def polygon_centroid(poly: np.ndarray) -> np.ndarray:
     return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
 
 
-
-
-
-
 def shrink_polygon(poly: np.ndarray, margin: float) -> np.ndarray:
     """The CCW convex polygon moved inward by ``margin`` on every edge."""
     n, c = half_planes(poly)
@@ -165,16 +161,10 @@ def shrink_polygon(poly: np.ndarray, margin: float) -> np.ndarray:
     return convex_hull_2d(pts[keep])
 
 
-
-
-
-
 def square(center: np.ndarray, side: float, yaw: float) -> np.ndarray:
     h = side / 2.0
     local = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
     return rotate(local, np.float64(yaw)) + center[:2]
-
-
 
 
 @dataclass(frozen=True)

@@ -176,9 +176,7 @@ def yaw_raw_poses(xy, z, yaw):
     """ManiSkill raw poses ``(b, 7)``, ``[x, y, z, qw, qx, qy, qz]``, of yaw-only rotations."""
     xp = array_module(yaw)
     zeros = xp.zeros_like(yaw)
-    return xp.stack(
-        [xy[:, 0], xy[:, 1], z, xp.cos(yaw / 2), zeros, zeros, xp.sin(yaw / 2)], -1
-    )
+    return xp.stack([xy[:, 0], xy[:, 1], z, xp.cos(yaw / 2), zeros, zeros, xp.sin(yaw / 2)], -1)
 
 
 @dataclass(frozen=True)
