@@ -28,7 +28,7 @@ def is_grasping(agent, obj, min_force: float = MIN_FORCE, max_angle: float = MAX
     left = agent.finger1_link._bodies[0].entity
     right = agent.finger2_link._bodies[0].entity
     target = obj._bodies[0].entity
-    impulse = np.zeros((2, 3))  # on the left and the right finger
+    impulses, rows = [], []  # every contact point's impulse on a finger; (finger, sign)
     for contact in scene.px.get_contacts():
         a, b = contact.bodies[0].entity, contact.bodies[1].entity
         if b == target:
@@ -38,8 +38,13 @@ def is_grasping(agent, obj, min_force: float = MIN_FORCE, max_angle: float = MAX
         else:
             continue
         if finger == left or finger == right:
-            total = np.sum([point.impulse for point in contact.points], axis=0)
-            impulse[0 if finger == left else 1] += sign * total
+            points = [point.impulse for point in contact.points]
+            impulses.extend(points)
+            rows.extend([(0 if finger == left else 1, sign)] * len(points))
+    impulse = np.zeros((2, 3))
+    if impulses:
+        side, sign = np.array(rows).T
+        np.add.at(impulse, side.astype(int), np.array(impulses) * sign[:, None])
     force = impulse / scene.px.timestep
     # the directions that open the fingers: the left finger's y axis, minus the right one's
     opening = np.stack(
