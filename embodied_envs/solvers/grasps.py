@@ -144,6 +144,29 @@ def _seed(spec: AssetSpec) -> int:
     return int.from_bytes(hashlib.sha256(spec.collision.path.read_bytes()).digest()[:8], "little")
 
 
+def hull_points(spec: AssetSpec, n: int) -> np.ndarray:
+    """About ``n`` points on the convex hulls of an asset's collision parts, in its own frame
+    (the obstacle cloud the planner keeps clear of); sampled once per file version, seeded by
+    the asset's content."""
+
+    def sample() -> np.ndarray:
+        import trimesh
+
+        parts = asset_geometry(spec).parts
+        rng = np.random.default_rng(_seed(spec))
+        per = max(n // max(len(parts), 1), 50)
+        points = []
+        for verts in parts:
+            with np.errstate(all="ignore"):  # thin parts have near-zero volume; sampling is fine
+                hull = trimesh.Trimesh(vertices=verts).convex_hull
+                pts, _ = trimesh.sample.sample_surface(hull, per, seed=int(rng.integers(2**31)))
+            points.append(pts)
+        return np.concatenate(points)
+
+    key = ("hull points", FileVersion.of(spec.collision.path), spec.collision, n)
+    return ASSET_FILES.get(key, sample)
+
+
 def _outer_surface(parts, n: int, rng: np.random.Generator):
     """Points and outward normals on the union of convex parts, none inside another part."""
     import trimesh  # only where grasps are computed (the CLI starts without it)

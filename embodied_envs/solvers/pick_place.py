@@ -20,7 +20,6 @@ import mplib
 import numpy as np
 import sapien
 import torch
-import trimesh
 
 from embodied_envs.envs.contacts import is_grasping
 from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
@@ -30,6 +29,7 @@ from embodied_envs.solvers.grasps import (
     GripperModel,
     asset_grasps,
     grasp_is_valid,
+    hull_points,
     posed_clearance,
     posed_grasps,
 )
@@ -105,17 +105,6 @@ class SolveResult:
         return np.asarray(torch.as_tensor(self.info["success"]).cpu().numpy()).reshape(-1)
 
 
-def _sample_surface(vertices_parts: tuple[np.ndarray, ...], n: int, rng: np.random.Generator):
-    points = []
-    per = max(n // max(len(vertices_parts), 1), 50)
-    for verts in vertices_parts:
-        with np.errstate(all="ignore"):  # thin parts have near-zero volume; sampling is fine
-            hull = trimesh.Trimesh(vertices=verts).convex_hull
-            pts, _ = trimesh.sample.sample_surface(hull, per, seed=int(rng.integers(2**31)))
-        points.append(pts)
-    return np.concatenate(points)
-
-
 def grasp_frame(
     vertices_world: np.ndarray, support_z: float, cfg: SolverConfig, current_y: np.ndarray
 ):
@@ -154,8 +143,10 @@ class PickPlaceSolver:
         env: the env (optionally wrapped); actions go through ``env.step`` so wrappers such as
             video recorders see every step.
         config: tunable numbers.
-        seed: seeds everything random the solver does (obstacle point sampling, IK restarts,
-            RRT-Connect): the same env state and seed give the same actions.
+        seed: seeds everything random the solver does (IK restarts, RRT-Connect; each plan
+            from this seed and its place in the episode): the same env state and seed give
+            the same actions. The obstacle clouds are sampled once per asset
+            (``grasps.hull_points``, seeded by the asset's content).
     """
 
     def __init__(self, env, config: SolverConfig | None = None, seed: int = 0):
@@ -163,7 +154,6 @@ class PickPlaceSolver:
         self.base = env.unwrapped
         self.cfg = config or SolverConfig()
         self.seed = seed
-        self.rng = np.random.default_rng(seed)  # the obstacle clouds
         self.stages = 0  # _per_env calls so far: part of each plan's random key
         self.num_envs = self.base.num_envs
         if self.base.control_mode != "pd_joint_pos":
@@ -209,10 +199,9 @@ class PickPlaceSolver:
             for node, actor in actors.items():
                 if node == layout.target_node:
                     continue
-                geom = asset_geometry(layout.asset_spec(node))
+                points = hull_points(layout.asset_spec(node), self.cfg.obstacle_points)
                 pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
-                parts = tuple(pose.transform_points(p) for p in geom.parts)
-                clouds.append(_sample_surface(parts, self.cfg.obstacle_points, self.rng))
+                clouds.append(pose.transform_points(points))
             cloud = np.concatenate(clouds)
             self.clouds.append(cloud)
             base = self.base.layout_scene.robot_poses[i, :3].cpu().numpy()
