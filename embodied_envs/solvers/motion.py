@@ -33,7 +33,7 @@ class MotionConfig:
     """Tunable numbers of the seeded planner."""
 
     ik_restarts: int = 20  # random CLIK starts after the current configuration
-    ik_solutions: int = 4  # distinct solutions collected before IK stops
+    ik_solutions: int = 2  # distinct solutions collected before IK stops
     ik_tolerance: float = 1e-3  # 6-D pose distance a solution must reach (as mplib's IK)
     distinct: float = 0.1  # rad, solutions closer than this (joint norm) are one
     check_step: float = 0.01  # rad, largest joint move between two collision checks (1 cm
