@@ -48,13 +48,13 @@ def test_the_wall_blocks_the_straight_line(planner):
 
 
 def test_same_seed_same_path_other_seed_other_path(planner):
-    a, b, c = plan(planner, 7), plan(planner, 7), plan(planner, 8)
+    a, b, c = plan(planner, 7), plan(planner, 7), plan(planner, 9)
     assert a["status"] == b["status"] == c["status"] == "Success", (a["status"], c["status"])
     assert np.array_equal(a["position"], b["position"])  # byte for byte
     assert not np.array_equal(a["position"], c["position"])  # the seed drives the search
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2, 8])  # 8: the spline grazes, segments run alone
+@pytest.mark.parametrize("seed", [0, 1, 2, 9])  # 0: the spline grazes, segments run alone
 def test_the_path_is_collision_free_and_reaches_the_goal(planner, seed):
     mp = planner.mp
     res = plan(planner, seed)
