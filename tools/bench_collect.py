@@ -64,7 +64,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=1, help="pairs per case (median ratio)")
     ap.add_argument("--layout", type=Path, nargs="+", default=None)
     args = ap.parse_args()
-    runs = [(path, 1) for path in args.layout or shipped_layouts()]
+    runs = [(path.resolve(), 1) for path in args.layout or shipped_layouts()]  # cwd: a temp dir
     runs.append((default_layout(), 2))
     for path, workers in runs:
         pairs = []
