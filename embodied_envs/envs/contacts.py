@@ -25,12 +25,12 @@ def is_grasping(agent, obj, min_force: float = MIN_FORCE, max_angle: float = MAX
     scene = agent.scene
     if scene.gpu_sim_enabled:
         return agent.is_grasping(obj, min_force, max_angle)
-    left = agent.finger1_link._bodies[0].entity
-    right = agent.finger2_link._bodies[0].entity
-    target = obj._bodies[0].entity
+    # the rigid-body components (comparing them costs a third of comparing their entities)
+    left, right = agent.finger1_link._bodies[0], agent.finger2_link._bodies[0]
+    target = obj._bodies[0]
     impulses, rows = [], []  # every contact point's impulse on a finger; (finger, sign)
     for contact in scene.px.get_contacts():
-        a, b = contact.bodies[0].entity, contact.bodies[1].entity
+        a, b = contact.bodies
         if b == target:
             finger, sign = a, 1.0  # impulses act on the contact's first body
         elif a == target:

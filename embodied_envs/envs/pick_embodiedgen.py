@@ -334,12 +334,13 @@ class PickEmbodiedGenEnv(CheckedEnv):
         return result
 
     def evaluate(self):
-        obj_to_goal_pos = self.goal_site.pose.p - self.obj.pose.p
+        obj = self.obj.pose.p
+        obj_to_goal_pos = self.goal_site.pose.p - obj
         is_obj_placed = torch.linalg.norm(obj_to_goal_pos, axis=1) <= self.goal_thresh
         is_robot_static = self.agent.is_static(self.static_thresh)
         return {
             "success": is_obj_placed & is_robot_static,
-            "fail": self.layout_scene.off_table(self.obj.pose.p, self.fail_drop),
+            "fail": self.layout_scene.off_table(obj, self.fail_drop),
             "is_obj_placed": is_obj_placed,
             "is_robot_static": is_robot_static,
             "is_grasped": is_grasping(self.agent, self.obj),

@@ -150,7 +150,7 @@ def hull_points(spec: AssetSpec, n: int) -> np.ndarray:
     the asset's content."""
 
     def sample() -> np.ndarray:
-        import trimesh
+        import trimesh  # only where clouds are sampled (the CLI starts without it)
 
         parts = asset_geometry(spec).parts
         rng = np.random.default_rng(_seed(spec))

@@ -21,7 +21,6 @@ import numpy as np
 import sapien
 import torch
 
-from embodied_envs.envs.contacts import is_grasping
 from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.solvers.grasps import (
@@ -403,8 +402,9 @@ class PickPlaceSolver:
         return np.einsum("nij,ni->nj", tcp[:, :3, :3], obj - tcp[:, :3, 3])
 
     def _grasping(self) -> np.ndarray:
-        """Per env: both fingers press on the target (ManiSkill's ``is_grasping`` rule)."""
-        return is_grasping(self.base.agent, self.base.obj).cpu().numpy().reshape(-1)
+        """Per env: both fingers press on the target now (the env's ``is_grasped`` after the
+        last step)."""
+        return np.asarray(torch.as_tensor(self.last_info["is_grasped"]).cpu()).reshape(-1)
 
     def _steps_left(self) -> int:
         limit = getattr(getattr(self.env, "spec", None), "max_episode_steps", None) or 10**9
