@@ -20,11 +20,13 @@ parameterisation) and draws everything random from a numpy ``Generator`` the cal
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import mplib
 import numpy as np
 
+STRAIGHT_BLOCKED = "the straight joint line is blocked"  # plan_to_pose(detour=False)
 BOUND_SLACK = 0.9  # min_steps' bound is this part of the time-optimal rest-to-rest time
 
 
@@ -42,6 +44,22 @@ class MotionConfig:
     rrt_step: float = 0.2  # rad, RRT-Connect extension
     rrt_samples: int = 1500  # RRT-Connect iterations before giving up
     shortcut_rounds: int = 30  # random shortcut tries on an RRT path
+
+
+@functools.lru_cache(maxsize=1024)
+def coarse_to_fine(n: int) -> tuple[int, ...]:
+    """``1..n``, each once: ``n`` first, then the multiples of halving strides."""
+    if n < 1:
+        return ()
+    order, seen = [n], {n}
+    stride = 1 << n.bit_length()
+    while stride:
+        for k in range(stride, n, stride):
+            if k not in seen:
+                seen.add(k)
+                order.append(k)
+        stride //= 2
+    return tuple(order)
 
 
 class SeededPlanner:
@@ -68,9 +86,10 @@ class SeededPlanner:
 
     def edge_free(self, a: np.ndarray, b: np.ndarray) -> bool:
         """Every configuration on the joint-space segment a-b is free (checked every
-        ``check_step`` rad of the largest joint move, ``b`` included)."""
+        ``check_step`` rad of the largest joint move, ``b`` included; ``b`` first, then
+        coarse to fine, so that a blocked segment is found blocked after a few checks)."""
         n = int(np.ceil(np.abs(b - a).max() / self.cfg.check_step))
-        return all(self.free(a + (b - a) * (k / n)) for k in range(1, n + 1))
+        return all(self.free(a + (b - a) * (k / n)) for k in coarse_to_fine(n))
 
     # --- IK ------------------------------------------------------------------------------
     def ik(self, goal_base: np.ndarray, qpos: np.ndarray, rng: np.random.Generator):
@@ -197,12 +216,15 @@ class SeededPlanner:
         time_step: float,
         use_point_cloud: bool,
         within: int | None = None,
+        detour: bool = True,
     ) -> dict:
         """mplib's ``plan_qpos_to_pose``, seeded: {"status", "position" (T, move group)}.
 
         ``within``: a path of this many waypoints or more is not wanted (a better one is known);
         when the IK solutions show that no path can be shorter (:meth:`min_steps`), nothing is
-        planned and the status says so.
+        planned and the status says so. ``detour=False``: the straight line or nothing (status
+        ``STRAIGHT_BLOCKED`` where it is blocked; the same call with ``detour=True`` and the
+        same generator state then plans the detour).
         """
         mp = self.mp
         qpos = np.clip(qpos.astype(np.float64), self.limits[:, 0] + 1e-3, self.limits[:, 1] - 1e-3)
@@ -217,6 +239,8 @@ class SeededPlanner:
             return {"status": f"no path shorter than {within} steps"}
         path = next(([start, g] for g in goals if self.edge_free(start, g)), None)
         if path is None:
+            if not detour:
+                return {"status": STRAIGHT_BLOCKED}
             path = self.rrt_connect(start, goals, rng)
             if path is None:
                 return {"status": "RRT-Connect failed"}

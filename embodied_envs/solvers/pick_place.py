@@ -32,7 +32,7 @@ from embodied_envs.solvers.grasps import (
     posed_clearance,
     posed_grasps,
 )
-from embodied_envs.solvers.motion import MotionConfig, SeededPlanner
+from embodied_envs.solvers.motion import STRAIGHT_BLOCKED, MotionConfig, SeededPlanner
 
 GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
 GRIPPER_CLOSED = -1.0  # and for closed fingers
@@ -212,7 +212,7 @@ class PickPlaceSolver:
     # --- planning ------------------------------------------------------------------------
     def _plan(
         self, i, pose: sapien.Pose, qpos: np.ndarray, how: str, obstacles: bool,
-        key: tuple = (), within: int | None = None,
+        key: tuple = (), within: int | None = None, detour: bool = True,
     ):  # fmt: skip
         """A joint path to ``pose`` for env i by ``how`` ("screw": mplib's straight screw
         motion; "rrt": the seeded planner), and a status ("" on success).
@@ -222,6 +222,8 @@ class PickPlaceSolver:
         ``key`` names the plan within the episode: its random draws come from the solver's
         seed and this key alone, so skipping one plan changes no other. ``within``: a path of
         this many steps or more is not wanted (a better option is known; "rrt" only).
+        ``detour=False`` ("rrt" only): the straight joint line or nothing (status
+        ``STRAIGHT_BLOCKED``).
         """
         target = np.concatenate([pose.p, pose.q])
         dt = self.base.control_timestep
@@ -231,7 +233,7 @@ class PickPlaceSolver:
             )
         else:
             rng = np.random.default_rng([self.seed, i, *key])
-            res = self.motion[i].plan_to_pose(target, qpos, rng, dt, obstacles, within)
+            res = self.motion[i].plan_to_pose(target, qpos, rng, dt, obstacles, within, detour)
         if res["status"] != "Success" or not len(res["position"]):
             return None, res["status"]
         if len(res["position"]) > self.cfg.max_path_steps:
@@ -300,37 +302,11 @@ class PickPlaceSolver:
         self.stages += 1
         for i, target in enumerate(targets):
             options = target if isinstance(target, list) else [target]
-            best, failures = None, []
+            best = None
             if target is not None and not self.reports[i].plan_failures:
-                for m, how in enumerate(methods):
-                    for k, pose in enumerate(options):
-                        # branch and bound: an option whose rank alone, or whose shortest
-                        # possible path, costs what the best so far does is not planned
-                        within = None if best is None else best[0] - (option_steps or 0) * k
-                        if within is not None and within <= 0:
-                            break  # later options rank lower still
-                        key = (self.stages, m, k)
-                        path, status = self._plan(i, pose, qpos[i], how, obstacles, key, within)
-                        if path is not None and path_ok is not None:
-                            status = path_ok(i, path)
-                            path = None if status else path
-                        label = "" if len(options) == 1 else f"option {k}: "
-                        if path is None:
-                            failures.append(f"{label}{how}: {status}")
-                            continue
-                        cost = len(path) + (option_steps or 0) * k
-                        if best is not None and cost >= best[0]:
-                            continue  # what follows only adds steps
-                        if then is not None:
-                            end = np.concatenate([path[-1][:7], qpos[i, 7:]])
-                            more = then(i, k, end)
-                            cost += self.cfg.max_path_steps if more is None else more
-                        if best is None or cost < best[0]:
-                            best = (cost, path, pose, k)
-                        if option_steps is None:
-                            break
-                    if best is not None:
-                        break
+                best, failures = self._choose(
+                    i, options, qpos[i], methods, obstacles, option_steps, then, path_ok
+                )
                 if best is None:
                     self.reports[i].plan_failures.append(f"{stage}: " + "; ".join(failures))
                 elif on_choice is not None:
@@ -339,6 +315,59 @@ class PickPlaceSolver:
             chosen.append(None if best is None else best[2])
         self._execute(paths, extra_steps=settle)  # settle: steps holding the last waypoint
         return chosen
+
+    def _choose(self, i, options, qpos, methods, obstacles, option_steps, then, path_ok):
+        """``_per_env``'s choice for env i: ``(cost, path, pose, k)`` of the option that wins
+        (None when none plans) and the failures.
+
+        With ``option_steps``, the winner is the least (cost, rank) over every option, found by
+        branch and bound: an option whose rank alone, or whose shortest possible path
+        (``SeededPlanner.min_steps``), cannot beat the best so far is not planned. The seeded
+        planner's straight joint lines come first for every option, then the detours
+        (RRT-Connect) where a line is blocked: a direct option found first bounds the detours.
+        """
+        best, failures = None, []
+        for m, how in enumerate(methods):
+            passes = (False, True) if how == "rrt" and option_steps is not None else (True,)
+            todo = list(range(len(options)))
+            for detour in passes:
+                blocked = []  # options whose straight line is blocked: for the detour pass
+                for k in todo:
+                    within = None
+                    if best is not None and option_steps is not None:
+                        # a path of `within` steps or more cannot beat the best (ties: rank)
+                        within = best[0] - option_steps * k + (k < best[3])
+                        if within <= 0:
+                            break  # later options rank lower still
+                    key = (self.stages, m, k)
+                    path, status = self._plan(
+                        i, options[k], qpos, how, obstacles, key, within, detour
+                    )
+                    if status == STRAIGHT_BLOCKED:
+                        blocked.append(k)
+                        continue
+                    if path is not None and path_ok is not None:
+                        status = path_ok(i, path)
+                        path = None if status else path
+                    label = "" if len(options) == 1 else f"option {k}: "
+                    if path is None:
+                        failures.append(f"{label}{how}: {status}")
+                        continue
+                    cost = len(path) + (option_steps or 0) * k
+                    if best is not None and (cost, k) > (best[0], best[3]):
+                        continue  # what follows only adds steps
+                    if then is not None:
+                        end = np.concatenate([path[-1][:7], qpos[7:]])
+                        more = then(i, k, end)
+                        cost += self.cfg.max_path_steps if more is None else more
+                    if best is None or (cost, k) < (best[0], best[3]):
+                        best = (cost, path, options[k], k)
+                    if option_steps is None:
+                        return best, failures
+                todo = blocked
+            if best is not None:
+                break
+        return best, failures
 
     # --- the policy ----------------------------------------------------------------------
     def grasp_poses(self) -> list[list[tuple[sapien.Pose, float]]]:

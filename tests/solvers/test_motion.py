@@ -153,3 +153,16 @@ def test_within_skips_what_cannot_be_shorter(planner):
     roomy = planner.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, False, steps + 1)
     assert roomy["status"] == "Success"
     assert np.array_equal(roomy["position"], free["position"])
+
+
+def test_segments_are_checked_end_first_then_coarse_to_fine():
+    """``edge_free`` checks every configuration on a segment once, the far end first and
+    then halving strides, so a blocked segment is usually found blocked after a few checks."""
+    from embodied_envs.solvers.motion import coarse_to_fine
+
+    assert coarse_to_fine(0) == ()
+    for n in range(1, 200):
+        order = coarse_to_fine(n)
+        assert sorted(order) == list(range(1, n + 1))
+        assert order[0] == n
+    assert coarse_to_fine(8) == (8, 4, 2, 6, 1, 3, 5, 7)

@@ -76,10 +76,11 @@ def test_expert_actions_do_not_depend_on_the_episodes_before():
 
 def test_bounded_options_give_the_actions_of_planning_them_all(monkeypatch):
     """The approach's branch and bound skips options that cannot beat the best so far
-    (``SeededPlanner.min_steps``); with the bound switched off every option is planned, and
-    the actions are the same byte for byte (each plan draws from its own random key, so a
-    skipped plan changes no other)."""
-    from embodied_envs.solvers.motion import SeededPlanner
+    (``SeededPlanner.min_steps``) and plans every option's straight joint line before any
+    detour. Planning every option fully, in rank order, gives the same actions byte for byte
+    (each plan draws from its own random key, so a skipped plan changes no other). Round-table
+    seed 13 takes both shortcuts."""
+    from embodied_envs.solvers.motion import STRAIGHT_BLOCKED, SeededPlanner
 
     statuses = []
     plan = SeededPlanner.plan_to_pose
@@ -89,23 +90,24 @@ def test_bounded_options_give_the_actions_of_planning_them_all(monkeypatch):
         statuses.append(res["status"])
         return res
 
-    monkeypatch.setattr(SeededPlanner, "plan_to_pose", recorded)
-
     def actions():  # each in a new env, as each collect run starts one
-        env = _Recorder(gym.make("PickEmbodiedGen-v1", control_mode="pd_joint_pos"))
+        layout = str(DATA / "layouts" / "round_table.json")
+        env = _Recorder(gym.make("PickEmbodiedGen-v1", layout_file=layout,
+                                 control_mode="pd_joint_pos"))  # fmt: skip
         try:
-            taken = _expert_actions(env, 2)
+            taken = _expert_actions(env, 13)
             assert bool(env.unwrapped.evaluate()["success"][0])
             return taken
         finally:
             env.close()
 
+    monkeypatch.setattr(SeededPlanner, "plan_to_pose", recorded)
     bounded = actions()
-    before = list(statuses)
-    assert sum(s.startswith("no path shorter") for s in before) >= 2, before
-    monkeypatch.setattr(SeededPlanner, "min_steps", lambda self, *a: 0)
-    statuses.clear()
-    full = actions()
-    assert not any(s.startswith("no path shorter") for s in statuses)
-    assert len(statuses) == len(before)  # the skipped options are planned now
-    assert bounded.tobytes() == full.tobytes()
+    assert sum(s.startswith("no path shorter") for s in statuses) >= 2, statuses
+    assert sum(s == STRAIGHT_BLOCKED for s in statuses) >= 2, statuses
+
+    def exhaustive(self, goal, qpos, rng, dt, obstacles, within=None, detour=True):
+        return plan(self, goal, qpos, rng, dt, obstacles)  # no bound, detours at once
+
+    monkeypatch.setattr(SeededPlanner, "plan_to_pose", exhaustive)
+    assert actions().tobytes() == bounded.tobytes()
