@@ -54,7 +54,9 @@ class SolverConfig:
     grasp_depth: float = 0.035  # m, grasp centre below the object's top
     min_tcp_height: float = 0.015  # m, lowest grasp centre above the support surface
     lift_heights: tuple[float, ...] = (0.10, 0.05)  # m, lifts after grasping, tried in order
-    gripper_steps: int = 8  # control steps to close the gripper
+    gripper_steps: int = 8  # control steps to open the gripper, and at most to close it
+    finger_rest: float = 1e-4  # m per step: fingers moving less are at rest (closed on the
+    # object: 3 steps on the shipped layouts)
     hold_steps: int = 10  # control steps holding still at the goal
     # rad/s and rad/s^2 per arm joint, within the Panda's (Franka's datasheet: velocity 2.175
     # for joints 1-4 and 2.61 for 5-7, acceleration 7.5 at least)
@@ -240,8 +242,9 @@ class PickPlaceSolver:
             return None, f"{len(res['position'])} steps, over max_path_steps"
         return res["position"], ""
 
-    def _execute(self, paths: list[np.ndarray | None], extra_steps: int = 0) -> None:
-        """Step all envs along their paths in lockstep; envs without a path hold still."""
+    def _execute(self, paths: list[np.ndarray | None], extra_steps: int = 0, until=None) -> None:
+        """Step all envs along their paths in lockstep; envs without a path hold still.
+        ``until()``: checked after every step; True ends the steps early."""
         qpos = self._qpos()
         lengths = [len(p) if p is not None else 0 for p in paths]
         n = max(lengths, default=0) + extra_steps
@@ -256,6 +259,8 @@ class PickPlaceSolver:
                     action[i, :7] = qpos[i, :7]
                 action[i, 7] = self.gripper[i]
             self._step(action)
+            if until is not None and until():
+                return
 
     def _step(self, action: np.ndarray) -> None:
         a = action if self._batched_actions else action[0]
@@ -440,9 +445,22 @@ class PickPlaceSolver:
         return limit - self.steps
 
     def _set_gripper(self, envs: np.ndarray, value: float) -> None:
-        """Open or close the gripper of ``envs`` (the others keep theirs)."""
+        """Open or close the gripper of ``envs`` (the others keep theirs), the arms held
+        still: ``gripper_steps`` steps; closing ends as soon as every env of ``envs`` grasps
+        the target (the env's ``is_grasped``) with its fingers at rest."""
         self.gripper[envs] = value
-        self._execute([None] * self.num_envs, extra_steps=self.cfg.gripper_steps)
+        fingers = [self._qpos()[:, 7:]]
+
+        def gripped() -> bool:
+            now = self._qpos()[:, 7:]
+            still = np.abs(now - fingers[0]).max(1) < self.cfg.finger_rest
+            fingers[0] = now
+            return bool(np.all((self._grasping() & still)[envs]))
+
+        closing = value == GRIPPER_CLOSED
+        self._execute(
+            [None] * self.num_envs, self.cfg.gripper_steps, until=gripped if closing else None
+        )
 
     def _grasp(self, todo: np.ndarray, attempt: int) -> np.ndarray:
         """One grasp attempt in the envs ``todo``: approach the best reachable grasp, close,

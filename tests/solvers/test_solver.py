@@ -111,3 +111,28 @@ def test_bounded_options_give_the_actions_of_planning_them_all(monkeypatch):
 
     monkeypatch.setattr(SeededPlanner, "plan_to_pose", exhaustive)
     assert actions().tobytes() == bounded.tobytes()
+
+
+def test_closing_ends_once_the_fingers_hold_the_target(env, monkeypatch):
+    """Closing stops as soon as the env reports the target grasped with the fingers at rest
+    (3 of the 8 allowed steps on the default layout), and takes all 8 on nothing."""
+    from embodied_envs.solvers.pick_place import GRIPPER_CLOSED
+
+    closes = []
+    original = PickPlaceSolver._set_gripper
+
+    def counted(self, envs, value):
+        before = self.steps
+        original(self, envs, value)
+        if value == GRIPPER_CLOSED:
+            closes.append((self.steps - before, bool(self._grasping()[0])))
+
+    monkeypatch.setattr(PickPlaceSolver, "_set_gripper", counted)
+    env.reset(seed=0)
+    solver = PickPlaceSolver(env, seed=0)
+    solver._set_gripper(np.array([True]), GRIPPER_CLOSED)  # the hand far above the table
+    solver._set_gripper(np.array([True]), 1.0)  # open again
+    solver.solve()
+    assert closes[0] == (solver.cfg.gripper_steps, False)
+    assert closes[1][1] and closes[1][0] < solver.cfg.gripper_steps, closes
+    assert bool(env.unwrapped.evaluate()["success"][0])
