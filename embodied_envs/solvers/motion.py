@@ -37,6 +37,9 @@ class MotionConfig:
     ik_restarts: int = 20  # random CLIK starts after the current configuration
     ik_solutions: int = 2  # distinct solutions collected before IK stops
     ik_tolerance: float = 1e-3  # 6-D pose distance a solution must reach (as mplib's IK)
+    ik_iterations: int = 300  # CLIK iterations per start (mplib's default 1000: a start that
+    # does not converge by 300 rarely does, measured 50 vs 54 of 100 random starts, at 0.4
+    # instead of 1.0 ms per start)
     distinct: float = 0.1  # rad, solutions closer than this (joint norm) are one
     check_step: float = 0.01  # rad, largest joint move between two collision checks (1 cm
     # at the end of a 1 m lever: obstacle points are 1 cm spheres)
@@ -105,7 +108,9 @@ class SeededPlanner:
             if k:
                 start = qpos.copy()
                 start[self.idx] = rng.uniform(self.lo, self.hi)
-            q = mp.pinocchio_model.compute_IK_CLIK_JL(self.link, goal_base, start, q_min, q_max)
+            q = mp.pinocchio_model.compute_IK_CLIK_JL(
+                self.link, goal_base, start, q_min, q_max, max_iter=cfg.ik_iterations
+            )
             q = np.array(q[0])
             if not mp.wrap_joint_limit(q):
                 continue
