@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from mani_skill.agents.robots import Panda
 
-from embodied_envs.solvers.motion import SeededPlanner
+from embodied_envs.solvers.motion import START_COLLIDES, SeededPlanner
 
 REST = np.array([0.0, np.pi / 8, 0, -5 * np.pi / 8, 0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04])
 DOWN = [0.0, 1.0, 0.0, 0.0]  # TCP pointing down (wxyz)
@@ -166,3 +166,26 @@ def test_segments_are_checked_end_first_then_coarse_to_fine():
         assert sorted(order) == list(range(1, n + 1))
         assert order[0] == n
     assert coarse_to_fine(8) == (8, 4, 2, 6, 1, 3, 5, 7)
+
+
+def test_no_detour_is_searched_from_a_start_that_collides(monkeypatch):
+    """Where the start configuration collides and the straight line is blocked, no
+    RRT-Connect search runs (one from there cannot grow and would spend all its samples):
+    the status says so."""
+    mp = mplib.Planner(urdf=Panda.urdf_path, srdf=Panda.urdf_path.replace(".urdf", ".srdf"),
+                       move_group="panda_hand_tcp")  # fmt: skip
+    mp.set_base_pose([0, 0, 0, 1, 0, 0, 0])
+    sp = SeededPlanner(mp)
+    mp.pinocchio_model.compute_forward_kinematics(REST)
+    hand = mp.pinocchio_model.get_link_pose(sp.link)[:3]
+    ball = hand + np.random.default_rng(0).normal(0, 0.03, (400, 3))  # around the hand
+    mp.update_point_cloud(ball, radius=0.01)
+    mp.planning_world.set_use_point_cloud(True)
+    assert not sp.free(REST[:7])
+
+    def searched(*args):
+        raise AssertionError("RRT-Connect ran from a colliding start")
+
+    monkeypatch.setattr(SeededPlanner, "rrt_connect", searched)
+    res = sp.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, True)
+    assert res["status"] == START_COLLIDES and "position" not in res
