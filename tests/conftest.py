@@ -45,10 +45,11 @@ def deep(d):
     return copy.deepcopy(d)
 
 
-def per_layout_env(**kwargs):
-    """A module-scoped fixture: one ``PickEmbodiedGen-v1`` env per shipped layout."""
+def per_layout_env(layouts: list[Path] = LAYOUTS, **kwargs):
+    """A module-scoped fixture: one ``PickEmbodiedGen-v1`` env per layout (default: every
+    shipped one)."""
 
-    @pytest.fixture(scope="module", params=LAYOUTS, ids=[p.stem for p in LAYOUTS])
+    @pytest.fixture(scope="module", params=layouts, ids=[p.stem for p in layouts])
     def fixture(request):
         import gymnasium as gym
 

@@ -1,21 +1,15 @@
 """The one-pass grasp check (envs/contacts.py) gives ManiSkill's Panda ``is_grasping``
-answer at every step of expert episodes: before the grasp, holding the object, and after a
-drop."""
+answer at every step of expert episodes on every shipped layout: before the grasp, holding
+the object, and after a drop."""
 
-import gymnasium as gym
 import numpy as np
-import pytest
+from conftest import per_layout_env
 
 import embodied_envs  # noqa: F401
 from embodied_envs.envs.contacts import is_grasping
 from embodied_envs.solvers import PickPlaceSolver
 
-
-@pytest.fixture(scope="module")
-def env():
-    e = gym.make("PickEmbodiedGen-v1", control_mode="pd_joint_pos")
-    yield e
-    e.close()
+env = per_layout_env(control_mode="pd_joint_pos")  # the round table: more contacts
 
 
 def test_agrees_with_maniskill_at_every_step(env):

@@ -1,18 +1,12 @@
 import gymnasium as gym
 import numpy as np
-import pytest
 import torch
-from conftest import DATA
+from conftest import DATA, DEFAULT_LAYOUT, per_layout_env
 
 import embodied_envs  # noqa: F401
 from embodied_envs.solvers import PickPlaceSolver
 
-
-@pytest.fixture(scope="module")
-def env():
-    e = gym.make("PickEmbodiedGen-v1", control_mode="pd_joint_pos")
-    yield e
-    e.close()
+env = per_layout_env([DEFAULT_LAYOUT], control_mode="pd_joint_pos")
 
 
 def test_solver_succeeds_on_default_layout(env):
