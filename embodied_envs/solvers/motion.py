@@ -13,8 +13,10 @@ parameterisation) and draws everything random from a numpy ``Generator`` the cal
   (checked every ``check_step`` rad) is free (the start itself is not checked: a move may
   leave a contact); otherwise RRT-Connect between the start and all solutions, then shortcuts,
   when the start is free (a search from a colliding start cannot grow).
-- Time: the path is densified to ``waypoint_step`` waypoints (so the spline TOPP-RA fits stays on
-  the checked segments) and parameterised by mplib's ``TOPP``. What will run is checked
+- Time: a straight line moves time-optimally from rest to rest within the joint limits
+  (:func:`straight_line_trajectory`, exact and in closed form); a detour is densified to
+  ``waypoint_step`` waypoints (so the spline TOPP-RA fits stays on the checked segments) and
+  parameterised by mplib's ``TOPP``. What will run is checked
   again where the path has corners: where the spline rounds one into an obstacle, each
   straight segment is parameterised alone.
 """
@@ -65,6 +67,39 @@ def coarse_to_fine(n: int) -> tuple[int, ...]:
                 order.append(k)
         stride //= 2
     return tuple(order)
+
+
+def straight_line_trajectory(
+    start: np.ndarray, goal: np.ndarray, vel: np.ndarray, acc: np.ndarray, time_step: float
+) -> np.ndarray:
+    """The time-optimal motion from rest at ``start`` to rest at ``goal`` along the straight
+    joint line, each joint within its velocity and acceleration limits, sampled every
+    ``time_step`` from its start, then its end: ``(T, dof)``, a waypoint per control step.
+    (mplib's ``TOPP`` spreads ``int(duration / time_step)`` samples over the duration instead:
+    a robot stepping through them moves up to ``T / (T - 1)`` faster than its limits.)
+
+    On the line ``start + s * (goal - start)`` the limits bound ``ds/dt`` and ``d2s/dt2`` by
+    their tightest joint, so ``s`` accelerates at that bound, cruises at that speed and brakes
+    (a trapezoid; a triangle when the line is too short to reach the speed). This is the
+    exact optimum of the problem TOPP-RA solves numerically on the same line.
+    """
+    start, goal = np.asarray(start, np.float64), np.asarray(goal, np.float64)
+    span = np.abs(goal - start)
+    moving = span > 0
+    if not moving.any():
+        return start[None].copy()
+    speed = np.min(np.asarray(vel, np.float64)[moving] / span[moving])  # ds/dt at most
+    rate = np.min(np.asarray(acc, np.float64)[moving] / span[moving])  # d2s/dt2 at most
+    ramp = min(speed / rate, np.sqrt(1 / rate))  # seconds accelerating (and braking)
+    speed = rate * ramp
+    duration = 1 / speed + ramp
+    t = np.append(np.arange(0.0, duration, time_step), duration)
+    s = np.where(
+        t < ramp,
+        rate * t**2 / 2,
+        np.where(t > duration - ramp, 1 - rate * (duration - t) ** 2 / 2, speed * (t - ramp / 2)),
+    )
+    return start + s[:, None] * (goal - start)
 
 
 class SeededPlanner:
@@ -257,10 +292,12 @@ class SeededPlanner:
             if path is None:
                 return {"status": "RRT-Connect failed"}
             path = self.shortcut(path, rng)
-        dense = self.densify(path)
-        if len(dense) < 2:  # already there
-            return {"status": "Success", "position": dense}
-        _, position, *_ = mp.TOPP(dense, time_step)
+        if len(path) == 2:
+            position = straight_line_trajectory(
+                start, path[1], mp.joint_vel_limits, mp.joint_acc_limits, time_step
+            )
+            return {"status": "Success", "position": position}
+        _, position, *_ = mp.TOPP(self.densify(path), time_step)
         # the spline TOPP-RA fits rounds the corners between segments: when that grazes an
         # obstacle, each straight segment is parameterised alone (stopping at the corners).
         # A straight line has no corners: its spline (which reproduces linear functions) is

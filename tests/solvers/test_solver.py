@@ -130,3 +130,44 @@ def test_closing_ends_once_the_fingers_hold_the_target(env, monkeypatch):
     assert closes[0] == (solver.cfg.gripper_steps, False)
     assert closes[1][1] and closes[1][0] < solver.cfg.gripper_steps, closes
     assert bool(env.unwrapped.evaluate()["success"][0])
+
+
+def _follow(env, monkeypatch, lead: bool):
+    """The arm's joint error to a 0.3-0.5 rad straight-line path at every control step, then
+    at rest after settling: (errors along the path, steps settling, error at the end)."""
+    from embodied_envs.solvers.motion import straight_line_trajectory
+
+    if not lead:
+        monkeypatch.setattr(PickPlaceSolver, "_commands", lambda self, p: np.asarray(p)[:, :7])
+    env.reset(seed=0)
+    solver = PickPlaceSolver(env, seed=0)
+    cfg = solver.cfg
+    start = solver._qpos()[0, :7]
+    goal = start + np.array([0.4, 0.3, -0.3, 0.3, 0.4, 0.3, 0.5])
+    dt = env.unwrapped.control_timestep
+    path = straight_line_trajectory(start, goal, cfg.joint_vel_limits, cfg.joint_acc_limits, dt)
+    errors = []
+    step = solver._step
+
+    def recorded(action):
+        step(action)
+        errors.append(np.abs(solver._qpos()[0, :7] - path[min(len(errors), len(path) - 1)]).max())
+
+    monkeypatch.setattr(solver, "_step", recorded)
+    monkeypatch.setattr(solver, "_choose", lambda *a: ((len(path), path, None, 0), []))
+    solver._per_env("test", [goal], settle=cfg.settle_steps)
+    monkeypatch.undo()
+    return np.array(errors[: len(path)]), len(errors) - len(path), errors[-1]
+
+
+def test_joint_targets_lead_the_path_and_settling_ends_once_there(env, monkeypatch):
+    """The PD drive lags a moving target (damping / stiffness, 0.1 s): the solver's targets
+    lead the path by it, so the arm runs on the path (within 0.03 rad at every step, under a
+    quarter of the lag without the lead) and settles in fewer steps than ``settle_steps``,
+    ending within ``settle_tolerance``; without the lead it needs all of them."""
+    tol, most = PickPlaceSolver(env).cfg.settle_tolerance, PickPlaceSolver(env).cfg.settle_steps
+    led, led_settle, led_end = _follow(env, monkeypatch, lead=True)
+    raw, raw_settle, raw_end = _follow(env, monkeypatch, lead=False)
+    assert led.max() < 0.03 and led.max() < raw.max() / 4, (led.max(), raw.max())
+    assert led_settle < most and led_end < tol, (led_settle, led_end)
+    assert raw_settle == most and raw_end > tol, (raw_settle, raw_end)
