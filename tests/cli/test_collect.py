@@ -258,4 +258,4 @@ def test_two_collect_runs_of_the_same_seeds_give_the_same_actions(tmp_path):
         assert sorted(a) == sorted(b) == ["traj_0", "traj_1", "traj_2"]
         for key in a:
             assert a[key]["actions"][:].tobytes() == b[key]["actions"][:].tobytes(), key
-            assert len(a[key]["actions"]) > 100
+            assert len(a[key]["actions"]) > 80  # a whole pick and place (84-134 steps)
