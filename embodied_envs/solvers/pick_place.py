@@ -14,7 +14,7 @@ recorded per env and stage; that env then holds still while the others go on.
 from __future__ import annotations
 
 import dataclasses
-import functools
+import weakref
 from dataclasses import dataclass, field
 
 import mplib
@@ -140,18 +140,28 @@ def grasp_frame(
     return np.array([centre2[0], centre2[1], z]), closing
 
 
-@functools.lru_cache(maxsize=64)
-def _planner(urdf: str, links: tuple[str, ...], joints: tuple[str, ...], env: int) -> mplib.Planner:
-    """Env ``env``'s mplib planner for the robot ``urdf``, one per process: building one parses
-    the URDF and its collision meshes (5 ms, an episode's 2%). A solver sets everything a plan
-    reads (base pose, joint limits, obstacle cloud, the robot's configuration) before using it."""
-    return mplib.Planner(
-        urdf=urdf,
-        srdf=urdf.replace(".urdf", ".srdf"),
-        user_link_names=list(links),
-        user_joint_names=list(joints),
-        move_group="panda_hand_tcp",
-    )
+# per env (the unwrapped env object), its mplib planners, one per parallel env: building one
+# parses the URDF and its collision meshes (5 ms, an episode's 2%). Solvers of one env run one
+# after another; each sets everything a plan reads (base pose, joint limits, obstacle cloud,
+# the robot's configuration) before planning.
+_PLANNERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _planners(base) -> list[mplib.Planner]:
+    """``base``'s (an unwrapped env's) mplib planners, built at its first solver."""
+    if base not in _PLANNERS:
+        robot = base.agent.robot
+        _PLANNERS[base] = [
+            mplib.Planner(
+                urdf=base.agent.urdf_path,
+                srdf=base.agent.urdf_path.replace(".urdf", ".srdf"),
+                user_link_names=[link.get_name() for link in robot.get_links()],
+                user_joint_names=[joint.get_name() for joint in robot.get_active_joints()],
+                move_group="panda_hand_tcp",
+            )
+            for _ in range(base.num_envs)
+        ]
+    return _PLANNERS[base]
 
 
 class PickPlaceSolver:
@@ -178,18 +188,12 @@ class PickPlaceSolver:
             raise ValueError(
                 f"the solver drives control_mode='pd_joint_pos', got {self.base.control_mode!r}"
             )
-        agent = self.base.agent
-        robot = agent.robot
-        link_names = [link.get_name() for link in robot.get_links()]
-        joint_names = [joint.get_name() for joint in robot.get_active_joints()]
-        base_poses = robot.pose.raw_pose.cpu().numpy()
-        self.planners = []
-        for i in range(self.num_envs):
-            planner = _planner(agent.urdf_path, tuple(link_names), tuple(joint_names), i)
+        base_poses = self.base.agent.robot.pose.raw_pose.cpu().numpy()
+        self.planners = _planners(self.base)
+        for i, planner in enumerate(self.planners):
             planner.set_base_pose(base_poses[i])
             planner.joint_vel_limits = np.asarray(self.cfg.joint_vel_limits, dtype=np.float64)
             planner.joint_acc_limits = np.asarray(self.cfg.joint_acc_limits, dtype=np.float64)
-            self.planners.append(planner)
         self.motion = [SeededPlanner(p, self.cfg.motion) for p in self.planners]
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
         self.steps = 0
