@@ -18,7 +18,7 @@ parameterisation) and draws everything random from a numpy ``Generator`` the cal
   ``waypoint_step`` waypoints (so the spline TOPP-RA fits stays on the checked segments) and
   parameterised by mplib's ``TOPP``. What will run is checked
   again where the path has corners: where the spline rounds one into an obstacle, each
-  straight segment is parameterised alone.
+  straight segment runs alone, timed in closed form.
 """
 
 from __future__ import annotations
@@ -292,19 +292,16 @@ class SeededPlanner:
             if path is None:
                 return {"status": "RRT-Connect failed"}
             path = self.shortcut(path, rng)
-        if len(path) == 2:
-            position = straight_line_trajectory(
-                start, path[1], mp.joint_vel_limits, mp.joint_acc_limits, time_step
-            )
+        limits = mp.joint_vel_limits, mp.joint_acc_limits
+        if len(path) == 2:  # the checked segment itself
+            position = straight_line_trajectory(start, path[1], *limits, time_step)
             return {"status": "Success", "position": position}
         _, position, *_ = mp.TOPP(self.densify(path), time_step)
         # the spline TOPP-RA fits rounds the corners between segments: when that grazes an
-        # obstacle, each straight segment is parameterised alone (stopping at the corners).
-        # A straight line has no corners: its spline (which reproduces linear functions) is
-        # the segment already checked.
-        if len(path) > 2 and not self.all_free(position):
+        # obstacle, each straight segment runs alone (stopping at the corners)
+        if not self.all_free(position):
             pieces = [
-                mp.TOPP(self.densify([a, b]), time_step)[1]
+                straight_line_trajectory(a, b, *limits, time_step)
                 for a, b in zip(path[:-1], path[1:], strict=True)
                 if not np.array_equal(a, b)
             ]

@@ -527,31 +527,26 @@ class PickPlaceSolver:
             [g * up for g, _ in candidates[i]] if todo[i] else None for i in range(self.num_envs)
         ]
 
-        descents = {}
+        descents, taken = {}, {}  # per (env, option) the descent planned; per env the one run
 
         def descent(i, k, qpos):  # the straight move from option k's pre-grasp to its grasp
             descents[i, k] = self._plan(i, targets[i][k] * up.inv(), qpos, "screw", False)[0]
             return descents[i, k]
 
-        chosen = {}
-
-        def pre_shape(i, k):  # the fingers open to the chosen grasp's opening on the way
+        def take(i, k):  # env i runs option k: fingers pre-shaped on the way, its descent next
             self.gripper[i] = gripper_action(candidates[i][k][1])
-            chosen[i] = k
+            taken[i] = descents.get((i, k))
 
         pre = self._per_env(
             "approach", targets, ("rrt", "screw"), settle=cfg.settle_steps,
             option_steps=cfg.option_steps,
             then=lambda i, k, q: None if (p := descent(i, k, q)) is None else len(p),
-            on_choice=pre_shape,
+            on_choice=take,
         )  # fmt: skip
         grasps = [None if p is None else p * up.inv() for p in pre]
-        # the arm lags its joint targets: reach the grasp before the fingers close
-        # the descent planned with the approach: from its end, where the arm has settled
-        self._per_env(
-            "grasp", grasps, obstacles=False, settle=cfg.settle_steps,
-            planned=lambda i: descents.get((i, chosen.get(i))),
-        )  # fmt: skip
+        # the descent ranked with the approach, from its end (the arm settled there); the arm
+        # reaches the grasp before the fingers close
+        self._per_env("grasp", grasps, obstacles=False, settle=cfg.settle_steps, planned=taken.get)
         self._set_gripper(todo, GRIPPER_CLOSED)
         z0 = self.base.obj.pose.p[:, 2].cpu().numpy()
         lifts = [

@@ -151,8 +151,8 @@ def test_a_straight_line_moves_time_optimally_within_the_limits(planner):
     """The closed-form straight-line motion: a waypoint per control step from rest at one end
     to rest at the other, forwards along the line, every joint within its velocity and
     acceleration limits at every step, one of them at its limit (it is optimal: within a
-    step of TOPP-RA's numerical optimum on the same line, mplib's ``TOPP`` with its samples
-    set one control step apart). 60 random lines from 1 mm to 2 rad."""
+    step of the duration of TOPP-RA's numerical optimum on the same line, mplib's ``TOPP``).
+    60 random lines from 1 mm to 2 rad."""
     cfg = SolverConfig()
     vel, acc = np.array(cfg.joint_vel_limits), np.array(cfg.joint_acc_limits)
     mp = planner.mp
@@ -175,9 +175,7 @@ def test_a_straight_line_moves_time_optimally_within_the_limits(planner):
             if len(q) >= 6:  # a ramp of whole steps: a joint at a limit
                 at_limit = (np.abs(v).max(0) >= 0.99 * vel) | (np.abs(dv).max(0) >= 0.99 * acc)
                 assert at_limit.any(), scale
-            n = int(np.ceil(np.abs(b - a).max() / planner.cfg.waypoint_step))
-            dense = np.array([a + (b - a) * k / n for k in range(n + 1)])
-            duration = mp.TOPP(dense, DT)[-1]
+            duration = mp.TOPP(planner.densify([a, b]), DT)[-1]
             assert abs((len(q) - 1) - duration / DT) <= 1.0, (scale, len(q), duration / DT)
     finally:
         mp.joint_vel_limits, mp.joint_acc_limits = defaults

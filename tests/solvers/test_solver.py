@@ -165,7 +165,9 @@ def test_joint_targets_lead_the_path_and_settling_ends_once_there(env, monkeypat
     lead the path by it, so the arm runs on the path (within 0.03 rad at every step, under a
     quarter of the lag without the lead) and settles in fewer steps than ``settle_steps``,
     ending within ``settle_tolerance``; without the lead it needs all of them."""
-    tol, most = PickPlaceSolver(env).cfg.settle_tolerance, PickPlaceSolver(env).cfg.settle_steps
+    from embodied_envs.solvers.pick_place import SolverConfig
+
+    tol, most = SolverConfig().settle_tolerance, SolverConfig().settle_steps
     led, led_settle, led_end = _follow(env, monkeypatch, lead=True)
     raw, raw_settle, raw_end = _follow(env, monkeypatch, lead=False)
     assert led.max() < 0.03 and led.max() < raw.max() / 4, (led.max(), raw.max())
