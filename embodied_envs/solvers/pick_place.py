@@ -290,13 +290,14 @@ class PickPlaceSolver:
         """
         q = np.asarray(path, dtype=np.float64)[:, :7]
         if len(q) < 3:
-            return q
+            return q[1:] if len(q) > 1 else q
         arm = self.base.agent.controller.controllers["arm"].config
         dt = self.base.control_timestep
         lead = q + arm.damping / arm.stiffness * np.gradient(q, dt, axis=0)
         lead[-1] = q[-1]  # the path ends at rest there
         space = self.base.single_action_space
-        return np.clip(lead, space.low[:7], space.high[:7])
+        # the path's first waypoint is where the arm is: step k drives to waypoint k + 1
+        return np.clip(lead[1:], space.low[:7], space.high[:7])
 
     def _step(self, action: np.ndarray) -> None:
         a = action if self._batched_actions else action[0]
@@ -365,7 +366,8 @@ class PickPlaceSolver:
         for i, path in enumerate(paths):
             if path is not None:
                 ends[i] = path[-1][:7]
-        start, moving = self.steps, max((len(p) for p in paths if p is not None), default=0)
+        start = self.steps
+        moving = max((len(p) - 1 for p in paths if p is not None), default=0)
 
         def arrived() -> bool:
             if self.steps < start + moving:
