@@ -279,7 +279,8 @@ class PickPlaceSolver:
                 return
 
     def _commands(self, path: np.ndarray) -> np.ndarray:
-        """The arm's joint targets that follow ``path`` (a waypoint per control step).
+        """The arm's joint targets that follow ``path`` (a waypoint per control step, the first
+        where the arm is now): one per waypoint after the first, so no step holds still.
 
         ``pd_joint_pos`` drives each joint with ``stiffness * (target - q) - damping * qvel``,
         so a joint lags a moving target by ``damping / stiffness`` (0.1 s for the Panda, 5
