@@ -279,8 +279,7 @@ class PickPlaceSolver:
                 return
 
     def _commands(self, path: np.ndarray) -> np.ndarray:
-        """The arm's joint targets that follow ``path`` (a waypoint per control step, the first
-        where the arm is now): one per waypoint after the first, so no step holds still.
+        """The arm's joint targets that follow ``path`` (a waypoint per control step).
 
         ``pd_joint_pos`` drives each joint with ``stiffness * (target - q) - damping * qvel``,
         so a joint lags a moving target by ``damping / stiffness`` (0.1 s for the Panda, 5
@@ -291,14 +290,13 @@ class PickPlaceSolver:
         """
         q = np.asarray(path, dtype=np.float64)[:, :7]
         if len(q) < 3:
-            return q[1:] if len(q) > 1 else q
+            return q
         arm = self.base.agent.controller.controllers["arm"].config
         dt = self.base.control_timestep
         lead = q + arm.damping / arm.stiffness * np.gradient(q, dt, axis=0)
         lead[-1] = q[-1]  # the path ends at rest there
         space = self.base.single_action_space
-        # the path's first waypoint is where the arm is: step k drives to waypoint k + 1
-        return np.clip(lead[1:], space.low[:7], space.high[:7])
+        return np.clip(lead, space.low[:7], space.high[:7])
 
     def _step(self, action: np.ndarray) -> None:
         a = action if self._batched_actions else action[0]
@@ -367,8 +365,7 @@ class PickPlaceSolver:
         for i, path in enumerate(paths):
             if path is not None:
                 ends[i] = path[-1][:7]
-        start = self.steps
-        moving = max((len(p) - 1 for p in paths if p is not None), default=0)
+        start, moving = self.steps, max((len(p) for p in paths if p is not None), default=0)
 
         def arrived() -> bool:
             if self.steps < start + moving:

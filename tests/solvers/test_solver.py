@@ -138,7 +138,7 @@ def _follow(env, monkeypatch, lead: bool):
     from embodied_envs.solvers.motion import straight_line_trajectory
 
     if not lead:
-        monkeypatch.setattr(PickPlaceSolver, "_commands", lambda self, p: np.asarray(p)[1:, :7])
+        monkeypatch.setattr(PickPlaceSolver, "_commands", lambda self, p: np.asarray(p)[:, :7])
     env.reset(seed=0)
     solver = PickPlaceSolver(env, seed=0)
     cfg = solver.cfg
@@ -150,16 +150,14 @@ def _follow(env, monkeypatch, lead: bool):
     step = solver._step
 
     def recorded(action):
-        step(action)  # step n drives to waypoint n (waypoint 0 is the start)
-        n = len(errors) + 1
-        errors.append(np.abs(solver._qpos()[0, :7] - path[min(n, len(path) - 1)]).max())
+        step(action)
+        errors.append(np.abs(solver._qpos()[0, :7] - path[min(len(errors), len(path) - 1)]).max())
 
     monkeypatch.setattr(solver, "_step", recorded)
     monkeypatch.setattr(solver, "_choose", lambda *a: ((len(path), path, None, 0), []))
     solver._per_env("test", [goal], settle=cfg.settle_steps)
     monkeypatch.undo()
-    moving = len(path) - 1
-    return np.array(errors[:moving]), len(errors) - moving, errors[-1]
+    return np.array(errors[: len(path)]), len(errors) - len(path), errors[-1]
 
 
 def test_joint_targets_lead_the_path_and_settling_ends_once_there(env, monkeypatch):
