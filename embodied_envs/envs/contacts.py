@@ -12,6 +12,8 @@ ManiSkill's; on CPU it walks the contacts once, for both fingers, in numpy.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 
@@ -26,35 +28,36 @@ def is_grasping(agent, obj, min_force: float = MIN_FORCE, max_angle: float = MAX
     if scene.gpu_sim_enabled:
         return agent.is_grasping(obj, min_force, max_angle)
     # the rigid-body components (comparing them costs a third of comparing their entities)
-    left, right = agent.finger1_link._bodies[0], agent.finger2_link._bodies[0]
+    fingers = agent.finger1_link._bodies[0], agent.finger2_link._bodies[0]
     target = obj._bodies[0]
-    impulses, rows = [], []  # every contact point's impulse on a finger; (finger, sign)
+    # per finger, the impulses of its contact points with the target: those acting on the
+    # finger (it is the contact's first body) and those acting on the target
+    on_finger, on_target = ([], []), ([], [])
     for contact in scene.px.get_contacts():
         a, b = contact.bodies
         if b == target:
-            finger, sign = a, 1.0  # impulses act on the contact's first body
+            finger, into = a, on_finger
         elif a == target:
-            finger, sign = b, -1.0
+            finger, into = b, on_target
         else:
             continue
-        if finger == left or finger == right:
-            points = [point.impulse for point in contact.points]
-            impulses.extend(points)
-            rows.extend([(0 if finger == left else 1, sign)] * len(points))
-    impulse = np.zeros((2, 3))
-    if impulses:
-        side, sign = np.array(rows).T
-        np.add.at(impulse, side.astype(int), np.array(impulses) * sign[:, None])
-    force = impulse / scene.px.timestep
-    # the directions that open the fingers: the left finger's y axis, minus the right one's
-    opening = np.stack(
-        [
-            agent.finger1_link._objs[0].entity_pose.to_transformation_matrix()[:3, 1],
-            -agent.finger2_link._objs[0].entity_pose.to_transformation_matrix()[:3, 1],
-        ]
-    )
-    magnitude = np.linalg.norm(force, axis=1)
-    unit = force / np.where(magnitude < 1e-6, 1.0, magnitude)[:, None]
-    angle = np.rad2deg(np.arccos(np.clip(np.sum(unit * opening, axis=1), -1, 1)))
-    grasped = bool(np.all((magnitude >= min_force) & (angle <= max_angle)))
-    return torch.tensor([grasped], device=scene.device)
+        side = 0 if finger == fingers[0] else 1 if finger == fingers[1] else None
+        if side is not None:
+            into[side].extend([point.impulse for point in contact.points])
+    # the opening directions: the left finger's y axis, minus the right one's
+    links = agent.finger1_link._objs[0], agent.finger2_link._objs[0]
+    for side, opens in ((0, 1.0), (1, -1.0)):
+        impulse = np.zeros(3)
+        if on_finger[side]:
+            impulse += np.sum(on_finger[side], axis=0, dtype=np.float64)
+        if on_target[side]:
+            impulse -= np.sum(on_target[side], axis=0, dtype=np.float64)
+        force = impulse / scene.px.timestep
+        magnitude = float(np.linalg.norm(force))
+        if magnitude < min_force:
+            return torch.tensor([False], device=scene.device)
+        opening = opens * links[side].entity_pose.to_transformation_matrix()[:3, 1]
+        cos = float(np.dot(force, opening)) / magnitude
+        if math.degrees(math.acos(min(max(cos, -1.0), 1.0))) > max_angle:
+            return torch.tensor([False], device=scene.device)
+    return torch.tensor([True], device=scene.device)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,7 @@ from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
 from embodied_envs.layout import GoalRegion, LayoutError, LayoutInfo, PlacementLimits
 from embodied_envs.layout.limits import check_number
 from embodied_envs.layout.placement import place
+from embodied_envs.layout.rules import array_module
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import default_layout
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID, MAX_EPISODE_STEPS
@@ -39,6 +41,20 @@ from embodied_envs.scene.layout_scene import configuration_layouts, scene_slots
 REST_QPOS = np.array(
     [0.0, np.pi / 8, 0.0, -3 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04]
 )
+
+
+@dataclass(frozen=True)
+class TaskState:
+    """What the success rule and the reward read, at one instant, per env: positions ``(n, 3)``
+    of the object, the goal and the TCP, and the arm's joint speeds ``(n, 7)``. Numpy arrays
+    on the CPU simulation (one env, where each torch operation's fixed cost made up most of
+    ``evaluate()`` and the reward: 0.35 of 1.8 ms per recorded control step), tensors on the
+    GPU; the rules below are written once for both."""
+
+    obj: Any
+    goal: Any
+    tcp: Any
+    arm_qvel: Any
 
 
 class PickEmbodiedGenEnv(CheckedEnv):
@@ -333,18 +349,43 @@ class PickEmbodiedGenEnv(CheckedEnv):
             self.hybrid.prerender(self.scene)  # after a (re)configuration: the new backgrounds
         return result
 
+    def _task_state(self) -> TaskState:
+        """The positions and speeds ``evaluate()`` and the reward read, now."""
+        if self.gpu_sim_enabled:
+            return TaskState(
+                obj=self.obj.pose.p,
+                goal=self.goal_site.pose.p,
+                tcp=self.agent.tcp_pose.p,
+                arm_qvel=self.agent.robot.get_qvel()[..., :-2],
+            )
+        # the CPU simulation's one env, read from its SAPIEN objects as ManiSkill's structs
+        # read them (Actor.pose, Link.pose, Articulation.qvel), without their torch wrapping
+        return TaskState(
+            obj=np.array([e.pose.p for e in self.obj._objs]),
+            goal=np.array([e.pose.p for e in self.goal_site._objs]),
+            tcp=np.array([link.entity_pose.p for link in self.agent.tcp._objs]),
+            arm_qvel=np.array([a.qvel[:-2] for a in self.agent.robot._objs]),
+        )
+
+    def _tensor(self, x) -> torch.Tensor:
+        """A task array as ManiSkill's info and rewards hold it (a tensor on the env's device;
+        a numpy array is shared, not copied)."""
+        return torch.as_tensor(x, device=self.device)
+
     def evaluate(self):
-        obj = self.obj.pose.p
-        obj_to_goal_pos = self.goal_site.pose.p - obj
-        is_obj_placed = torch.linalg.norm(obj_to_goal_pos, axis=1) <= self.goal_thresh
-        is_robot_static = self.agent.is_static(self.static_thresh)
+        s = self._task_state()
+        xp = array_module(s.obj)
+        obj_to_goal_pos = s.goal - s.obj
+        is_obj_placed = xp.linalg.norm(obj_to_goal_pos, axis=1) <= self.goal_thresh
+        # ManiSkill's Panda.is_static: every arm joint slower than the threshold
+        is_robot_static = (xp.abs(s.arm_qvel) <= self.static_thresh).all(-1)
         return {
-            "success": is_obj_placed & is_robot_static,
-            "fail": self.layout_scene.off_table(obj, self.fail_drop),
-            "is_obj_placed": is_obj_placed,
-            "is_robot_static": is_robot_static,
+            "success": self._tensor(is_obj_placed & is_robot_static),
+            "fail": self._tensor(self.layout_scene.off_table(s.obj, self.fail_drop)),
+            "is_obj_placed": self._tensor(is_obj_placed),
+            "is_robot_static": self._tensor(is_robot_static),
             "is_grasped": is_grasping(self.agent, self.obj),
-            "obj_to_goal_pos": obj_to_goal_pos,
+            "obj_to_goal_pos": self._tensor(obj_to_goal_pos),
         }
 
     def _get_obs_extra(self, info: dict):
@@ -370,17 +411,19 @@ class PickEmbodiedGenEnv(CheckedEnv):
         - static, [0, 1] while placed: ``1 - tanh(5 * |arm qvel|)``
         - success: the maximum, 5
         """
-        tcp_to_obj = torch.linalg.norm(self.obj.pose.p - self.agent.tcp_pose.p, axis=1)
-        reward = 1 - torch.tanh(5 * tcp_to_obj)
-        is_grasped = info["is_grasped"].float()
-        reward = reward + is_grasped
-        obj_to_goal = torch.linalg.norm(info["obj_to_goal_pos"], axis=1)
-        reward = reward + (1 - torch.tanh(5 * obj_to_goal)) * is_grasped
-        qvel = self.agent.robot.get_qvel()[..., :-2]
-        static = 1 - torch.tanh(5 * torch.linalg.norm(qvel, axis=1))
-        reward = reward + static * info["is_obj_placed"].float()
-        reward[info["success"]] = self.max_reward
-        return reward
+        s = self._task_state()
+        xp = array_module(s.obj)
+
+        def given(key):  # info's tensor as the state's array
+            return info[key] if xp is torch else info[key].cpu().numpy()
+
+        is_grasped = xp.asarray(given("is_grasped"), dtype=xp.float32)
+        reward = 1 - xp.tanh(5 * xp.linalg.norm(s.obj - s.tcp, axis=1)) + is_grasped
+        obj_to_goal = xp.linalg.norm(given("obj_to_goal_pos"), axis=1)
+        reward = reward + (1 - xp.tanh(5 * obj_to_goal)) * is_grasped
+        static = 1 - xp.tanh(5 * xp.linalg.norm(s.arm_qvel, axis=1))
+        reward = reward + static * xp.asarray(given("is_obj_placed"), dtype=xp.float32)
+        return self._tensor(xp.where(given("success"), self.max_reward, reward))
 
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
         return self.compute_dense_reward(obs=obs, action=action, info=info) / self.max_reward

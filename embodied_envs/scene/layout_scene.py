@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -63,6 +64,11 @@ class SceneEpisodes:
             normals[rows, :e], offsets[rows, :e] = top.normals, top.offsets
             lo[rows], hi[rows], z[rows], robot_xy[rows] = top.lo, top.hi, top.z, tensor(s.robot_xy)
         return cls(samplers, slots, Region(normals, offsets, lo, hi, z), robot_xy, z)
+
+    @functools.cached_property
+    def top_arrays(self) -> Region:
+        """``top`` as numpy arrays (on a CPU env the same memory), for numpy points."""
+        return self.top.map(lambda x: x.cpu().numpy())
 
     @property
     def fallbacks(self) -> int:
@@ -169,9 +175,10 @@ class LayoutScene:
             actor.set_angular_velocity(zeros)
 
     def off_table(self, points: torch.Tensor, drop: float) -> torch.Tensor:
-        """``(n,)`` bool: each env's point (``points (n, 3)``) is more than ``drop`` below its
-        table's top or outside the top's footprint (the whole top hull, seen from above)."""
-        top = self.episodes.top
+        """``(n,)`` bool: each env's point (``points (n, 3)``, a tensor or a numpy array) is more
+        than ``drop`` below its table's top or outside the top's footprint (the whole top hull,
+        seen from above)."""
+        top = self.episodes.top if isinstance(points, torch.Tensor) else self.episodes.top_arrays
         inside = top.contains(points[:, None, :2])[:, 0]
         return (points[:, 2] < top.z - drop) | ~inside
 

@@ -33,7 +33,12 @@ from embodied_envs.solvers.grasps import (
     posed_clearance,
     posed_grasps,
 )
-from embodied_envs.solvers.motion import STRAIGHT_BLOCKED, MotionConfig, SeededPlanner
+from embodied_envs.solvers.motion import (
+    STRAIGHT_BLOCKED,
+    MotionConfig,
+    SeededPlanner,
+    joint_levers,
+)
 
 GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
 GRIPPER_CLOSED = -1.0  # and for closed fingers
@@ -147,6 +152,17 @@ def grasp_frame(
 _PLANNERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
+# per robot URDF, its joints' levers (motion.joint_levers: 75 ms)
+_LEVERS: dict[str, np.ndarray] = {}
+
+
+def _levers(base) -> np.ndarray:
+    """The levers of ``base``'s (an unwrapped env's) robot's arm joints."""
+    if base.agent.urdf_path not in _LEVERS:
+        _LEVERS[base.agent.urdf_path] = joint_levers(base.agent.robot, _planners(base)[0])
+    return _LEVERS[base.agent.urdf_path]
+
+
 def _planners(base) -> list[mplib.Planner]:
     """``base``'s (an unwrapped env's) mplib planners, built at its first solver."""
     if base not in _PLANNERS:
@@ -194,7 +210,7 @@ class PickPlaceSolver:
             planner.set_base_pose(base_poses[i])
             planner.joint_vel_limits = np.asarray(self.cfg.joint_vel_limits, dtype=np.float64)
             planner.joint_acc_limits = np.asarray(self.cfg.joint_acc_limits, dtype=np.float64)
-        self.motion = [SeededPlanner(p, self.cfg.motion) for p in self.planners]
+        self.motion = [SeededPlanner(p, self.cfg.motion, _levers(self.base)) for p in self.planners]
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
         self.steps = 0
         self.ended = False  # the episode was truncated (or terminated) in every env

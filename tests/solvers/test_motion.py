@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 from mani_skill.agents.robots import Panda
 
-from embodied_envs.solvers.motion import START_COLLIDES, SeededPlanner, straight_line_trajectory
+from embodied_envs.solvers.motion import (
+    START_COLLIDES,
+    SeededPlanner,
+    joint_levers,
+    straight_line_trajectory,
+)
 from embodied_envs.solvers.pick_place import SolverConfig
 
 REST = np.array([0.0, np.pi / 8, 0, -5 * np.pi / 8, 0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04])
@@ -227,3 +232,78 @@ def test_no_detour_is_searched_from_a_start_that_collides(monkeypatch):
     monkeypatch.setattr(SeededPlanner, "rrt_connect", searched)
     res = sp.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, True)
     assert res["status"] == START_COLLIDES and "position" not in res
+
+
+def test_a_line_that_cannot_beat_within_is_not_checked(planner, monkeypatch):
+    """With a bound between ``min_steps`` and the exact length of the straight line, the line
+    is refused without a collision check (and no detour is searched); one step more and it is
+    checked and planned as without a bound."""
+    free = planner.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, False)
+    steps = len(free["position"])
+    checks = []
+    real = SeededPlanner.edge_free
+    monkeypatch.setattr(
+        SeededPlanner, "edge_free", lambda s, a, b: checks.append(1) or real(s, a, b)
+    )
+    exact = planner.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, False, steps)
+    assert exact["status"] == f"no straight line shorter than {steps} steps", exact["status"]
+    assert not checks
+    roomy = planner.plan_to_pose(GOAL, REST.copy(), np.random.default_rng(0), DT, False, steps + 1)
+    assert roomy["status"] == "Success" and len(checks) == 1
+    assert np.array_equal(roomy["position"], free["position"])
+
+
+def test_joint_levers_bound_how_far_each_joint_moves_the_robot():
+    """Turning one arm joint by ``d`` moves no collision point of the Panda (SAPIEN's own
+    link poses and collision shapes) farther than ``d`` times that joint's lever, over 40
+    configurations the levers were not sampled on; the levers are tight (some point moves at
+    least 80 % of the bound) and follow the arm: the shoulder's about 1 m, the last joint's
+    (the hand alone) under 15 cm, so a wrist turn needs a tenth of the checks."""
+    import gymnasium as gym
+    from mani_skill.utils.geometry.trimesh_utils import get_component_mesh
+
+    import embodied_envs  # noqa: F401
+    from embodied_envs.solvers.pick_place import _planners
+
+    env = gym.make("PickEmbodiedGen-v1", control_mode="pd_joint_pos")
+    try:
+        u = env.unwrapped
+        robot = u.agent.robot
+        levers = joint_levers(robot, _planners(u)[0])
+        assert levers.shape == (7,)
+        assert 0.9 < levers[0] < 1.2 and 0.9 < levers[1] < 1.2 and levers[6] < 0.15
+        comps = [link._objs[0] for link in robot.get_links()]
+
+        def points(q):
+            robot.set_qpos(q[None])
+            out = []
+            for c in comps:
+                mesh = get_component_mesh(c, to_world_frame=False)
+                if mesh is not None:
+                    m = c.entity_pose.to_transformation_matrix()
+                    out.append(mesh.vertices @ m[:3, :3].T + m[:3, 3])
+            return np.concatenate(out)
+
+        rng = np.random.default_rng(123)
+        lo, hi = robot.get_qlimits()[0].cpu().numpy().T
+        d = 0.01
+        ratio = np.zeros(7)
+        for _ in range(40):
+            q = rng.uniform(lo, hi)
+            before = points(q)
+            for j in range(7):
+                turned = q.copy()
+                turned[j] += d if turned[j] + d <= hi[j] else -d
+                moved = np.linalg.norm(points(turned) - before, axis=1).max()
+                assert moved <= d * levers[j] * (1 + 1e-6), (j, moved, d * levers[j])
+                ratio[j] = max(ratio[j], moved / (d * levers[j]))
+        assert (ratio > 0.8).all(), ratio
+        sp = SeededPlanner(_planners(u)[0], levers=levers)
+        calls = []
+        sp.free = lambda q: calls.append(1) or True
+        wrist = np.zeros(7)
+        wrist[6] = 1.0  # 1 rad of the last joint alone
+        assert sp.edge_free(REST[:7], REST[:7] + wrist)
+        assert len(calls) == int(np.ceil(levers[6] / sp.cfg.check_distance)) <= 15
+    finally:
+        env.close()
