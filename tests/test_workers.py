@@ -55,3 +55,76 @@ def test_a_killed_worker_is_noticed_within_seconds():
 def test_in_process_tasks_raise_directly():
     with pytest.raises(ValueError, match="task 0 is bad"):
         run(fail_on, [(0, 0)], 1)
+
+
+def test_start_up_runs_without_the_collector_until_started():
+    """A command's start-up runs with the garbage collector off; ``started()`` sets aside
+    what is alive then (frozen out of every later collection) and turns it on again, once.
+    Without ``start_up()`` (library use, worker processes) ``started()`` changes nothing."""
+    import gc
+
+    from embodied_envs.workers import start_up, started
+
+    frozen = gc.get_freeze_count()
+    try:
+        started()  # no start-up: nothing happens
+        assert gc.isenabled() and gc.get_freeze_count() == frozen
+        start_up()
+        assert not gc.isenabled()
+        alive = [object() for _ in range(1000)]
+        started()
+        assert gc.isenabled() and gc.get_freeze_count() >= frozen + len(alive)
+        count = gc.get_freeze_count()
+        started()  # once only
+        assert gc.isenabled() and gc.get_freeze_count() == count
+    finally:
+        gc.enable()
+        gc.unfreeze()
+
+
+def test_the_cli_turns_the_collector_off_only_for_commands_that_build_envs(monkeypatch):
+    """``collect``, ``demo`` and ``eval`` start up without the collector (their tasks call
+    ``started()``); the other commands never turn it off; after any command, failed ones
+    included, it is on."""
+    import gc
+
+    from embodied_envs import workers
+    from embodied_envs.cli import main as cli
+
+    parser = cli.build_parser()
+    for argv, builds in (
+        (["collect"], True),
+        (["demo"], True),
+        (["eval", "--policy", "zero"], True),
+        (["layout", "validate", "x.json"], False),
+        (
+            [
+                "splat",
+                "render",
+                "x.ply",
+                "--eye",
+                "1",
+                "0",
+                "1",
+                "--target",
+                "0",
+                "0",
+                "0",
+                "--out",
+                "o.png",
+            ],
+            False,
+        ),
+    ):
+        args, _ = parser.parse_known_args(argv)
+        assert getattr(args, "builds_env", False) is builds, argv
+    offs = []
+    monkeypatch.setattr(cli, "start_up", lambda: offs.append(1) or workers.start_up())
+    try:
+        assert cli.main(["layout", "validate", "missing.json"]) == 1
+        assert not offs and gc.isenabled()
+        assert cli.main(["collect", "--layout", "missing.json", "--out", "/nonexistent/x"]) != 0
+        assert offs and gc.isenabled()
+    finally:
+        gc.enable()
+        gc.unfreeze()

@@ -66,7 +66,7 @@ def add_parser(sub) -> None:
     p.add_argument("--workers", type=positive_int, default=None, help="processes (default 1)")
     p.add_argument("--video", action="store_true", help="also an MP4 per kept episode")
     add_config_argument(p)
-    p.set_defaults(func=cmd_collect)
+    p.set_defaults(func=cmd_collect, builds_env=True)
 
 
 def cmd_collect(args) -> int:

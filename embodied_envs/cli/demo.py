@@ -71,7 +71,7 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--workers", type=positive_int, default=None, help="processes (default: min(envs, cores))"
     )
-    p.set_defaults(func=cmd_demo)
+    p.set_defaults(func=cmd_demo, builds_env=True)
 
 
 def cmd_demo(args) -> int:

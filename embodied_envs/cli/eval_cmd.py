@@ -71,7 +71,7 @@ def add_parser(sub) -> None:
     p.add_argument("--video", choices=VIDEO_CHOICES, default="fail", help="which episodes to film")
     p.add_argument("--workers", type=positive_int, default=1, help="processes")
     add_config_argument(p)
-    p.set_defaults(func=cmd_eval)
+    p.set_defaults(func=cmd_eval, builds_env=True)
 
 
 def cmd_eval(args) -> int:

@@ -19,7 +19,7 @@ from embodied_envs.config import ConfigError
 from embodied_envs.layout import LayoutError, PlacementError
 from embodied_envs.pipelines.datasets import DatasetError
 from embodied_envs.splat import SplatFileError
-from embodied_envs.workers import WorkerError
+from embodied_envs.workers import WorkerError, start_up, started
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,6 +44,8 @@ def main(argv: list[str] | None = None) -> int:
         args = argparse.Namespace(options=argv[1:], func=replay.cmd_replay)
     else:
         args = build_parser().parse_args(argv)
+    if getattr(args, "builds_env", False):  # its task calls started() once its env is built
+        start_up()
     try:
         return int(args.func(args) or 0)
     except (
@@ -56,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {where}{e.strerror or e}. Fix: free space or choose a writable --out.",
               file=sys.stderr)  # fmt: skip
         return 1
+    finally:
+        started()
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ from embodied_envs.paths import atomic_output
 from embodied_envs.pipelines.datasets import RECORD_KEY, has_splat, scene_record
 from embodied_envs.registration import ENTRY_ID, ENV_ID
 from embodied_envs.solvers.pick_place import PickPlaceSolver
-from embodied_envs.workers import report, run
+from embodied_envs.workers import report, run, started
 
 SOURCE_DESC = (
     "embodied_envs PickPlaceSolver (embodied_envs/solvers/pick_place.py): mplib screw and "
@@ -157,6 +157,7 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         source_desc=SOURCE_DESC,
         video_fps=int(round(1 / env.unwrapped.control_timestep)),
     )
+    started()
     kept, records = 0, []
     # over a set, each episode's seed draws its layout: a reconfiguration, recorded as such
     options = dict(reconfigure=True) if env.unwrapped.layout_set.varies else None

@@ -25,7 +25,7 @@ from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import atomic_output
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 from embodied_envs.solvers import PickPlaceSolver
-from embodied_envs.workers import run
+from embodied_envs.workers import run, started
 
 
 @dataclass(frozen=True)
@@ -76,6 +76,7 @@ def _run_env(job: dict) -> list[EnvEpisode]:
         render_mode=job["render_mode"],
         control_mode="pd_joint_pos",
     )
+    started()
     out = []
     every = job["frame_every"]
     try:

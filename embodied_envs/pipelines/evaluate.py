@@ -48,7 +48,7 @@ import numpy as np
 from embodied_envs.paths import atomic_output
 from embodied_envs.pipelines.datasets import has_splat
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
-from embodied_envs.workers import WorkerError, run
+from embodied_envs.workers import WorkerError, run, started
 
 BUILTIN_POLICIES = ("expert", "random", "zero")
 VIDEO_CHOICES = ("all", "fail", "none")
@@ -266,6 +266,7 @@ class EpisodeRunner:
             env = gym.make(ENV_ID, **self.plan.env_make_kwargs(layout, render))
             self.envs[layout] = env
             self.policies[layout] = load_policy(self.plan.policy, env)
+            started()
         return self.envs[layout]
 
     def run(
