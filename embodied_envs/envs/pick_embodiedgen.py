@@ -388,6 +388,41 @@ class PickEmbodiedGenEnv(CheckedEnv):
             "obj_to_goal_pos": self._tensor(obj_to_goal_pos),
         }
 
+    def get_state_dict(self):
+        """ManiSkill's state dict (what ``RecordEpisode`` records every step and
+        ``set_state_dict`` takes): on the CPU simulation read from the SAPIEN objects in one
+        pass, as ManiSkill's ``Actor.get_state`` and ``Articulation.get_state`` read them, with
+        the same keys, order, shapes and values (tested at every step of expert episodes);
+        ManiSkill's own on the GPU (its pass over the actors cost 0.12 of 1.7 ms per recorded
+        control step on the CPU)."""
+        if self.gpu_sim_enabled:
+            return super().get_state_dict()
+        zeros = np.zeros(3, dtype=np.float32)
+        actors, articulations = {}, {}
+        for actor in self.scene.state_dict_registry.actors.values():
+            if actor.px_body_type == "static":
+                continue
+            pose, body = actor._objs[0].pose, actor._bodies[0]
+            moving = actor.px_body_type == "dynamic"
+            vel = (body.linear_velocity, body.angular_velocity) if moving else (zeros, zeros)
+            actors[actor.name] = torch.from_numpy(np.concatenate([pose.p, pose.q, *vel])[None])
+        for art in self.scene.state_dict_registry.articulations.values():
+            root, px = art.root, art._objs[0]
+            pose, body = root._objs[0].entity_pose, root._bodies[0]
+            state = [pose.p, pose.q, body.linear_velocity, body.angular_velocity, px.qpos, px.qvel]
+            articulations[art.name] = torch.from_numpy(np.concatenate(state)[None])
+        state = {}
+        if actors:
+            state["actors"] = actors
+        if articulations:
+            state["articulations"] = articulations
+        controller = self.agent.get_controller_state()
+        if isinstance(self.agent.controller, dict):
+            controller = {k: v for k, v in controller.items() if len(v) > 0}
+        if len(controller) > 0:
+            state["controller"] = controller
+        return state
+
     def _get_obs_extra(self, info: dict):
         obs = dict(
             is_grasped=info["is_grasped"],
