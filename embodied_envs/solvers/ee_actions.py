@@ -22,6 +22,10 @@ from mani_skill.utils.geometry.rotation_conversions import (
     quaternion_to_matrix,
 )
 
+# steps at most that a converted demo holds its last target for its task to succeed (measured:
+# 1-7 on the default layout's demos that needed any)
+SETTLE_STEPS = 20
+
 
 def _root_pose_of_target(pin_model, qpos: np.ndarray, ee_index: int):
     """The end-effector pose relative to the robot root for joint positions ``qpos``."""
@@ -69,12 +73,16 @@ def joint_pos_to_ee(
     pbar=None,
     verbose: bool = False,
     substeps: int = 4,
+    settle: int = SETTLE_STEPS,
 ) -> dict:
     """Replay ``pd_joint_pos`` actions in ``env`` with an end-effector controller.
 
     The signature is ManiSkill's converter's; ``ori_env`` (the original control mode) is not
     needed: a ``pd_joint_pos`` action holds the joint targets themselves. When a target is
-    farther than one controller step, up to ``substeps`` steps are taken toward it.
+    farther than one controller step, up to ``substeps`` steps are taken toward it. A demo
+    ends at the first step its task succeeds, with the arm still slowing down and the object
+    just inside the goal; the converted arm lags a little behind it, so after the last action
+    it holds the last target until the task succeeds, for at most ``settle`` steps.
 
     Returns:
         The last step's info.
@@ -107,4 +115,14 @@ def joint_pos_to_ee(
                 env.render_human()
             if not clipped:
                 break
+    for _ in range(settle if len(ori_actions) else 0):
+        if bool(torch.as_tensor(info["success"]).all()):
+            break
+        arm_action, _ = ee_action(arm, target.p, target.q)
+        action = controller.from_action_dict(
+            {"arm": arm_action[0], "gripper": common.to_tensor(ori["gripper"]).reshape(-1)}
+        )
+        _, _, _, _, info = env.step(action)
+        if render:
+            env.render_human()
     return info
