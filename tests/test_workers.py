@@ -76,8 +76,8 @@ def test_start_up_runs_without_the_collector_until_started():
         started()
         assert gc.isenabled() and gc.get_freeze_count() >= frozen + len(alive)
         count = gc.get_freeze_count()
-        started()  # once only
-        assert gc.isenabled() and gc.get_freeze_count() == count
+        started()  # once only: nothing more set aside (what was, may be freed meanwhile)
+        assert gc.isenabled() and gc.get_freeze_count() <= count
     finally:
         gc.enable()
         gc.unfreeze()
