@@ -59,7 +59,9 @@ class SolverConfig:
     approach_offset: float = 0.08  # m, pre-grasp distance above the grasp along the approach
     grasp_depth: float = 0.035  # m, grasp centre below the object's top
     min_tcp_height: float = 0.015  # m, lowest grasp centre above the support surface
-    lift_heights: tuple[float, ...] = (0.10, 0.05)  # m, lifts after grasping, tried in order
+    lift_heights: tuple[float, ...] = (0.05, 0.10)  # m, lifts after grasping, tried in order
+    # (the carry plans from there: 5 cm before 10 saves 1-4 steps an episode, the same
+    # successes on the shipped layouts and the zoo)
     gripper_steps: int = 8  # control steps to open the gripper, and at most to close it
     finger_rest: float = 1e-4  # m per step: fingers moving less are at rest (closed on the
     # object: 3 steps on the shipped layouts)
