@@ -94,6 +94,18 @@ def joint_pos_to_ee(
     arm_joints = arm.active_joint_indices.cpu().numpy()
     ori_controller = ori_env.unwrapped.agent.controller
     info: dict = {}
+
+    def toward(target, gripper) -> bool:  # one step toward the target; whether it clipped
+        nonlocal info
+        arm_action, clipped = ee_action(arm, target.p, target.q)
+        action = controller.from_action_dict(
+            {"arm": arm_action[0], "gripper": common.to_tensor(gripper).reshape(-1)}
+        )
+        _, _, _, _, info = env.step(action)
+        if render:
+            env.render_human()
+        return clipped
+
     if pbar is not None:
         pbar.reset(total=len(ori_actions))
     for t in range(len(ori_actions)):
@@ -106,23 +118,10 @@ def joint_pos_to_ee(
         qpos[arm_joints] = common.to_numpy(ori["arm"]).reshape(-1)
         target = _root_pose_of_target(pin_model, qpos, arm.ee_link.index)
         for _ in range(substeps):
-            arm_action, clipped = ee_action(arm, target.p, target.q)
-            action = controller.from_action_dict(
-                {"arm": arm_action[0], "gripper": common.to_tensor(ori["gripper"]).reshape(-1)}
-            )
-            _, _, _, _, info = env.step(action)
-            if render:
-                env.render_human()
-            if not clipped:
+            if not toward(target, ori["gripper"]):
                 break
     for _ in range(settle if len(ori_actions) else 0):
         if bool(torch.as_tensor(info["success"]).all()):
             break
-        arm_action, _ = ee_action(arm, target.p, target.q)
-        action = controller.from_action_dict(
-            {"arm": arm_action[0], "gripper": common.to_tensor(ori["gripper"]).reshape(-1)}
-        )
-        _, _, _, _, info = env.step(action)
-        if render:
-            env.render_human()
+        toward(target, ori["gripper"])
     return info

@@ -22,6 +22,21 @@ from embodied_envs.solvers import PickPlaceSolver
 env = per_layout_env(control_mode="pd_joint_pos")
 
 
+def expert_episode_then_drop(env, seed: int, evaluate) -> None:
+    """An expert episode, then 15 steps with the fingers open at the goal (the object falls),
+    with ``evaluate`` (which calls the env's own) in place of the env's ``evaluate()``."""
+    u = env.unwrapped
+    own = u.evaluate
+    u.evaluate = evaluate
+    try:
+        env.reset(seed=seed)
+        PickPlaceSolver(env, seed=seed).solve()
+        for _ in range(15):
+            env.step(np.r_[u.agent.robot.get_qpos()[0, :7].cpu().numpy(), 1.0])
+    finally:
+        u.evaluate = own
+
+
 def test_arrays_and_tensors_give_the_same_flags_and_rewards(env):
     u = env.unwrapped
     arrays = u._task_state
@@ -52,14 +67,7 @@ def test_arrays_and_tensors_give_the_same_flags_and_rewards(env):
         seen.append([float(reward[0])] + [bool(info[k][0]) for k in ("success", "is_grasped")])
         return info
 
-    u.evaluate = checked
-    try:
-        env.reset(seed=0)
-        PickPlaceSolver(env, seed=0).solve()
-        for _ in range(15):  # open the fingers at the goal: the object falls
-            env.step(np.r_[u.agent.robot.get_qpos()[0, :7].cpu().numpy(), 1.0])
-    finally:
-        u.evaluate = evaluate
+    expert_episode_then_drop(env, 0, checked)
     reward, success, grasped = np.array(seen).T
     assert len(seen) > 60
     # every stage of the reward occurs: reaching only, grasped, success (its maximum)
@@ -87,14 +95,7 @@ def test_state_dict_is_maniskills_bit_for_bit(env):
         steps.append(ours)
         return evaluate()
 
-    u.evaluate = checked
-    try:
-        env.reset(seed=1)
-        PickPlaceSolver(env, seed=1).solve()
-        for _ in range(10):  # open the fingers at the goal: the object falls
-            env.step(np.r_[u.agent.robot.get_qpos()[0, :7].cpu().numpy(), 1.0])
-    finally:
-        u.evaluate = evaluate
+    expert_episode_then_drop(env, 1, checked)
     assert len(steps) > 60
     name = u.layouts[0].target_node  # the state dict holds each node's actor by its name
     moved = steps[len(steps) // 2]["actors"][name]
