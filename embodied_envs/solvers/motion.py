@@ -132,6 +132,7 @@ def joint_levers(robot, planner: mplib.Planner, samples: int = 200, seed: int = 
             points.append(np.asarray(mesh.vertices, dtype=np.float64))
     owner = np.concatenate([np.full(len(p), k) for k, p in enumerate(points)])
     local = np.concatenate(points)
+    rows = [owner == k for k in range(len(points))]  # each link's rows of `local`
 
     def beyond(child) -> set[str]:  # the link and every link after it
         out, todo = set(), [child]
@@ -163,7 +164,7 @@ def joint_levers(robot, planner: mplib.Planner, samples: int = 200, seed: int = 
         world = np.empty_like(local)
         for k, i in enumerate(frames):
             m = matrix(i)
-            world[owner == k] = local[owner == k] @ m[:3, :3].T + m[:3, 3]
+            world[rows[k]] = local[rows[k]] @ m[:3, :3].T + m[:3, 3]
         for j in range(len(joints)):
             axis = matrix(child[j]) @ in_child[j]  # its x axis is the joint's
             rel = world[moved[j]] - axis[:3, 3]
