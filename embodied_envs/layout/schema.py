@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -20,6 +21,7 @@ import numpy as np
 from embodied_envs.layout.assets import AssetSpec, parse_urdf, urdf_path_for
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE, LayoutPose
+from embodied_envs.layout.task import Task, resolve_task
 from embodied_envs.paths import atomic_output
 
 CATEGORIES = ("background", "context", "manipulated_objs", "distractor_objs")
@@ -70,21 +72,30 @@ class LayoutInfo:
     def manipulated_objs(self) -> list[str]:
         return list(self.relation["manipulated_objs"])
 
+    @functools.cached_property
+    def task(self) -> Task:
+        """The task graded in this layout (``layout/task.py``: ``relation.task``, else the
+        sentence ``relation.task_desc``, else picking the first manipulated object)."""
+        return resolve_task(self, label(self.source))
+
     @property
     def target_node(self) -> str:
-        """The graded object's node name: the first manipulated object."""
-        return self.manipulated_objs[0]
+        """The graded object's node name: the task's first mover."""
+        return self.task.objects[0]
 
     @property
     def instruction(self) -> str:
         """The task in words, for language-conditioned policies: ``relation.task_desc``, or,
-        when the layout has none, a sentence built from the target's ``objs_desc`` (or its
-        node name)."""
+        when the layout has none, a sentence built from the task and the objects' ``objs_desc``
+        (or their node names)."""
         desc = self.relation.get("task_desc")
         if isinstance(desc, str) and desc.strip():
             return " ".join(desc.split())
-        target = (self.objs_desc or {}).get(self.target_node) or self.target_node
-        return f"Pick up {' '.join(str(target).replace('_', ' ').split())} and hold it at the goal."
+        names = {
+            n: " ".join(str((self.objs_desc or {}).get(n) or n).replace("_", " ").split())
+            for n in self.objs_mapping
+        }
+        return self.task.sentence(names)
 
     def object_nodes(self) -> list[str]:
         """Simulated asset nodes (everything but the background), in ``objs_mapping`` order."""
@@ -158,6 +169,7 @@ class LayoutInfo:
         # normalise quaternions within tolerance (rejected beyond it by _check_structure)
         for node, values in info.position.items():
             info.position[node] = LayoutPose.from_layout(values).to_layout()
+        info.task  # noqa: B018 (a task the env cannot grade is refused at load)
         return info
 
     def to_dict(self, decimals: int | None = POSE_DECIMALS) -> dict:
