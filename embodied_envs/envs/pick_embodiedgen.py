@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,12 +24,12 @@ from embodied_envs.config import (
 )
 from embodied_envs.envs.arguments import check_quaternion, dataclass_arg
 from embodied_envs.envs.base import CheckedEnv
-from embodied_envs.envs.contacts import is_grasping
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
+from embodied_envs.envs.tasks import INFO_KEYS, KIND_IDS, RULES, pick
+from embodied_envs.envs.tasks.scene import TaskReader, TaskScene
 from embodied_envs.layout import GoalRegion, LayoutError, LayoutInfo, PlacementLimits
 from embodied_envs.layout.limits import check_number
 from embodied_envs.layout.placement import place
-from embodied_envs.layout.rules import array_module
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import default_layout
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID, MAX_EPISODE_STEPS
@@ -41,20 +40,6 @@ from embodied_envs.scene.layout_scene import configuration_layouts, scene_slots
 REST_QPOS = np.array(
     [0.0, np.pi / 8, 0.0, -3 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04]
 )
-
-
-@dataclass(frozen=True)
-class TaskState:
-    """What the success rule and the reward read, at one instant, per env: positions ``(n, 3)``
-    of the object, the goal and the TCP, and the arm's joint speeds ``(n, 7)``. Numpy arrays
-    on the CPU simulation (one env, where each torch operation's fixed cost made up most of
-    ``evaluate()`` and the reward: 0.35 of 1.8 ms per recorded control step), tensors on the
-    GPU; the rules below are written once for both."""
-
-    obj: Any
-    goal: Any
-    tcp: Any
-    arm_qvel: Any
 
 
 class PickEmbodiedGenEnv(CheckedEnv):
@@ -112,10 +97,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
     SUPPORTED_RENDER_MODES = (*CheckedEnv.SUPPORTED_RENDER_MODES, "hybrid")
     metadata = {"render_modes": SUPPORTED_RENDER_MODES}
 
-    goal_thresh = 0.025  # m, object-to-goal distance that counts as placed
     fail_drop = 0.05  # m, the object this far below the table's top has fallen off
-    static_thresh = 0.2  # rad/s, arm joint speed under which the robot is static
-    max_reward = 5.0  # dense reward on success; the normalised reward divides by it
     base_camera_eye = (0.95, 0.0, 0.55)  # base_camera eye in the robot base frame, m
     base_camera_target = (0.30, 0.0, 0.0)  # base_camera target in the robot base frame, m
     # the framed render camera (camera_cfg without an eye or target): past the table's centre,
@@ -286,11 +268,19 @@ class PickEmbodiedGenEnv(CheckedEnv):
         )  # fmt: skip
         self.env_actors, self.obj = ls.env_actors, ls.target_actor
         self.instructions = [layout.instruction for layout in self.layouts]  # one per env
+        limits = self.agent.robot.get_qlimits()[0, -2:].sum(0).tolist()  # fingers shut, open
+        self.task_scene = TaskScene.build(
+            self.layouts, ls.env_actors, ls.robot_poses.cpu().numpy(), tuple(limits)
+        )
+        self.tasks = self.task_scene.tasks  # one per env (layout/task.py)
+        self.task_reader = TaskReader(self, self.task_scene, ls.top_z)
+        self._kinds = sorted({t.kind for t in self.tasks}, key=KIND_IDS.get)
+        self._kind_masks = {k: self.task_scene.kinds == KIND_IDS[k] for k in self._kinds}
         ls.register_state(self)
         self.ground = build_ground(self.scene, altitude=ls.floor_z)
         self.goal_site = actors.build_sphere(
             self.scene,
-            radius=self.goal_thresh,
+            radius=pick.GOAL_THRESH,
             color=[0, 1, 0, 1],
             name="goal_site",
             body_type="kinematic",
@@ -325,7 +315,11 @@ class PickEmbodiedGenEnv(CheckedEnv):
             qpos[:, :-2] += self.robot_init_qpos_noise * start.joint_noise  # fingers stay open
             self.agent.reset(qpos)
             ls.set_episode_poses(env_idx, start.objects if self.replace_objs else {})
-            self.goal_site.set_pose(Pose.create_from_pq(start.goal))
+            dest = self.task_reader.begin_episode(env_idx, start.goal)
+            # the goal marker: the pick goal, or where the first mover goes
+            is_pick = (self.task_scene.kinds == KIND_IDS["pick"]).to(self.device)[env_idx]
+            goal = torch.where(is_pick[:, None], torch.as_tensor(start.goal), dest[:, 0])
+            self.goal_site.set_pose(Pose.create_from_pq(goal))
         if not self.gpu_sim_enabled:
             self._restart_sleep_timers()
 
@@ -349,44 +343,35 @@ class PickEmbodiedGenEnv(CheckedEnv):
             self.hybrid.prerender(self.scene)  # after a (re)configuration: the new backgrounds
         return result
 
-    def _task_state(self) -> TaskState:
-        """The positions and speeds ``evaluate()`` and the reward read, now."""
-        if self.gpu_sim_enabled:
-            return TaskState(
-                obj=self.obj.pose.p,
-                goal=self.goal_site.pose.p,
-                tcp=self.agent.tcp_pose.p,
-                arm_qvel=self.agent.robot.get_qvel()[..., :-2],
-            )
-        # the CPU simulation's one env, read from its SAPIEN objects as ManiSkill's structs
-        # read them (Actor.pose, Link.pose, Articulation.qvel), without their torch wrapping
-        return TaskState(
-            obj=np.array([e.pose.p for e in self.obj._objs]),
-            goal=np.array([e.pose.p for e in self.goal_site._objs]),
-            tcp=np.array([link.entity_pose.p for link in self.agent.tcp._objs]),
-            arm_qvel=np.array([a.qvel[:-2] for a in self.agent.robot._objs]),
-        )
+    def _rules(self):
+        """The task state now and each present kind's rule results (``envs/tasks``)."""
+        goal = self.goal_site.pose.p if self.gpu_sim_enabled else np.array(
+            [e.pose.p for e in self.goal_site._objs])  # fmt: skip
+        state = self.task_reader.state(goal)
+        return state, {k: RULES[k].evaluate(state) for k in self._kinds}
 
-    def _tensor(self, x) -> torch.Tensor:
-        """A task array as ManiSkill's info and rewards hold it (a tensor on the env's device;
-        a numpy array is shared, not copied)."""
-        return torch.as_tensor(x, device=self.device)
+    def _by_kind(self, results: dict, key: str) -> torch.Tensor:
+        """``key`` of each env's own kind, as a tensor on the env's device."""
+        out = None
+        for kind, res in results.items():
+            value = torch.as_tensor(res[key], device=self.device)
+            if out is None:
+                out = value
+            else:
+                mask = self._kind_masks[kind].to(self.device)
+                out = torch.where(mask.reshape(-1, *[1] * (value.ndim - 1)), value, out)
+        return out
 
     def evaluate(self):
-        s = self._task_state()
-        xp = array_module(s.obj)
-        obj_to_goal_pos = s.goal - s.obj
-        is_obj_placed = xp.linalg.norm(obj_to_goal_pos, axis=1) <= self.goal_thresh
-        # ManiSkill's Panda.is_static: every arm joint slower than the threshold
-        is_robot_static = (xp.abs(s.arm_qvel) <= self.static_thresh).all(-1)
-        return {
-            "success": self._tensor(is_obj_placed & is_robot_static),
-            "fail": self._tensor(self.layout_scene.off_table(s.obj, self.fail_drop)),
-            "is_obj_placed": self._tensor(is_obj_placed),
-            "is_robot_static": self._tensor(is_robot_static),
-            "is_grasped": is_grasping(self.agent, self.obj),
-            "obj_to_goal_pos": self._tensor(obj_to_goal_pos),
-        }
+        state, results = self._rules()
+        self._last_rules = (state, results)
+        info = {key: self._by_kind(results, key) for key in ("success", *INFO_KEYS)}
+        ls, xp = self.layout_scene, state.xp
+        off = [ls.off_table(state.movers[:, k], self.fail_drop) for k in range(state.movers.shape[1])]
+        # an object off the table, or the receptacle knocked off
+        off.append(ls.off_table(state.rec_pos, self.fail_drop) & ~state.rec_is_table)
+        info["fail"] = torch.as_tensor(xp.stack(off, 0).any(0), device=self.device)
+        return info
 
     def get_state_dict(self):
         """ManiSkill's state dict (what ``RecordEpisode`` records every step and
@@ -428,6 +413,8 @@ class PickEmbodiedGenEnv(CheckedEnv):
             is_grasped=info["is_grasped"],
             tcp_pose=self.agent.tcp_pose.raw_pose,
             goal_pos=self.goal_site.pose.p,
+            task_kind=torch.nn.functional.one_hot(self.task_scene.kinds, len(RULES)).to(
+                self.device, torch.float32),  # pick, place, move  # fmt: skip
         )
         if "state" in self.obs_mode:
             obs.update(
@@ -438,30 +425,17 @@ class PickEmbodiedGenEnv(CheckedEnv):
         return obs
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        """Staged dense reward, in [0, 5].
-
-        - reaching, [0, 1]: ``1 - tanh(5 * |tcp - obj|)``
-        - grasped, {0, 1}
-        - placing, [0, 1] while grasped: ``1 - tanh(5 * |obj - goal|)``
-        - static, [0, 1] while placed: ``1 - tanh(5 * |arm qvel|)``
-        - success: the maximum, 5
-        """
-        s = self._task_state()
-        xp = array_module(s.obj)
-
-        def given(key):  # info's tensor as the state's array
-            return info[key] if xp is torch else info[key].cpu().numpy()
-
-        is_grasped = xp.asarray(given("is_grasped"), dtype=xp.float32)
-        reward = 1 - xp.tanh(5 * xp.linalg.norm(s.obj - s.tcp, axis=1)) + is_grasped
-        obj_to_goal = xp.linalg.norm(given("obj_to_goal_pos"), axis=1)
-        reward = reward + (1 - xp.tanh(5 * obj_to_goal)) * is_grasped
-        static = 1 - xp.tanh(5 * xp.linalg.norm(s.arm_qvel, axis=1))
-        reward = reward + static * xp.asarray(given("is_obj_placed"), dtype=xp.float32)
-        return self._tensor(xp.where(given("success"), self.max_reward, reward))
+        """Each env's kind's staged dense reward (``envs/tasks/<kind>.py`` ``reward``), from
+        0 to that kind's ``MAX_REWARD`` (reached on success only)."""
+        state, results = self._last_rules if hasattr(self, "_last_rules") else self._rules()
+        rewards = {k: {"reward": RULES[k].reward(state, res)} for k, res in results.items()}
+        return self._by_kind(rewards, "reward").float()
 
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return self.compute_dense_reward(obs=obs, action=action, info=info) / self.max_reward
+        dense = self.compute_dense_reward(obs=obs, action=action, info=info)
+        maxima = {k: {"max": np.full(self.num_envs, RULES[k].MAX_REWARD, np.float32)}
+                  for k in self._kinds}  # fmt: skip
+        return dense / self._by_kind(maxima, "max")
 
     # --- hybrid rendering: HybridRenderer composites; the env only hands it images -----------
     def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:

@@ -1,0 +1,59 @@
+"""``move``: the mover ends ``MIN_SHIFT`` or more from where it started, along a direction
+(left, right, forward: away from the robot, backward) of the robot's frame, on the table.
+
+**Success**, for every mover: its displacement in the table's plane at least ``MIN_SHIFT``
+along the direction and within ``MAX_ANGLE_DEG`` of it; on the table (its lowest point within
+``place.TOUCH`` of the top); released and at rest (``state``). **Reward**:
+``state.staged_reward`` towards ``SHIFT`` along the direction; ``MAX_REWARD`` on success.
+"""
+
+from __future__ import annotations
+
+import math
+
+from embodied_envs.envs.tasks.place import TOUCH
+from embodied_envs.envs.tasks.state import (
+    STAGES,
+    TaskState,
+    at_rest,
+    current,
+    norm,
+    released,
+    robot_static,
+    staged_reward,
+    take,
+)
+
+MIN_SHIFT = 0.10  # m along the direction
+MAX_ANGLE_DEG = 45.0  # the displacement within this of the direction
+SHIFT = 0.15  # m: the destination the expert and the reward aim at
+MAX_REWARD = STAGES + 1
+
+
+def in_pose(s: TaskState):
+    """``(n, m)``: each mover shifted far enough along the direction, on the table."""
+    d = s.movers[..., :2] - s.start[..., :2]
+    along = (d * s.direction[:, None, :]).sum(-1)
+    aligned = along >= math.cos(math.radians(MAX_ANGLE_DEG)) * norm(d)
+    return (along >= MIN_SHIFT) & aligned & (s.bottom <= s.table_z[:, None] + TOUCH)
+
+
+def evaluate(s: TaskState) -> dict:
+    pose = in_pose(s)
+    done = pose & released(s) & at_rest(s)
+    k = current(done)
+    return {
+        "success": done.all(1),
+        "is_grasped": take(s.grasped, k),
+        "is_obj_placed": pose.all(1),
+        "is_robot_static": robot_static(s),
+        "obj_to_goal_pos": take(s.dest, k) - take(s.movers, k),
+        "done": done,
+    }
+
+
+def reward(s: TaskState, info: dict):
+    done = info["done"]
+    k = current(done)
+    staged = staged_reward(s, k, take(in_pose(s), k), done.sum(1), done.shape[1])
+    return s.xp.where(info["success"], MAX_REWARD, staged)

@@ -1,0 +1,64 @@
+"""``place``: every mover ends in or on the receptacle (another object, or the table).
+
+**Success**, for every mover: at rest (``state.REST_LIN``, ``REST_ANG``), released (not
+grasped; fingers open or the hand away, ``state.released``) and in its pose:
+
+- its centre over the receptacle's footprint (in the receptacle's frame);
+- a receptacle object: its lowest point off the table (``OFF_TABLE``: it rests on the
+  receptacle, not leaning on its outer wall from the table) and at most ``TOUCH`` above the
+  receptacle's top (not hovering); for "in", its centre below the receptacle's rim;
+- the table: its lowest point within ``TOUCH`` of the top.
+
+Held above the receptacle, dropped and still bouncing, next to it on the table, leaning on
+its side: not success. **Reward**: ``state.staged_reward``; ``MAX_REWARD`` on success.
+"""
+
+from __future__ import annotations
+
+from embodied_envs.envs.tasks.state import (
+    OFF_TABLE,
+    STAGES,
+    TaskState,
+    at_rest,
+    current,
+    released,
+    robot_static,
+    staged_reward,
+    take,
+)
+
+TOUCH = 0.01  # m: a lowest point this close above a support surface touches it
+MAX_REWARD = STAGES + 1  # the dense reward on success
+
+
+def in_pose(s: TaskState):
+    """``(n, m)``: each mover rests where the task wants it (released or not)."""
+    normals, offsets = s.footprint
+    xy = s.in_receptacle[..., :2]
+    over = ((xy[:, :, None, :] * normals[:, None]).sum(-1) >= offsets[:, None] - 1e-9).all(-1)
+    table_z, rec_top = s.table_z[:, None], s.rec_top[:, None]
+    on_object = (s.bottom >= table_z + OFF_TABLE) & (s.bottom <= rec_top + TOUCH)
+    on_object &= ~s.is_in[:, None] | (s.in_receptacle[..., 2] < s.rim[:, None])
+    on_table = s.bottom <= table_z + TOUCH
+    return over & s.xp.where(s.rec_is_table[:, None], on_table, on_object)
+
+
+def evaluate(s: TaskState) -> dict:
+    pose = in_pose(s)
+    done = pose & released(s) & at_rest(s)
+    k = current(done)
+    return {
+        "success": done.all(1),
+        "is_grasped": take(s.grasped, k),
+        "is_obj_placed": pose.all(1),
+        "is_robot_static": robot_static(s),
+        "obj_to_goal_pos": take(s.dest, k) - take(s.movers, k),
+        "done": done,
+    }
+
+
+def reward(s: TaskState, info: dict):
+    done = info["done"]
+    k = current(done)
+    staged = staged_reward(s, k, take(in_pose(s), k), done.sum(1), done.shape[1])
+    return s.xp.where(info["success"], MAX_REWARD, staged)

@@ -1,0 +1,258 @@
+"""Each env's task in the scene: its movers and receptacle as actors merged over envs, their
+geometry, destinations, and the :class:`TaskState` read from the simulation every step."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from mani_skill.utils.structs import Actor
+from scipy.spatial import ConvexHull
+
+from embodied_envs.envs.contacts import is_grasping
+from embodied_envs.envs.tasks import KIND_IDS, move
+from embodied_envs.envs.tasks.state import TaskState
+from embodied_envs.layout.assets import asset_geometry
+from embodied_envs.layout.rules import half_planes, pad_polygons
+from embodied_envs.layout.task import Task
+
+# a move's direction in the robot base's frame (forward: away from the robot)
+DIRECTION_XY = {"forward": (1.0, 0.0), "backward": (-1.0, 0.0), "left": (0.0, 1.0),
+                "right": (0.0, -1.0)}  # fmt: skip
+SPREAD = 0.9  # several movers' destinations spread over this part of the receptacle's length
+
+
+def quat_matrix(q):
+    """Rotation matrices ``(..., 3, 3)`` of scalar-first quaternions ``q (..., 4)`` (numpy or
+    torch, as ManiSkill's raw poses hold them)."""
+    w, x, y, z = (q[..., i] for i in range(4))
+    rows = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    stack = np.stack if isinstance(q, np.ndarray) else torch.stack
+    return stack([stack(r, -1) for r in rows], -2)
+
+
+def support_height(parts: tuple[np.ndarray, ...], xy: np.ndarray, default: float) -> float:
+    """The highest point of any convex part straight above or below ``xy`` (its top surface
+    there: a bowl's floor, a box's lid), in the actor's frame; ``default`` where none is."""
+    best = None
+    for verts in parts:
+        try:
+            eq = ConvexHull(verts).equations  # n . p + d <= 0 inside
+        except Exception:  # a flat part: no volume, nothing to stand on
+            continue
+        n, d = eq[:, :3], eq[:, 3] + eq[:, :2] @ xy
+        up, down, side = n[:, 2] > 1e-9, n[:, 2] < -1e-9, np.abs(n[:, 2]) <= 1e-9
+        if (d[side] > 1e-9).any():
+            continue
+        top = (-d[up] / n[up, 2]).min() if up.any() else None
+        low = (-d[down] / n[down, 2]).max() if down.any() else -np.inf
+        if top is not None and top >= low and (best is None or top > best):
+            best = float(top)
+    return default if best is None else best
+
+
+@dataclass
+class TaskScene:
+    """The tasks of all envs of one configuration.
+
+    Attributes:
+        tasks: per env, its :class:`Task`.
+        kinds: ``(n,)`` each env's kind index (``tasks.KIND_IDS``).
+        movers: per mover slot, the movers merged over envs (an env with fewer movers repeats
+            its last one); ``mover_nodes[i][k]`` names env i's mover in slot k.
+        receptacle: the receptacle merged over envs (the context where an env has none).
+    """
+
+    tasks: list[Task]
+    kinds: torch.Tensor
+    movers: list[Actor]
+    mover_nodes: list[list[str]]
+    receptacle: Actor
+    hulls: np.ndarray  # (n, m, V, 3) each mover's collision points in its frame
+    centres: np.ndarray  # (n, m, 3) each mover's centre (its collision box's) in its frame
+    footprint: tuple  # (normals (n, E, 2), offsets (n, E)) receptacle footprint, its frame
+    rim: np.ndarray  # (n,) receptacle top in its frame
+    dest_local: np.ndarray  # (n, m, 3) each mover's destination in the receptacle's frame
+    is_in: np.ndarray  # (n,) bool
+    rec_is_table: np.ndarray  # (n,) bool
+    direction: np.ndarray  # (n, 2) world XY unit vector of a move
+    finger_span: tuple[float, float]  # the fingers' summed joint positions closed and open
+
+    @classmethod
+    def build(cls, layouts, env_actors, robot_poses: np.ndarray, finger_span) -> TaskScene:
+        n = len(layouts)
+        tasks = [x.task for x in layouts]
+        m = max(len(t.objects) for t in tasks)
+        nodes = [list(t.objects) + [t.objects[-1]] * (m - len(t.objects)) for t in tasks]
+        movers = [
+            Actor.merge([env_actors[f"env{i}"][nodes[i][k]] for i in range(n)], name=f"mover{k}")
+            for k in range(m)
+        ]
+        rec_nodes = [t.receptacle or x.context for t, x in zip(tasks, layouts, strict=True)]
+        receptacle = Actor.merge(
+            [env_actors[f"env{i}"][rec_nodes[i]] for i in range(n)], name="receptacle"
+        )
+        hulls, centres, polys, rims, dests = [], [], [], [], []
+        for i, layout in enumerate(layouts):
+            geoms = [asset_geometry(layout.asset_spec(node)) for node in nodes[i]]
+            hulls.append([_hull_points(g.vertices) for g in geoms])
+            centres.append([(g.vertices.min(0) + g.vertices.max(0)) / 2 for g in geoms])
+            rec = asset_geometry(layout.asset_spec(rec_nodes[i]))
+            poly = rec.top_hull(0.02) if rec_nodes[i] == layout.context else rec.footprint()
+            polys.append(poly)
+            rims.append(rec.max_z)
+            dests.append(_destinations(rec, poly, [g.min_z for g in geoms], centres[-1]))
+        size = max(len(h) for hs in hulls for h in hs)
+        hulls = np.array([[np.concatenate([h, np.repeat(h[:1], size - len(h), 0)]) for h in hs]
+                          for hs in hulls], np.float32)  # fmt: skip
+        normals, offsets = half_planes(pad_polygons(polys))
+        yaw = _yaws(robot_poses)
+        way = np.array([DIRECTION_XY.get(t.direction, (1.0, 0.0)) for t in tasks])
+        c, s = np.cos(yaw), np.sin(yaw)
+        direction = np.stack([c * way[:, 0] - s * way[:, 1], s * way[:, 0] + c * way[:, 1]], -1)
+        return cls(
+            tasks=tasks,
+            kinds=torch.tensor([KIND_IDS[t.kind] for t in tasks]),
+            movers=movers,
+            mover_nodes=nodes,
+            receptacle=receptacle,
+            hulls=hulls,
+            centres=np.array(centres, np.float32),
+            footprint=(normals.astype(np.float32), offsets.astype(np.float32)),
+            rim=np.array(rims, np.float32),
+            dest_local=np.array(dests, np.float32),
+            is_in=np.array([t.relation == "in" for t in tasks]),
+            rec_is_table=np.array([r == x.context for r, x in zip(rec_nodes, layouts, strict=True)]),
+            direction=direction.astype(np.float32),
+            finger_span=finger_span,
+        )
+
+    def destinations(self, rows, rec_pose, start, goal) -> torch.Tensor:
+        """``(b, m, 3)`` each mover's destination for an episode of the envs ``rows (b,)``: on
+        the receptacle (its raw pose ``rec_pose (b, 7)`` now), ``move.SHIFT`` along the
+        direction from ``start (b, m, 3)`` (``move``), or over the ``goal (b, 3)`` on the
+        table (a place on the table)."""
+        def t(x):
+            return torch.as_tensor(x, device=start.device)[rows.cpu()].to(start.device)
+
+        rot = quat_matrix(rec_pose[:, 3:])
+        on_rec = rec_pose[:, None, :3] + (rot[:, None] @ t(self.dest_local)[..., None])[..., 0]
+        on_table = torch.cat([goal[:, None, :2].expand_as(start[..., :2]), on_rec[..., 2:]], -1)
+        place = torch.where(t(self.rec_is_table)[:, None, None], on_table, on_rec)
+        shifted = start.clone()
+        shifted[..., :2] += t(self.direction)[:, None] * move.SHIFT
+        is_move = (t(self.kinds) == KIND_IDS["move"])[:, None, None]
+        return torch.where(is_move, shifted, place)
+
+
+def _hull_points(vertices: np.ndarray) -> np.ndarray:
+    """The collision points that can be lowest: the hull's vertices."""
+    try:
+        return vertices[ConvexHull(vertices).vertices]
+    except Exception:  # flat: every vertex
+        return vertices
+
+
+def _yaws(robot_poses: np.ndarray) -> np.ndarray:
+    q = np.asarray(robot_poses)[:, 3:]
+    w, x, y, z = q.T
+    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def _destinations(rec, poly: np.ndarray, mover_min_z: list[float], centres) -> np.ndarray:
+    """``(m, 3)`` in the receptacle's frame: each mover's centre resting upright on the
+    receptacle's top surface, spread along its footprint's longer side."""
+    centre = poly.mean(0)
+    extent = poly.max(0) - poly.min(0)
+    axis = np.eye(2)[int(np.argmax(extent))]
+    m = len(mover_min_z)
+    out = []
+    for k, min_z in enumerate(mover_min_z):
+        xy = centre + ((k + 1) / (m + 1) - 0.5) * SPREAD * extent.max() * axis
+        out.append([*xy, support_height(rec.parts, xy, rec.max_z) - min_z + centres[k][2]])
+    return np.array(out)
+
+
+class TaskReader:
+    """Reads :class:`TaskState` from the simulation: from ManiSkill's structs as tensors on
+    the GPU simulation, and on the CPU simulation's one env as numpy arrays straight from the
+    SAPIEN objects, as ManiSkill's ``Actor.pose``, ``Link.pose`` and ``Articulation.qpos``
+    read them (each torch operation's fixed cost would make up most of a step's rules)."""
+
+    def __init__(self, env, scene: TaskScene, table_z: torch.Tensor):
+        self.env, self.ts = env, scene
+        self.gpu = env.gpu_sim_enabled
+        arr = (lambda x: torch.as_tensor(x, device=env.device)) if self.gpu else np.asarray
+        self.arr = arr
+        self.hulls, self.centres = arr(scene.hulls), arr(scene.centres)
+        self.footprint = tuple(arr(x) for x in scene.footprint)
+        self.rim, self.is_in = arr(scene.rim), arr(scene.is_in)
+        self.rec_is_table, self.direction = arr(scene.rec_is_table), arr(scene.direction)
+        self.table_z = arr(table_z.cpu().numpy()) if not self.gpu else table_z
+        n, m = scene.hulls.shape[:2]
+        self.start = arr(np.zeros((n, m, 3), np.float32))
+        self.dest = arr(np.zeros((n, m, 3), np.float32))
+
+    def begin_episode(self, env_idx: torch.Tensor, goal) -> torch.Tensor:
+        """Record the envs' mover starts and destinations after their poses were set
+        (``goal (b, 3)``: those envs' pick goals); returns the destinations ``(b, m, 3)``."""
+        goal = torch.as_tensor(goal, device=self.env.device)
+        poses = torch.stack([a.pose.raw_pose[env_idx] for a in self.ts.movers], 1)
+        centres = torch.as_tensor(self.ts.centres, device=poses.device)[env_idx.to(poses.device)]
+        start = poses[..., :3] + (quat_matrix(poses[..., 3:]) @ centres[..., None])[..., 0]
+        rec = self.ts.receptacle.pose.raw_pose[env_idx]
+        dest = self.ts.destinations(env_idx, rec, start, goal)
+        if self.gpu:
+            self.start[env_idx], self.dest[env_idx] = start, dest
+        else:
+            idx = env_idx.cpu().numpy()
+            self.start[idx], self.dest[idx] = start.cpu().numpy(), dest.cpu().numpy()
+        return dest
+
+    def _read(self):
+        agent, movers, rec = self.env.agent, self.ts.movers, self.ts.receptacle
+        if self.gpu:
+            poses = torch.stack([a.pose.raw_pose for a in movers], 1)
+            return (
+                agent.tcp.pose.p, agent.robot.get_qpos(), agent.robot.get_qvel(), poses,
+                torch.stack([a.linear_velocity for a in movers], 1),
+                torch.stack([a.angular_velocity for a in movers], 1),
+                rec.pose.raw_pose,
+                torch.stack([is_grasping(agent, a) for a in movers], 1),
+            )  # fmt: skip
+        robot = agent.robot._objs[0]
+        poses = [a._objs[0].pose for a in movers]
+        bodies = [a._bodies[0] for a in movers]
+        rp = rec._objs[0].pose
+        return (
+            np.array([agent.tcp._objs[0].entity_pose.p]), robot.qpos[None], robot.qvel[None],
+            np.array([[np.concatenate([p.p, p.q]) for p in poses]]),
+            np.array([[b.linear_velocity for b in bodies]]),
+            np.array([[b.angular_velocity for b in bodies]]),
+            np.concatenate([rp.p, rp.q])[None],
+            np.array([[bool(is_grasping(agent, a)[0]) for a in movers]]),
+        )  # fmt: skip
+
+    def state(self, goal) -> TaskState:
+        """The state now; ``goal (n, 3)`` the pick goal (same array type as the reads)."""
+        tcp, qpos, qvel, poses, lin, ang, rec, grasped = self._read()
+        origin, rot = poses[..., :3], quat_matrix(poses[..., 3:])
+        p = origin + (rot @ self.centres[..., None])[..., 0]  # the movers' centres
+        low = (rot[..., 2:3, :] @ self.hulls.swapaxes(-1, -2))[..., 0, :]  # (n, m, V)
+        bottom = origin[..., 2] + (low.min(-1) if not self.gpu else low.amin(-1))
+        rec_rot = quat_matrix(rec[:, 3:])
+        local = ((p - rec[:, None, :3])[..., None, :] @ rec_rot[:, None])[..., 0, :]
+        lo, hi = self.ts.finger_span
+        return TaskState(
+            tcp=tcp, goal=goal, arm_qvel=qvel[:, :-2],
+            opening=(qpos[:, -2:].sum(-1) - lo) / (hi - lo),
+            movers=p, lin_vel=lin, ang_vel=ang, bottom=bottom, grasped=grasped,
+            start=self.start, dest=self.dest, in_receptacle=local, footprint=self.footprint,
+            rim=self.rim, rec_top=rec[:, 2] + self.rim, rec_pos=rec[:, :3], is_in=self.is_in,
+            rec_is_table=self.rec_is_table, table_z=self.table_z, direction=self.direction,
+        )  # fmt: skip
