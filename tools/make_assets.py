@@ -231,6 +231,20 @@ def bowl() -> Asset:
     return Asset("bowl", [Part(shell, (0.9, 0.9, 0.95))], collision=collision, mass=0.25)
 
 
+def fruit_bowl() -> Asset:
+    """A wide, deep bowl: the receptacle of the shipped "in" task (the banana lies inside)."""
+    r0, r, h, t = 0.065, 0.11, 0.065, 0.006
+    shell = revolve([[0, 0], [r0, 0], [r, h], [r - t, h], [r0 - t, t], [0, t]], sections=48)
+    collision = [cylinder(r0, t, [0, 0, t / 2])]
+    n = 12
+    for k in range(n):
+        a0, a1 = 2 * np.pi * k / n, 2 * np.pi * (k + 1) / n
+        pts = [[rr * np.cos(a), rr * np.sin(a), zz] for a in (a0, a1)
+               for rr, zz in ((r0, 0), (r, h), (r - t, h), (r0 - t, t))]
+        collision.append(trimesh.Trimesh(vertices=np.array(pts)).convex_hull)
+    return Asset("fruit_bowl", [Part(shell, (0.55, 0.75, 0.9))], collision=collision, mass=0.35)
+
+
 def banana() -> Asset:
     """An irregular curved object: ellipsoid segments along an arc."""
     parts, collision = [], []
@@ -248,7 +262,7 @@ def banana() -> Asset:
     return Asset("banana", parts, collision=collision, mass=0.12)
 
 
-ASSETS = [rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana]
+ASSETS = [rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana, fruit_bowl]
 
 
 def room_mesh() -> trimesh.Trimesh:

@@ -33,6 +33,25 @@ SCENES = {
         distractors=["bottle", "cracker_box"],
         task="Pick up the banana and hold it at the green goal.",
     ),
+    # the task kinds beyond pick (layout/task.py reads them from the sentence)
+    "place_box": dict(
+        context="table",
+        manipulated=["can"],
+        distractors=["cracker_box", "mug", "bowl"],
+        task="Put the can on the cracker box.",
+    ),
+    "place_bowl": dict(
+        context="table",
+        manipulated=["banana"],
+        distractors=["fruit_bowl", "can", "cracker_box"],
+        task="Put the banana in the fruit bowl.",
+    ),
+    "move_left": dict(
+        context="table",
+        manipulated=["can"],
+        distractors=["cracker_box", "mug", "bowl"],
+        task="Move the can to the left.",
+    ),
 }
 
 DESCRIPTIONS = {
@@ -42,6 +61,7 @@ DESCRIPTIONS = {
     "cracker_box": "a red cracker box with a yellow top",
     "mug": "an orange mug with a handle",
     "bowl": "a white bowl",
+    "fruit_bowl": "a wide light-blue fruit bowl",
     "bottle": "a green bottle with a white cap",
     "banana": "a yellow banana",
     "background": "a room with a window and a bookshelf",
@@ -80,9 +100,12 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     ap.add_argument("--out", type=Path, default=DATA / "layouts")
+    ap.add_argument("--only", nargs="*", choices=list(SCENES), help="these scenes alone")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    for name, spec in SCENES.items():
+    names = args.only or list(SCENES)
+    for name in names:
+        spec = SCENES[name]
         layout = base_layout(name, spec, args.out)
         for seed in range(10_000):
             placed = place(layout, seed)

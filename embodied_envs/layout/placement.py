@@ -277,7 +277,7 @@ class _Placer:
         lo, hi = region.min(0), region.max(0)
         normals, offsets = half_planes(region)
         reach = None
-        if node in layout.manipulated_objs:
+        if node in layout.reach_nodes:
             robot = self.poses[layout.robot]
             reach = (
                 np.array([robot.p[:2]]), np.array([robot.yaw]),

@@ -79,6 +79,14 @@ class LayoutInfo:
         return resolve_task(self, label(self.source))
 
     @property
+    def reach_nodes(self) -> list[str]:
+        """The objects placed within the robot's reach: the manipulated ones, and the task's
+        receptacle when it is an object (the movers go there)."""
+        rec = self.task.receptacle
+        extra = [rec] if rec is not None and rec != self.context else []
+        return self.manipulated_objs + [n for n in extra if n not in self.manipulated_objs]
+
+    @property
     def target_node(self) -> str:
         """The graded object's node name: the task's first mover."""
         return self.task.objects[0]

@@ -277,6 +277,15 @@ def resolve_task(layout, f: str) -> Task:
         task = parse_task(rel["task_desc"], layout, f)
     else:
         task = Task("pick", (rel["manipulated_objs"][0],))
+    if task.kind == "place" and task.receptacle == rel["context"]:
+        on_table = [n for n in task.objects if [n, "ON"] in [list(x) for x in
+                    layout.tree.get(rel["context"], [])]]  # fmt: skip
+        if on_table:
+            raise LayoutError(
+                f'{f}: the task puts {on_table} on the context "{rel["context"]}", where the '
+                "tree already places them: it would start done. Fix: name another object as "
+                f'the receptacle, {EXPLICIT[3:]}.'
+            )
     if task.kind == "place" and task.receptacle != rel["context"]:
         for node in task.objects:  # the tree may not start the task done
             if [node, "ON"] in [list(x) for x in layout.tree.get(task.receptacle, [])] or [

@@ -318,7 +318,7 @@ class EpisodeSampler:
                     node=node,
                     parent=parent,
                     min_z=node_geometry(base, node).min_z,
-                    manipulated=node in base.manipulated_objs,
+                    manipulated=node in base.reach_nodes,
                     avoid=a.index(avoid),
                     top=top,
                     top_z=top_z,

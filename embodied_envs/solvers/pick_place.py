@@ -88,6 +88,9 @@ class SolverConfig:
     lift_check: float = 0.5  # the object held rises at least this part of the lift
     slip_tolerance: float = 0.03  # m, the object moving this far in the hand may be dropped
     rise_clearance: float = 0.12  # m, above the highest obstacle point before a carry from above
+    release_clearance: float = 0.04  # m, a carried mover's lowest point above the
+    # receptacle's top (or the table) over its destination, before it is lowered
+    release_gap: float = 0.01  # m, its lowest point above the surface when the hand opens
     carry_yaws: tuple[float, ...] = (0.0, np.pi / 2, -np.pi / 2, np.pi)  # rad, hand turns at
     # the goal about the vertical, tried in order
 
@@ -220,18 +223,29 @@ class PickPlaceSolver:
         self._batched_actions = len(self.env.action_space.shape) == 2
         self.gripper = np.full(self.num_envs, GRIPPER_OPEN)
         self.clouds: list[np.ndarray] = []  # per env, the obstacle surface points (world)
+        self.slot = 0  # the mover slot being taken (``env.task_scene.movers``)
         self._set_obstacles()
 
     # --- state ---------------------------------------------------------------------------
     def _qpos(self) -> np.ndarray:
         return self.base.agent.robot.get_qpos().cpu().numpy().astype(np.float64)
 
+    @property
+    def target(self):
+        """The mover being taken, merged over envs."""
+        return self.base.task_scene.movers[self.slot]
+
+    def _node(self, i: int) -> str:
+        return self.base.task_scene.mover_nodes[i][self.slot]
+
     def _set_obstacles(self) -> None:
+        """Every object but the mover being taken, where it stands now, is an obstacle."""
+        self.clouds = []
         for i, layout in enumerate(self.base.layouts):
             actors = self.base.env_actors[f"env{i}"]
             clouds = []
             for node, actor in actors.items():
-                if node == layout.target_node:
+                if node == self._node(i):
                     continue
                 points = hull_points(layout.asset_spec(node), self.cfg.obstacle_points)
                 pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
@@ -459,8 +473,8 @@ class PickPlaceSolver:
         tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
         poses = []
         for i, layout in enumerate(self.base.layouts):
-            actor = self.base.env_actors[f"env{i}"][layout.target_node]
-            spec = layout.asset_spec(layout.target_node)
+            actor = self.base.env_actors[f"env{i}"][self._node(i)]
+            spec = layout.asset_spec(self._node(i))
             geom = asset_geometry(spec)
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             support = float(self.base.layout_scene.top_z[i])
@@ -504,7 +518,7 @@ class PickPlaceSolver:
     def _in_hand(self) -> np.ndarray:
         """Per env, the target's position in the TCP's frame now."""
         tcp = self.base.agent.tcp.pose.to_transformation_matrix().cpu().numpy()
-        obj = self.base.obj.pose.p.cpu().numpy()
+        obj = self.target.pose.p.cpu().numpy()
         return np.einsum("nij,ni->nj", tcp[:, :3, :3], obj - tcp[:, :3, 3])
 
     def _grasping(self) -> np.ndarray:
@@ -566,7 +580,7 @@ class PickPlaceSolver:
         # reaches the grasp before the fingers close
         self._per_env("grasp", grasps, obstacles=False, settle=cfg.settle_steps, planned=taken.get)
         self._set_gripper(todo, GRIPPER_CLOSED)
-        z0 = self.base.obj.pose.p[:, 2].cpu().numpy()
+        z0 = self.target.pose.p[:, 2].cpu().numpy()
         lifts = [
             None
             if g is None
@@ -575,7 +589,7 @@ class PickPlaceSolver:
         ]
         self._per_env("lift", lifts, obstacles=False)
         # held: the object came up with the hand (a physical check, not a contact threshold)
-        rose = self.base.obj.pose.p[:, 2].cpu().numpy() - z0
+        rose = self.target.pose.p[:, 2].cpu().numpy() - z0
         held = (rose > cfg.lift_check * min(cfg.lift_heights)) & todo
         held &= np.array([p is not None for p in pre])
         self.hand = self._in_hand()  # where the object sits in the hand after the lift
@@ -595,11 +609,27 @@ class PickPlaceSolver:
         return held
 
     def solve(self) -> SolveResult:
-        """Run the whole pick-and-place in every env; returns per-env reports and the last info."""
+        """Run the whole task in every env: each mover in turn (``pick``: the one, held at the
+        goal; ``place`` and ``move``: carried over its destination, lowered, released, the
+        hand withdrawn); returns per-env reports and the last info."""
+        kinds = [t.kind for t in self.base.tasks]
+        self.releases = np.array([k != "pick" for k in kinds])
+        nodes = self.base.task_scene.mover_nodes
+        for slot in range(len(self.base.task_scene.movers)):
+            self.slot = slot
+            todo = np.array([slot == 0 or n[slot] != n[slot - 1] for n in nodes])
+            if slot:
+                self._set_obstacles()
+            self._take(todo)
+        self._execute([None] * self.num_envs, extra_steps=self.cfg.hold_steps)
+        return SolveResult(self.reports, self.steps, self.last_info)
+
+    def _take(self, envs: np.ndarray) -> None:
+        """Grasp the current mover in ``envs``, carry it, and release it where its task says."""
         cfg = self.cfg
         self.hand = np.zeros((self.num_envs, 3))
         holding = np.zeros(self.num_envs, bool)
-        placed = np.zeros(self.num_envs, bool)
+        placed = ~envs.copy()
         for attempt in range(cfg.grasp_attempts):
             todo = ~placed & np.array([not r.plan_failures for r in self.reports])
             todo &= ~holding
@@ -614,15 +644,63 @@ class PickPlaceSolver:
             still = (moved < cfg.slip_tolerance) | self._grasping()
             for i in np.flatnonzero(carry & ~still):
                 self.reports[i].misses.append(f"carry (attempt {attempt})")
-            placed |= carry & still
+            done = carry & still
+            if (done & self.releases).any():
+                self._release(done & self.releases)
+            placed |= done
             dropped = carry & ~still
             holding &= ~dropped
             if dropped.any():  # grasp again from where the object lies
                 self._set_gripper(dropped, GRIPPER_OPEN)
             if placed.all():
                 break
-        self._execute([None] * self.num_envs, extra_steps=cfg.hold_steps)
-        return SolveResult(self.reports, self.steps, self.last_info)
+
+    def _task_state(self):
+        """The env's task state now, as numpy arrays (``envs/tasks/state.py``)."""
+        goal = self.base.goal_site.pose.p
+        state = self.base.task_reader.state(goal if self.base.gpu_sim_enabled else goal.numpy())
+        return {k: np.asarray(torch.as_tensor(getattr(state, k)).cpu()) for k in
+                ("movers", "origins", "bottom", "dest", "rec_top", "rec_is_table", "table_z")}  # fmt: skip
+
+    def _carry_goal(self) -> np.ndarray:
+        """Per env, where the current mover's centre is carried: the pick goal; or over its
+        destination, high enough that its lowest point clears the receptacle's top by
+        ``release_clearance``."""
+        st, k = self._task_state(), self.slot
+        goal = self.base.goal_site.pose.p.cpu().numpy().astype(np.float64)
+        above = self._release_height(st)
+        top = np.where(st["rec_is_table"], st["table_z"], st["rec_top"])
+        low = st["movers"][:, k, 2] - st["bottom"][:, k]  # centre above the lowest point now
+        lift = np.maximum(top + low - above, 0.0) + self.cfg.release_clearance
+        over = np.concatenate([st["dest"][:, k, :2], (above + lift)[:, None]], 1)
+        return np.where(self.releases[:, None], over, goal)
+
+    def _release_height(self, st) -> np.ndarray:
+        """Per env, the height of the current mover's centre at release: held as it is now,
+        its lowest point ``release_gap`` above the surface under its destination."""
+        k = self.slot
+        half = self.base.task_scene.centres[:, k, 2] - self.base.task_scene.hulls[:, k, :, 2].min(1)
+        surface = st["dest"][:, k, 2] - half  # the destination's support surface
+        low = st["movers"][:, k, 2] - st["bottom"][:, k]
+        return surface + low + self.cfg.release_gap
+
+    def _release(self, envs: np.ndarray) -> None:
+        """Lower the held mover of ``envs`` straight down to its release height, open, and
+        withdraw the hand straight up."""
+        st = self._task_state()
+        drop = st["movers"][:, self.slot, 2] - self._release_height(st)
+        tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+
+        def shifted(dz):
+            return [sapien.Pose(tcp[i, :3] + [0, 0, dz[i]], tcp[i, 3:]) if envs[i] else None
+                    for i in range(self.num_envs)]  # fmt: skip
+
+        self._per_env("lower", shifted(-np.maximum(drop, 0.0)), obstacles=False,
+                      settle=self.cfg.settle_steps)  # fmt: skip
+        self._set_gripper(envs, GRIPPER_OPEN)
+        tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+        self._per_env("withdraw", shifted(np.full(self.num_envs, self.cfg.approach_offset)),
+                      obstacles=False)  # fmt: skip
 
     def _carry(self, envs: np.ndarray) -> None:
         """Carry the held target of ``envs`` to the goal (keeping its offset from the TCP as
@@ -632,13 +710,14 @@ class PickPlaceSolver:
         object out over the table's edge is refused (the episode would end in ``fail``);
         where no carry plans, the hand first rises ``rise_clearance`` above the highest
         obstacle point and carries from there."""
-        goal = self.base.goal_site.pose.p.cpu().numpy()
+        goal = self._carry_goal()
         hand = self._in_hand()
         over = lambda i, path: self._over_table(i, path, hand[i])  # noqa: E731
 
         def targets(yaws, todo):
             tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
-            obj = self.base.obj.pose.p.cpu().numpy()
+            st = self._task_state()  # the point the goal is for: centre, or origin (pick)
+            obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
             return [
                 [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in yaws] if todo[i] else None
                 for i in range(self.num_envs)

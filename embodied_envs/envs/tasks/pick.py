@@ -1,4 +1,5 @@
-"""``pick``: hold the mover still at the goal point (the shipped layouts' task).
+"""``pick``: hold the mover still at the goal point (the shipped layouts' task); the
+mover's place is its actor's origin, as ManiSkill's PickCube reads it.
 
 **Success:** the mover within ``GOAL_THRESH`` of the goal, and the robot static (every arm
 joint slower than ``STATIC_ARM``).
@@ -17,7 +18,7 @@ MAX_REWARD = 5.0  # the dense reward on success; the normalised reward divides b
 
 
 def evaluate(s: TaskState) -> dict:
-    obj_to_goal = s.goal - s.movers[:, 0]
+    obj_to_goal = s.goal - s.origins[:, 0]
     placed = norm(obj_to_goal) <= GOAL_THRESH
     static = robot_static(s)
     return {
@@ -32,7 +33,7 @@ def evaluate(s: TaskState) -> dict:
 def reward(s: TaskState, info: dict):
     xp = s.xp
     grasped = as_float(info["is_grasped"])
-    reward = 1 - xp.tanh(5 * norm(s.movers[:, 0] - s.tcp)) + grasped
+    reward = 1 - xp.tanh(5 * norm(s.origins[:, 0] - s.tcp)) + grasped
     reward = reward + (1 - xp.tanh(5 * norm(info["obj_to_goal_pos"]))) * grasped
     static = 1 - xp.tanh(5 * norm(s.arm_qvel))
     reward = reward + static * as_float(info["is_obj_placed"])

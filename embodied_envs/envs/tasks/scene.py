@@ -251,7 +251,7 @@ class TaskReader:
         return TaskState(
             tcp=tcp, goal=goal, arm_qvel=qvel[:, :-2],
             opening=(qpos[:, -2:].sum(-1) - lo) / (hi - lo),
-            movers=p, lin_vel=lin, ang_vel=ang, bottom=bottom, grasped=grasped,
+            movers=p, origins=origin, lin_vel=lin, ang_vel=ang, bottom=bottom, grasped=grasped,
             start=self.start, dest=self.dest, in_receptacle=local, footprint=self.footprint,
             rim=self.rim, rec_top=rec[:, 2] + self.rim, rec_pos=rec[:, :3], is_in=self.is_in,
             rec_is_table=self.rec_is_table, table_z=self.table_z, direction=self.direction,

@@ -30,7 +30,7 @@ class TaskState:
         arm_qvel: ``(n, J)`` arm joint speeds; ``opening``: ``(n,)`` fingers' opening, as a
             part of their span (0 closed, 1 open).
         movers, lin_vel, ang_vel: ``(n, m, 3)``: each mover's centre (its collision box's)
-            and velocities.
+            and velocities; ``origins``: ``(n, m, 3)`` their actors' origins.
         bottom: ``(n, m)`` height of each mover's lowest collision point.
         grasped: ``(n, m)`` bool, the gripper grasps that mover (ManiSkill's rule).
         start: ``(n, m, 3)`` each mover's centre when the episode began.
@@ -51,6 +51,7 @@ class TaskState:
     arm_qvel: Any
     opening: Any
     movers: Any
+    origins: Any
     lin_vel: Any
     ang_vel: Any
     bottom: Any
