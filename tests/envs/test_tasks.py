@@ -1,0 +1,212 @@
+"""The layout's task: the sentence parser, the success rules from set poses, the staged reward,
+and the expert's place and move episodes."""
+
+from types import SimpleNamespace
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from conftest import DATA
+
+from embodied_envs.envs.tasks import move, place, state
+from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.task import Task, parse_task, resolve_task
+
+F = "scene.json"
+
+
+def scene(manipulated, distractors, context="desk", desc=None, tree=None):
+    nodes = [*manipulated, *distractors]
+    mapping = {"background": "background", context: "context"}
+    mapping |= {n: "manipulated_objs" for n in manipulated}
+    mapping |= {n: "distractor_objs" for n in distractors}
+    return SimpleNamespace(
+        relation=dict(manipulated_objs=list(manipulated), distractor_objs=list(distractors),
+                      context=context, background="background", robot="franka"),
+        objs_mapping=mapping, objs_desc=desc or {},
+        tree=tree or {context: [[n, "ON"] for n in nodes]},
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "sentence, manipulated, distractors, desc, expected",
+    [
+        ("Place the pen in the mug on the desk", ["pen", "mug"], [], None,
+         Task("place", ("pen",), "mug", "in")),
+        ("Put the pens in the grey bowl", ["pen1", "pen2", "grey bowl"], [], None,
+         Task("place", ("pen1", "pen2"), "grey bowl", "in")),
+        ("Put the fruit on the table on the plate", ["banana"], ["plate"],
+         {"banana": "a ripe yellow banana", "plate": "a white plate"},
+         Task("place", ("banana",), "plate", "on")),
+        ("Put the rubik's cube onto the box.", ["rubik's cube"], ["box"], None,
+         Task("place", ("rubik's cube",), "box", "on")),
+        ("Place the apple on top of the wooden crate", ["apple"], ["crate"],
+         {"crate": "a wooden crate"}, Task("place", ("apple",), "crate", "on")),
+        ("Put the cup on the desk", ["cup"], [], None, None),  # already on it: refused
+        ("Move the lamp to the left.", ["lamp"], ["book"], None,
+         Task("move", ("lamp",), direction="left")),
+        ("Move the plate forward", ["plate"], [], None, Task("move", ("plate",), direction="forward")),
+        ("Push the box on the desk backwards", ["box"], [], None,
+         Task("move", ("box",), direction="backward")),
+        ("Slide the mug to the right", ["mug"], [], None, Task("move", ("mug",), direction="right")),
+        ("Pick up the red block on the desk.", ["block"], ["tray"], None, Task("pick", ("block",))),
+        ("Pick up the spoon and put it in the bowl", ["spoon"], ["bowl"], None,
+         Task("place", ("spoon",), "bowl", "in")),
+        ("Move the cup into the sink", ["cup"], ["sink"], None, Task("place", ("cup",), "sink", "in")),
+    ],
+)  # fmt: skip
+def test_the_parser_reads_embodiedgen_sentences(sentence, manipulated, distractors, desc, expected):
+    layout = scene(manipulated, distractors, desc=desc)
+    layout.relation["task_desc"] = sentence
+    if expected is None:
+        with pytest.raises(LayoutError, match="would start done"):
+            resolve_task(layout, F)
+    else:
+        assert resolve_task(layout, F) == expected
+
+
+@pytest.mark.parametrize(
+    "sentence, why",
+    [("Close the laptop", '"close" is not a verb'), ("Move the lamp", "no direction"),
+     ("Put the pen in the drawer", "names no object"), ("", "empty")],
+)  # fmt: skip
+def test_sentences_it_cannot_grade_are_refused_in_one_line(sentence, why):
+    with pytest.raises(LayoutError) as e:
+        parse_task(sentence, scene(["pen", "lamp", "laptop"], []), F)
+    msg = str(e.value)
+    assert len(e.value.problems) == 1 and F in msg and why in msg
+    assert f'"{sentence}"' in msg and "Pick up X" in msg and 'relation["task"]' in msg
+
+
+def test_the_structured_field_wins_and_is_checked():
+    layout = scene(["pen", "mug"], ["bowl"])
+    layout.relation["task_desc"] = "Close the laptop"
+    layout.relation["task"] = {"kind": "place", "objects": ["pen"], "receptacle": "bowl",
+                               "relation": "in"}  # fmt: skip
+    assert resolve_task(layout, F) == Task("place", ("pen",), "bowl", "in")
+    layout.relation["task"] = {"kind": "place", "objects": ["pen"], "receptacle": "pen"}
+    with pytest.raises(LayoutError, match="receptacle"):
+        resolve_task(layout, F)
+    layout.relation["task"] = {"kind": "move", "objects": ["pen"], "direction": "up"}
+    with pytest.raises(LayoutError, match="direction"):
+        resolve_task(layout, F)
+
+
+def test_a_mover_the_tree_puts_in_the_receptacle_is_refused():
+    layout = scene(["pen"], ["mug"], tree={"desk": [["mug", "ON"]], "mug": [["pen", "IN"]]})
+    layout.relation["task_desc"] = "Put the pen in the mug"
+    with pytest.raises(LayoutError, match="start done"):
+        resolve_task(layout, F)
+
+
+# --- success and reward from set states (numpy, the CPU path's arrays) -----------------------
+def task_state(**over):
+    """One env, one mover: a 0.2 m square receptacle at the origin, top 0.1 m, rim 0.05 m."""
+    square = np.array([[-0.1, -0.1], [0.1, -0.1], [0.1, 0.1], [-0.1, 0.1]])
+    from embodied_envs.layout.rules import half_planes
+
+    normals, offsets = half_planes(square)
+    base = dict(
+        tcp=np.array([[0.0, 0.0, 0.5]]), goal=np.zeros((1, 3)), arm_qvel=np.zeros((1, 7)),
+        opening=np.array([1.0]), movers=np.array([[[0.0, 0.0, 0.07]]]),
+        origins=np.array([[[0.0, 0.0, 0.04]]]), lin_vel=np.zeros((1, 1, 3)),
+        ang_vel=np.zeros((1, 1, 3)), bottom=np.array([[0.04]]), grasped=np.array([[False]]),
+        start=np.array([[[0.3, 0.0, 0.03]]]), dest=np.array([[[0.0, 0.0, 0.07]]]),
+        in_receptacle=np.array([[[0.0, 0.0, 0.03]]]), footprint=(normals[None], offsets[None]),
+        rim=np.array([0.05]), rec_top=np.array([0.09]), rec_pos=np.array([[0.0, 0.0, 0.04]]),
+        is_in=np.array([True]), rec_is_table=np.array([False]), table_z=np.array([0.0]),
+        direction=np.array([[0.0, 1.0]]),
+    )  # fmt: skip
+    base.update(over)
+    return state.TaskState(**base)
+
+
+@pytest.mark.parametrize(
+    "case, over, success",
+    [
+        ("resting in it", {}, True),
+        ("still bouncing", dict(lin_vel=np.array([[[0.0, 0.0, 0.3]]])), False),
+        ("still turning", dict(ang_vel=np.array([[[2.0, 0.0, 0.0]]])), False),
+        ("held in it", dict(grasped=np.array([[True]]), opening=np.array([0.3]),
+                            tcp=np.array([[0.0, 0.0, 0.08]])), False),
+        ("fingers half shut next to it", dict(opening=np.array([0.5]),
+                                              tcp=np.array([[0.0, 0.0, 0.1]])), False),
+        ("fingers half shut, hand away", dict(opening=np.array([0.5])), True),
+        ("hovering above it", dict(bottom=np.array([[0.2]]), movers=np.array([[[0, 0, 0.23]]]),
+                                   in_receptacle=np.array([[[0, 0, 0.19]]])), False),
+        ("next to it on the table", dict(bottom=np.array([[0.0]]),
+                                         in_receptacle=np.array([[[0.25, 0, 0.0]]])), False),
+        ("leaning on its outer wall", dict(bottom=np.array([[0.0]]),
+                                           in_receptacle=np.array([[[0.09, 0, 0.02]]])), False),
+        ("on it but above the rim (in)", dict(in_receptacle=np.array([[[0, 0, 0.06]]])), False),
+    ],
+)  # fmt: skip
+def test_place_success_truth_table(case, over, success):
+    s = task_state(**over)
+    assert bool(place.evaluate(s)["success"][0]) is success, case
+    # torch gives the same answer
+    t = state.TaskState(**{k: (tuple(torch.as_tensor(x) for x in v) if isinstance(v, tuple)
+                               else torch.as_tensor(v)) for k, v in vars(s).items()})  # fmt: skip
+    assert bool(place.evaluate(t)["success"][0]) is success, case
+
+
+def test_on_needs_no_rim_and_the_table_is_a_receptacle():
+    above_rim = dict(in_receptacle=np.array([[[0, 0, 0.06]]]))
+    assert place.evaluate(task_state(is_in=np.array([False]), **above_rim))["success"][0]
+    on_table = dict(rec_is_table=np.array([True]), bottom=np.array([[0.001]]))
+    assert place.evaluate(task_state(**on_table))["success"][0]
+    assert not place.evaluate(task_state(rec_is_table=np.array([True])))["success"][0]
+
+
+@pytest.mark.parametrize(
+    "shift, success",
+    [((0.0, 0.12), True), ((0.0, 0.09), False), ((0.11, 0.12), True), ((0.13, 0.12), False),
+     ((0.0, -0.2), False)],
+)  # fmt: skip
+def test_move_success_needs_ten_centimetres_within_45_degrees(shift, success):
+    start = np.array([[[0.3, 0.0, 0.03]]])
+    moved = start + np.array([[[*shift, 0.0]]])
+    s = task_state(start=start, movers=moved, bottom=np.array([[0.0]]))
+    assert bool(move.evaluate(s)["success"][0]) is success
+
+
+def test_holding_the_mover_over_the_receptacle_scores_clearly_below_success():
+    held = task_state(grasped=np.array([[True]]), opening=np.array([0.3]),
+                      tcp=np.array([[0.0, 0.0, 0.08]]))  # fmt: skip
+    info = place.evaluate(held)
+    assert not info["success"][0]
+    assert place.reward(held, info)[0] / place.MAX_REWARD <= 4 / 7 + 1e-6
+    free = task_state()
+    assert place.reward(free, place.evaluate(free))[0] == place.MAX_REWARD
+
+
+# --- the expert in the env ----------------------------------------------------------------
+@pytest.mark.parametrize("name, seed", [("place_box", 0), ("place_bowl", 1), ("move_left", 2)])
+def test_the_expert_finishes_place_and_move_tasks_and_the_reward_rises(name, seed):
+    from embodied_envs.solvers.pick_place import PickPlaceSolver
+
+    env = gym.make("PickEmbodiedGen-v1", layout_file=DATA / "layouts" / f"{name}.json",
+                   obs_mode="state", control_mode="pd_joint_pos",
+                   reward_mode="normalized_dense")  # fmt: skip
+    rewards = []
+    step = env.step
+
+    def recording(action):
+        out = step(action)
+        rewards.append(float(out[1][0]) if np.ndim(out[1]) else float(out[1]))
+        return out
+
+    env.step = recording
+    try:
+        env.reset(seed=seed)
+        kind = env.unwrapped.tasks[0].kind
+        assert kind == ("move" if name.startswith("move") else "place")
+        result = PickPlaceSolver(env, seed=seed).solve()
+        assert result.success.all(), [r.plan_failures + r.misses for r in result.reports]
+    finally:
+        env.close()
+    r = np.array(rewards)
+    assert r.max() == pytest.approx(1.0) and r[0] < 0.4
+    # nearly monotone: the running best is never undercut by more than a tenth
+    assert (np.maximum.accumulate(r) - r).max() < 0.1 * 7 / 7 + 0.05
