@@ -15,8 +15,8 @@ from conftest import ROOT
 PACKAGE = ROOT / "embodied_envs"
 # importing embodied_envs registers the env id: every import pulls in registration
 ALWAYS = {"registration"}
-# what importing each part may pull in (STYLE.md: layout -> scene -> envs -> solvers ->
-# pipelines -> cli; splat, paths, workers stand alone)
+# what importing each part may pull in (the README's "Where things are": layout -> scene ->
+# envs -> solvers -> pipelines -> cli; splat, paths, workers stand alone)
 ALLOWED = {
     "paths": set(),
     "workers": set(),

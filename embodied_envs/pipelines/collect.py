@@ -37,9 +37,12 @@ from embodied_envs.solvers.pick_place import PickPlaceSolver
 from embodied_envs.workers import report, run, started
 
 SOURCE_DESC = (
-    "embodied_envs PickPlaceSolver (embodied_envs/solvers/pick_place.py): mplib screw and "
-    "RRTConnect joint plans, top-down grasp across the target's narrow side, carry to the goal, "
-    "hold still; pd_joint_pos actions"
+    "embodied_envs PickPlaceSolver (embodied_envs/solvers/pick_place.py): antipodal parallel-jaw "
+    "grasps synthesised from the target's collision mesh (embodied_envs/solvers/grasps.py), kept "
+    "when the gripper clears the object, the table and the other objects; the arm takes the one "
+    "it reaches soonest (IK and a collision-free plan, lower ranks costing steps); seeded plans "
+    "(straight joint lines, screw motions, RRT-Connect) approach, grasp, lift, carry to the goal "
+    "and hold still, re-grasping after a miss; pd_joint_pos actions"
 )
 OBS_MODES = ("none", "state", "rgb", "rgbd")
 

@@ -1,0 +1,108 @@
+"""The README and docs/ stay a user guide whose references hold: the README's size limits, every
+relative link and anchor resolves, every repository path the docs name exists, every page is
+reachable from the README, and the datasets' ``source_desc`` names files that exist."""
+
+import ast
+import re
+
+import pytest
+from conftest import ROOT
+
+README = ROOT / "README.md"
+DOCS = sorted((ROOT / "docs").glob("*.md"))
+PAGES = [README, *DOCS]
+MAX_README_LINES = 200
+MAX_LINE = 200  # characters, in the README and every docs page
+# pages the README links to that are still being written (issue 33: the lead writes tasks.md);
+# a link to one of them is allowed only while the page does not exist
+PENDING = {ROOT / "docs" / "tasks.md"}
+# repository folders whose paths, named whole in `backticks`, must exist
+REPO_ROOTS = ("embodied_envs/", "tools/", "tests/", "zoo/", "layouts/", "assets/", ".ci/")
+
+LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
+CODE_SPAN = re.compile(r"`([^`\n]+)`")
+FENCE = re.compile(r"^```.*?^```", re.S | re.M)
+
+
+def prose(text: str) -> str:
+    """The text without fenced code blocks (commands there name outputs, not repository files)."""
+    return FENCE.sub("", text)
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor for a Markdown heading."""
+    text = heading.strip().lower().replace("`", "")
+    return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
+
+
+def anchors(page) -> set[str]:
+    text = prose(page.read_text(encoding="utf-8"))
+    return {slug(m.group(1)) for m in re.finditer(r"^#+ (.+)$", text, re.M)}
+
+
+def links(page) -> list[str]:
+    text = CODE_SPAN.sub("", prose(page.read_text(encoding="utf-8")))
+    return [t for t in LINK.findall(text) if not re.match(r"[a-z]+:", t)]
+
+
+def test_the_readme_is_short_and_no_line_is_long():
+    lines = README.read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= MAX_README_LINES, f"README.md has {len(lines)} lines, the limit is 200"
+    long = [
+        f"{page.relative_to(ROOT)}:{i}: {len(line)} characters"
+        for page in PAGES
+        for i, line in enumerate(page.read_text(encoding="utf-8").splitlines(), 1)
+        if len(line) > MAX_LINE
+    ]
+    assert not long, "lines over 200 characters:\n" + "\n".join(long)
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_relative_link_resolves(page):
+    broken = []
+    for target in links(page):
+        path, _, anchor = target.partition("#")
+        file = (page.parent / path).resolve() if path else page
+        if file in PENDING and not file.exists():
+            continue
+        if not file.exists():
+            broken.append(f"{target}: no file {file.relative_to(ROOT)}")
+        elif anchor and file.suffix == ".md" and anchor not in anchors(file):
+            broken.append(f"{target}: no heading for #{anchor} in {file.relative_to(ROOT)}")
+    assert not broken, f"{page.relative_to(ROOT)}: broken links:\n" + "\n".join(broken)
+
+
+def test_pending_pages_leave_the_list_once_written():
+    written = [str(p.relative_to(ROOT)) for p in PENDING if p.exists()]
+    assert not written, f"{written} exist now: remove them from PENDING in tests/test_docs.py"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_every_repository_path_named_exists(page):
+    named = [
+        span
+        for span in CODE_SPAN.findall(prose(page.read_text(encoding="utf-8")))
+        if span.startswith(REPO_ROOTS) and " " not in span
+    ]
+    missing = [p for p in named if not (any(ROOT.glob(p)) if "*" in p else (ROOT / p).exists())]
+    assert not missing, f"{page.relative_to(ROOT)} names paths that do not exist: {missing}"
+
+
+def test_every_docs_page_is_linked_from_the_readme():
+    linked = {(ROOT / t.partition("#")[0]).resolve() for t in links(README)}
+    unlinked = [str(p.relative_to(ROOT)) for p in DOCS if p.resolve() not in linked]
+    assert not unlinked, f"pages the README does not link to: {unlinked}"
+
+
+def test_the_datasets_source_desc_names_files_that_exist():
+    found = []
+    for module in sorted((ROOT / "embodied_envs").rglob("*.py")):
+        for node in ast.walk(ast.parse(module.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Assign) and any(
+                getattr(t, "id", None) == "SOURCE_DESC" for t in node.targets
+            ):
+                found.append(ast.literal_eval(node.value))
+    assert len(found) == 1, f"expected one SOURCE_DESC in embodied_envs/, found {len(found)}"
+    paths = re.findall(r"embodied_envs/[\w/]+\.py", found[0])
+    assert paths, "SOURCE_DESC names no file of the expert"
+    assert all((ROOT / p).is_file() for p in paths), f"SOURCE_DESC names missing files: {paths}"
