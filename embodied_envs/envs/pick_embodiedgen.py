@@ -64,20 +64,24 @@ class PickEmbodiedGenEnv(CheckedEnv):
     - arm joints: ``REST_QPOS`` plus N(0, ``robot_init_qpos_noise``); fingers open
     - goal: uniform over the table top within the robot's reach (``goal_region``)
 
-    **Success Conditions:**
-    - the object is within ``goal_thresh`` (0.025 m) of the goal, and
-    - the robot is static (arm joint speeds below ``static_thresh``, 0.2 rad/s)
+    **Task** (per env, ``env.unwrapped.tasks``; ``layout/task.py`` reads it from the layout:
+    ``relation.task``, else the sentence ``relation.task_desc``): ``pick`` (hold the object at
+    the goal), ``place`` (movers in or on a receptacle) or ``move`` (a mover 10 cm or more along
+    a direction). Success, fail extras and the dense reward of each kind: ``envs/tasks/``.
 
-    **Fail Conditions:** ``fail`` when the object is off the table: more than ``fail_drop``
-    (0.05 m) below the table's top, or its origin outside the top's footprint seen from above.
+    **Fail Conditions:** ``fail`` when a mover is off the table: more than ``fail_drop``
+    (0.05 m) below the table's top, or its origin outside the top's footprint seen from above;
+    or a receptacle object knocked off likewise.
 
     **Action Space:** the Panda controller's (default ``pd_joint_delta_pos``).
 
-    **Observation Space:** ManiSkill's agent state plus ``extra``: ``tcp_pose``, ``goal_pos``,
-    ``is_grasped``; in state modes also ``obj_pose``, ``tcp_to_obj_pos``, ``obj_to_goal_pos``.
+    **Observation Space:** ManiSkill's agent state plus ``extra``: ``tcp_pose``, ``goal_pos``
+    (the pick goal, or the first mover's destination), ``is_grasped``, ``task_kind`` (one-hot:
+    pick, place, move); in state modes also ``obj_pose``, ``tcp_to_obj_pos``, ``obj_to_goal_pos``.
     Visual modes add the 128x128 ``base_camera`` (composited over the splat with ``hybrid_obs``).
 
-    **Rewards:** :meth:`compute_dense_reward`, in [0, 5]; the normalised one is in [0, 1].
+    **Rewards:** :meth:`compute_dense_reward`, in [0, the kind's ``MAX_REWARD``]; the
+    normalised one is in [0, 1].
 
     **Episode End:** ``terminated`` on ``success`` or ``fail`` (ManiSkill sets it from both);
     truncation after ``MAX_EPISODE_STEPS`` (300) control steps, 6 s. Both flags are in ``info``.
@@ -345,7 +349,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
 
     def _rules(self):
         """The task state now and each present kind's rule results (``envs/tasks``)."""
-        goal = self.goal_site.pose.p if self.gpu_sim_enabled else np.array(
+        goal = self.goal_site.pose.p if self.task_reader.gpu else np.array(
             [e.pose.p for e in self.goal_site._objs])  # fmt: skip
         state = self.task_reader.state(goal)
         return state, {k: RULES[k].evaluate(state) for k in self._kinds}
@@ -367,7 +371,8 @@ class PickEmbodiedGenEnv(CheckedEnv):
         self._last_rules = (state, results)
         info = {key: self._by_kind(results, key) for key in ("success", *INFO_KEYS)}
         ls, xp = self.layout_scene, state.xp
-        off = [ls.off_table(state.movers[:, k], self.fail_drop) for k in range(state.movers.shape[1])]
+        movers = range(state.movers.shape[1])
+        off = [ls.off_table(state.movers[:, k], self.fail_drop) for k in movers]
         # an object off the table, or the receptacle knocked off
         off.append(ls.off_table(state.rec_pos, self.fail_drop) & ~state.rec_is_table)
         info["fail"] = torch.as_tensor(xp.stack(off, 0).any(0), device=self.device)

@@ -659,8 +659,8 @@ class PickPlaceSolver:
         """The env's task state now, as numpy arrays (``envs/tasks/state.py``)."""
         goal = self.base.goal_site.pose.p
         state = self.base.task_reader.state(goal if self.base.gpu_sim_enabled else goal.numpy())
-        return {k: np.asarray(torch.as_tensor(getattr(state, k)).cpu()) for k in
-                ("movers", "origins", "bottom", "dest", "rec_top", "rec_is_table", "table_z")}  # fmt: skip
+        keys = ("movers", "origins", "bottom", "dest", "rec_top", "rec_is_table", "table_z")
+        return {k: np.asarray(torch.as_tensor(getattr(state, k)).cpu()) for k in keys}
 
     def _carry_goal(self) -> np.ndarray:
         """Per env, where the current mover's centre is carried: the pick goal; or over its

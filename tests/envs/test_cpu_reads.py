@@ -2,7 +2,8 @@
 ManiSkill's torch wrapping, gives what ManiSkill's own reads give:
 
 - ``evaluate()`` and the dense reward read numpy arrays on the CPU simulation and tensors on
-  the GPU (``TaskState``), by one set of rules written for both: the flags from tensors (read
+  the GPU (``envs/tasks`` ``TaskState``, read by ``TaskReader``), by one set of rules written
+  for both: the flags from tensors (read
   through ManiSkill's ``Actor``, ``Link`` and ``Articulation``, as on the GPU) equal those from
   arrays and the rewards agree to float32 rounding;
 - ``get_state_dict()`` (recorded by ``RecordEpisode`` every step) equals ManiSkill's
@@ -16,7 +17,8 @@ from conftest import per_layout_env
 from mani_skill.envs.sapien_env import BaseEnv
 
 import embodied_envs  # noqa: F401
-from embodied_envs.envs.pick_embodiedgen import TaskState
+from embodied_envs.envs.tasks import RULES
+from embodied_envs.envs.tasks.scene import TaskReader
 from embodied_envs.solvers import PickPlaceSolver
 
 env = per_layout_env(control_mode="pd_joint_pos")
@@ -39,24 +41,22 @@ def expert_episode_then_drop(env, seed: int, evaluate) -> None:
 
 def test_arrays_and_tensors_give_the_same_flags_and_rewards(env):
     u = env.unwrapped
-    arrays = u._task_state
-
-    def tensors():  # the state as the GPU simulation reads it: ManiSkill's structs, tensors
-        qvel = u.agent.robot.get_qvel()[..., :-2]
-        return TaskState(u.obj.pose.p, u.goal_site.pose.p, u.agent.tcp_pose.p, qvel)
-
     evaluate, seen = u.evaluate, []
 
     def checked():
         info = evaluate()
         reward = u.compute_dense_reward(None, None, info)
-        assert isinstance(arrays().obj, np.ndarray)  # the CPU simulation reads arrays
-        u._task_state = tensors
+        arrays = u.task_reader
+        assert isinstance(arrays.state(np.zeros((1, 3))).tcp, np.ndarray)  # the CPU reads arrays
+        # the state as the GPU simulation reads it: ManiSkill's structs, tensors
+        u.task_reader = TaskReader(u, u.task_scene, u.layout_scene.top_z, tensors=True)
+        u.task_reader.start = torch.as_tensor(arrays.start)
+        u.task_reader.dest = torch.as_tensor(arrays.dest)
         try:
             info_t = evaluate()
             reward_t = u.compute_dense_reward(None, None, info_t)
         finally:
-            u._task_state = arrays
+            u.task_reader = arrays
         assert list(info) == list(info_t)
         for key, value in info.items():
             assert value.dtype == info_t[key].dtype and value.shape == info_t[key].shape, key
@@ -72,7 +72,7 @@ def test_arrays_and_tensors_give_the_same_flags_and_rewards(env):
     assert len(seen) > 60
     # every stage of the reward occurs: reaching only, grasped, success (its maximum)
     assert reward.min() < 1 and grasped.any() and (~grasped.astype(bool)).any()
-    assert success.any() and reward.max() == u.max_reward
+    assert success.any() and reward.max() == RULES[u.tasks[0].kind].MAX_REWARD
 
 
 def test_state_dict_is_maniskills_bit_for_bit(env):

@@ -46,14 +46,17 @@ def scene(manipulated, distractors, context="desk", desc=None, tree=None):
         ("Put the cup on the desk", ["cup"], [], None, None),  # already on it: refused
         ("Move the lamp to the left.", ["lamp"], ["book"], None,
          Task("move", ("lamp",), direction="left")),
-        ("Move the plate forward", ["plate"], [], None, Task("move", ("plate",), direction="forward")),
+        ("Move the plate forward", ["plate"], [], None,
+         Task("move", ("plate",), direction="forward")),
         ("Push the box on the desk backwards", ["box"], [], None,
          Task("move", ("box",), direction="backward")),
         ("Slide the mug to the right", ["mug"], [], None, Task("move", ("mug",), direction="right")),
-        ("Pick up the red block on the desk.", ["block"], ["tray"], None, Task("pick", ("block",))),
+        ("Pick up the red block on the desk.", ["block"], ["tray"], None,
+         Task("pick", ("block",))),
         ("Pick up the spoon and put it in the bowl", ["spoon"], ["bowl"], None,
          Task("place", ("spoon",), "bowl", "in")),
-        ("Move the cup into the sink", ["cup"], ["sink"], None, Task("place", ("cup",), "sink", "in")),
+        ("Move the cup into the sink", ["cup"], ["sink"], None,
+         Task("place", ("cup",), "sink", "in")),
     ],
 )  # fmt: skip
 def test_the_parser_reads_embodiedgen_sentences(sentence, manipulated, distractors, desc, expected):

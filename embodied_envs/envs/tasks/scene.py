@@ -127,7 +127,7 @@ class TaskScene:
             rim=np.array(rims, np.float32),
             dest_local=np.array(dests, np.float32),
             is_in=np.array([t.relation == "in" for t in tasks]),
-            rec_is_table=np.array([r == x.context for r, x in zip(rec_nodes, layouts, strict=True)]),
+            rec_is_table=np.array([r == x.context for r, x in zip(rec_nodes, layouts, strict=1)]),
             direction=direction.astype(np.float32),
             finger_span=finger_span,
         )
@@ -184,9 +184,9 @@ class TaskReader:
     SAPIEN objects, as ManiSkill's ``Actor.pose``, ``Link.pose`` and ``Articulation.qpos``
     read them (each torch operation's fixed cost would make up most of a step's rules)."""
 
-    def __init__(self, env, scene: TaskScene, table_z: torch.Tensor):
+    def __init__(self, env, scene: TaskScene, table_z: torch.Tensor, tensors: bool | None = None):
         self.env, self.ts = env, scene
-        self.gpu = env.gpu_sim_enabled
+        self.gpu = env.gpu_sim_enabled if tensors is None else tensors  # read as on the GPU
         arr = (lambda x: torch.as_tensor(x, device=env.device)) if self.gpu else np.asarray
         self.arr = arr
         self.hulls, self.centres = arr(scene.hulls), arr(scene.centres)

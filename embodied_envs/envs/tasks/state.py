@@ -39,7 +39,8 @@ class TaskState:
         footprint: ``(normals (n, E, 2), offsets (n, E))``: the receptacle's footprint in its
             frame (inside: ``normals @ xy >= offsets`` on every edge, ``rules.half_planes``).
         rim: ``(n,)`` height of the receptacle's top in its frame; ``rec_top``: ``(n,)`` the
-            height of its top in the world; ``rec_pos``: ``(n, 3)`` its origin; ``is_in``: ``(n,)`` bool,
+            height of its top in the world; ``rec_pos``: ``(n, 3)`` its origin;
+            ``is_in``: ``(n,)`` bool,
             the relation is "in" (else "on").
         rec_is_table: ``(n,)`` bool: the receptacle is the context (the table).
         table_z: ``(n,)`` height of the table's top.
