@@ -146,8 +146,8 @@ def cmd_validate(args) -> int:
             print(f"FAIL {path}")
             for p in problems:
                 print(f"  - {p}")
-        else:
-            print(f"ok   {path}")
+        else:  # the task as the env grades it (layout/task.py)
+            print(f"ok   {path}  task: {load_layout(path).task.describe()}")
     return 1 if bad else 0
 
 

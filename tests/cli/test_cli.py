@@ -14,6 +14,10 @@ from embodied_envs.cli.main import main
 def test_validate_ok_and_broken(tmp_path, scene_copy, capsys):
     shipped = sorted((ROOT / "embodied_envs" / "data" / "layouts").glob("*.json"))  # task ones too
     assert main(["layout", "validate", *map(str, shipped)]) == 0
+    out = capsys.readouterr().out
+    assert "place_box.json  task: place [can] on cracker_box" in out
+    assert "move_left.json  task: move [can] left" in out
+    assert "default.json  task: pick [can]" in out
     broken = scene_copy / "layouts" / "default.json"
     data = json.loads(broken.read_text())
     data["position"]["can"] = data["position"]["can"][:6]

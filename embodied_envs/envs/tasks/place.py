@@ -19,12 +19,8 @@ from embodied_envs.envs.tasks.state import (
     OFF_TABLE,
     STAGES,
     TaskState,
-    at_rest,
-    current,
-    released,
-    robot_static,
-    staged_reward,
-    take,
+    staged_dense,
+    staged_evaluate,
 )
 
 TOUCH = 0.01  # m: a lowest point this close above a support surface touches it
@@ -44,21 +40,8 @@ def in_pose(s: TaskState):
 
 
 def evaluate(s: TaskState) -> dict:
-    pose = in_pose(s)
-    done = pose & released(s) & at_rest(s)
-    k = current(done)
-    return {
-        "success": done.all(1),
-        "is_grasped": take(s.grasped, k),
-        "is_obj_placed": pose.all(1),
-        "is_robot_static": robot_static(s),
-        "obj_to_goal_pos": take(s.dest, k) - take(s.movers, k),
-        "done": done,
-    }
+    return staged_evaluate(s, in_pose(s))
 
 
 def reward(s: TaskState, info: dict):
-    done = info["done"]
-    k = current(done)
-    staged = staged_reward(s, k, take(in_pose(s), k), done.sum(1), done.shape[1])
-    return s.xp.where(info["success"], MAX_REWARD, staged)
+    return staged_dense(s, info, MAX_REWARD)

@@ -113,6 +113,31 @@ def take(x, k):
     return x[rows, k]
 
 
+def staged_evaluate(s: TaskState, pose) -> dict:
+    """``place`` and ``move``: success when every mover is in its pose (``pose (n, m)``, the
+    kind's own rule), released and at rest; the flags of the current mover."""
+    done = pose & released(s) & at_rest(s)
+    k = current(done)
+    return {
+        "success": done.all(1),
+        "is_grasped": take(s.grasped, k),
+        "is_obj_placed": pose.all(1),
+        "is_robot_static": robot_static(s),
+        "obj_to_goal_pos": take(s.dest, k) - take(s.movers, k),
+        "done": done,  # (n, m), and the poses: for the reward, not in info
+        "pose": pose,
+    }
+
+
+def staged_dense(s: TaskState, result: dict, max_reward: float):
+    """``place`` and ``move``: :func:`staged_reward` of ``staged_evaluate``'s ``result``;
+    ``max_reward`` on success."""
+    done = result["done"]
+    k = current(done)
+    staged = staged_reward(s, k, take(result["pose"], k), done.sum(1), done.shape[1])
+    return s.xp.where(result["success"], max_reward, staged)
+
+
 def staged_reward(s: TaskState, k, in_pose, done_before, count: int):
     """The staged reward of ``place`` and ``move``, per env, in [0, ``STAGES``]: for the
     current mover ``k`` (``(n,)``), reach (1) and grasp (1); while grasped, carry over the
