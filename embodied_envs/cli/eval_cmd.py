@@ -79,7 +79,7 @@ def add_parser(sub) -> None:
         default="none",
         help="videos are opt-in: all or fail (unsuccessful ones) films the first "
         "--video-episodes episodes per layout and keeps all or the unsuccessful of them; "
-        "none (the default) renders nothing, so an episode costs what a bare gym loop costs",
+        "none (the default) renders nothing: an episode then costs ~1.1x a bare gym loop",
     )
     p.add_argument(
         "--video-episodes",

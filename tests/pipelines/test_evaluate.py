@@ -227,6 +227,10 @@ def test_zero_policy_from_the_cli_writes_its_summary_and_no_video_by_default(tmp
     assert summary["success_ci95"] == [0.0, pytest.approx(0.5615, abs=1e-4)]
     assert "zero: 0/3 successful (0%, 95% interval 0%-56%)" in capsys.readouterr().out
     assert (out / "summary.png").is_file() and not (out / "videos").exists(), "opt-in videos"
+    with pytest.raises(SystemExit):
+        main(["eval", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "videos are opt-in" in help_text and "film only the first N episodes" in help_text
 
 
 def test_one_episode_keeps_its_summary_when_the_plot_fails(tmp_path, monkeypatch):
