@@ -28,7 +28,8 @@ import numpy as np  # noqa: E402
 
 import embodied_envs  # noqa: E402,F401
 from embodied_envs.paths import default_layout  # noqa: E402
-from embodied_envs.pipelines.evaluate import EpisodeRunner, EvalPlan, load_policy  # noqa: E402
+from embodied_envs.pipelines.evaluate import EpisodeRunner, EvalPlan  # noqa: E402
+from embodied_envs.pipelines.policies import load_policy  # noqa: E402
 from embodied_envs.registration import ENV_ID  # noqa: E402
 
 

@@ -21,13 +21,8 @@ from embodied_envs.cli.args import (
     seed_int,
     writable_dir,
 )
-from embodied_envs.pipelines.evaluate import (
-    BUILTIN_POLICIES,
-    VIDEO_CHOICES,
-    EvalError,
-    EvalPlan,
-    evaluate,
-)
+from embodied_envs.pipelines.evaluate import VIDEO_CHOICES, EvalError, EvalPlan, evaluate
+from embodied_envs.pipelines.policies import BUILTIN_POLICIES
 
 # env keywords eval sets itself: a --config file may not set them
 OWNED_KEYS = {
