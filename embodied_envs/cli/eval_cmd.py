@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from tqdm import tqdm
 
 from embodied_envs.cli.args import (
+    DEBUG_ENV,
     LAYOUT_HELP,
     add_config_argument,
     check_seed_span,
@@ -19,13 +21,8 @@ from embodied_envs.cli.args import (
     seed_int,
     writable_dir,
 )
-from embodied_envs.pipelines.evaluate import (
-    BUILTIN_POLICIES,
-    VIDEO_CHOICES,
-    EvalError,
-    EvalPlan,
-    evaluate,
-)
+from embodied_envs.pipelines.evaluate import VIDEO_CHOICES, EvalError, EvalPlan, evaluate
+from embodied_envs.pipelines.policies import BUILTIN_POLICIES
 
 # env keywords eval sets itself: a --config file may not set them
 OWNED_KEYS = {
@@ -50,9 +47,12 @@ def add_parser(sub) -> None:
         description=(
             "Runs a policy on N seeded episodes per layout (seeds S .. S+N-1) and writes "
             "OUT/episodes.json, OUT/summary.json (success rate and its 95%% Wilson interval, "
-            "overall and per layout), OUT/summary.png and videos. POLICY: "
+            "overall and per layout), OUT/summary.png and, with --video, videos of the first "
+            "--video-episodes episodes per layout. POLICY: "
             f"{', '.join(BUILTIN_POLICIES)}, or module:factory / file.py:factory, where "
-            "factory(env) returns a callable obs -> action or a torch.nn.Module."
+            "factory(env) returns a callable obs -> action or a torch.nn.Module. An action "
+            "that is not a finite array of the action space's shape, or a policy that raises, "
+            "stops the run with one line naming the policy, the step and the expected shape."
         ),
     )
     p.add_argument("--policy", required=True, help="expert | random | zero | module:factory")
@@ -68,7 +68,22 @@ def add_parser(sub) -> None:
         default=None,
         help="episode limit (default: the registered 300 control steps)",
     )
-    p.add_argument("--video", choices=VIDEO_CHOICES, default="fail", help="which episodes to film")
+    p.add_argument(
+        "--video",
+        choices=VIDEO_CHOICES,
+        default="none",
+        help="videos are opt-in: all or fail (unsuccessful ones) films the first "
+        "--video-episodes episodes per layout and keeps all or the unsuccessful of them; "
+        "none (the default) renders nothing: an episode then costs ~1.1x a bare gym loop",
+    )
+    p.add_argument(
+        "--video-episodes",
+        type=positive_int,
+        default=2,
+        metavar="N",
+        help="with --video all|fail: film only the first N episodes of each layout (seeds "
+        "S .. S+N-1; default 2). A filmed episode costs ~50x an unfilmed one on the CPU",
+    )
     p.add_argument("--workers", type=positive_int, default=1, help="processes")
     add_config_argument(p)
     p.set_defaults(func=cmd_eval, builds_env=True)
@@ -92,6 +107,7 @@ def cmd_eval(args) -> int:
         obs_mode=args.obs_mode,
         control_mode=args.control_mode,
         video=args.video,
+        video_episodes=args.video_episodes,
         workers=args.workers,
         env_kwargs=config
         if args.max_episode_steps is None
@@ -102,6 +118,8 @@ def cmd_eval(args) -> int:
             s = evaluate(plan, args.out, progress=lambda r: bar.update(1))
         except EvalError as e:
             bar.close()
+            if e.__cause__ is not None and os.environ.get(DEBUG_ENV):
+                raise  # the policy's own traceback
             print(f"error: {e}")
             return 1
         except Exception as e:  # an env or a policy failed in a worker: one line

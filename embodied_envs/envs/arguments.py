@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import warnings
 
 import numpy as np
 import torch
@@ -56,22 +57,37 @@ def check_quaternion(name: str, value) -> tuple[float, float, float, float]:
     return q
 
 
-RESET_OPTIONS = ("env_idx", "reconfigure")  # what reset(options=...) reads
+# what ManiSkill 3.0.1's BaseEnv.reset reads from options (mani_skill/envs/sapien_env.py); it
+# passes the others on to the task's hooks, where this env reads none
+RESET_OPTIONS = ("env_idx", "reconfigure", "reset_to_env_states")
 
 
 def check_reset_options(options) -> None:
-    """``reset(options=...)``: a dict of the known keys; ``reconfigure`` is a bool."""
+    """``reset(options=...)``: a dict; ``reconfigure`` is a bool, ``reset_to_env_states`` a dict
+    with ``env_states`` (and optionally ``obs``), as ManiSkill reads them. Other keys, which
+    ManiSkill hands to the task and this env does not read, are ignored with a warning, not
+    refused."""
     if options is None:
         return
     if not isinstance(options, dict):
         raise ValueError(f"reset(options={options!r}): options is a dict, e.g. {{'env_idx': [0]}}")
-    unknown = sorted(set(options) - set(RESET_OPTIONS))
-    if unknown:
-        raise ValueError(
-            f"reset(options=...): unknown keys {unknown}; known: {list(RESET_OPTIONS)}"
+    ignored = sorted(map(str, set(options) - set(RESET_OPTIONS)))
+    if ignored:
+        warnings.warn(
+            f"reset(options=...): ignored keys {ignored}; this env reads {list(RESET_OPTIONS)}",
+            stacklevel=3,
         )
     if "reconfigure" in options:
         check_flag("reset(options=...): reconfigure", options["reconfigure"])
+    states = options.get("reset_to_env_states", {"env_states": None})
+    keys = sorted(map(str, states)) if isinstance(states, dict) else None
+    if keys is None or "env_states" not in keys or not set(keys) <= {"env_states", "obs"}:
+        got = type(states).__name__ if keys is None else f"keys {keys}"
+        raise ValueError(
+            f"reset(options=...): reset_to_env_states is a dict with 'env_states' "
+            "(env.get_state_dict() or env.get_state(), one row per reset env) and optionally "
+            f"'obs' (their observations); got {got}"
+        )
 
 
 def check_num_envs(num_envs, sim_backend: str) -> None:

@@ -2,8 +2,10 @@
 
 Task files subclass :class:`CheckedEnv` and keep to the task; this class holds what every env of
 the package does the same way: render-mode and ``num_envs`` checks, ``reset`` seed and
-``env_idx`` checks (gymnasium's generator follows the seed too), action checks on ``step``, a
-closed-env guard, a spec whose ``layout_file`` is absolute (RecordEpisode stores it), fresh
+``env_idx`` checks (gymnasium's generator follows the seed too), every ``reset`` option ManiSkill
+reads (``reset_to_env_states`` too, so its ``CachedResetWrapper`` works), ``agent.init_qpos``
+as EmbodiedGen's env sets it, action checks on ``step``, a closed-env guard, a spec whose id
+names the package and whose ``layout_file`` is absolute (RecordEpisode stores both), fresh
 sensor parameters per call, and ``render_mode="human"`` without a display.
 """
 
@@ -55,9 +57,12 @@ class CheckedEnv(BaseEnv):
 
     @spec.setter
     def spec(self, spec) -> None:
-        # gymnasium sets the spec that RecordEpisode stores as env_kwargs: keep the layout files
-        # absolute there (a folder or glob as the files it named) and the config files' values
-        # spelled out, so a recorded dataset re-creates the env from any working directory
+        # gymnasium sets the spec that RecordEpisode stores as env_id and env_kwargs: the id
+        # carries its package ("embodied_envs:PickEmbodiedGen-v1"; gymnasium imports the module
+        # before the ":" on make, so ManiSkill's replay_trajectory, which imports only
+        # mani_skill, finds the env), the layout files are absolute (a folder or glob as the
+        # files it named) and the config files' values spelled out, so a recorded dataset
+        # re-creates the env from any working directory
         if spec is not None:
             kwargs = self.env_kwargs(**spec.kwargs)
             if kwargs.get("layout_file") is not None:  # a set: its files, spelled out
@@ -67,8 +72,14 @@ class CheckedEnv(BaseEnv):
                     if isinstance(files, list | tuple)
                     else str(Path(files).resolve())
                 )
-            spec = dataclasses.replace(spec, kwargs=kwargs)
+            spec = dataclasses.replace(spec, id=self.module_id(spec.id), kwargs=kwargs)
         self.__dict__["_spec"] = spec
+
+    @classmethod
+    def module_id(cls, env_id: str) -> str:
+        """``env_id`` prefixed by the package that registers it (``package:id``), unless it
+        names a module already."""
+        return env_id if ":" in env_id else f"{cls.__module__.partition('.')[0]}:{env_id}"
 
     @classmethod
     def keywords(cls) -> tuple[str, ...]:
@@ -143,7 +154,23 @@ class CheckedEnv(BaseEnv):
             # wrappers expect (ManiSkill only seeds its episode RNGs); nothing here draws from it
             first = np.asarray(seed).reshape(-1)[0]
             self._np_random, self._np_random_seed = seeding.np_random(int(first))
-        return super().reset(seed=seed, options=options)
+        result = super().reset(seed=seed, options=options)
+        self._note_init_qpos(None if options is None else options.get("env_idx"))
+        return result
+
+    def _note_init_qpos(self, env_idx: torch.Tensor | None) -> None:
+        """``agent.init_qpos``: each env's joint positions at its episode's start, ``(num_envs,
+        dof)``, as EmbodiedGen's env sets it (its scripts step ``init_qpos[:, :8]`` as a hold
+        action and reset the agent to it); the reset envs' rows only on a partial reset."""
+        robot = getattr(self.agent, "robot", None)
+        if robot is None:  # no agent, or several
+            return
+        qpos = robot.get_qpos().clone()
+        old = getattr(self.agent, "init_qpos", None)
+        if env_idx is not None and isinstance(old, torch.Tensor) and old.shape == qpos.shape:
+            old[env_idx] = qpos[env_idx]
+        else:
+            self.agent.init_qpos = qpos
 
     def step(self, action):
         self._check_open("step")
@@ -160,7 +187,7 @@ class CheckedEnv(BaseEnv):
 
     def _check_open(self, call: str) -> None:
         if self.__dict__.get("_closed"):
-            name = getattr(self.spec, "id", type(self).__name__)
+            name = getattr(self.spec, "id", type(self).__name__).rpartition(":")[2]
             raise RuntimeError(f"{call}() on a closed {name} env; make a new env")
 
     def get_sensor_params(self) -> dict[str, dict[str, torch.Tensor]]:

@@ -7,9 +7,13 @@ processes (one env per layout per worker, reused across its episodes), and write
 - ``episodes.json``: per episode its layout, seed, success, fail, steps, return and video;
 - ``summary.json``: the success rate with its 95% Wilson interval overall and per layout, the
   fail rate, mean and median episode length and return;
-- ``summary.png``: success per layout with its interval, and a histogram of episode lengths;
-- ``videos/<layout>_seed<seed>.mp4`` (``video="all"`` or ``"fail"``: unsuccessful episodes),
-  hybrid frames when the layout has a splat, the simulator's otherwise.
+- ``summary.png``: success per layout with its interval, and a histogram of episode lengths
+  (drawn after ``summary.json`` is written: a plot that cannot be drawn is a warning);
+- ``videos/<layout>_seed<seed>.mp4``, opt-in (``video="none"`` by default): with ``"all"`` or
+  ``"fail"`` the first ``video_episodes`` episodes of each entry of ``layouts`` are filmed (a
+  filmed episode costs ~50x an unfilmed one on the CPU), and of those ``"all"`` keeps every
+  one, ``"fail"`` the unsuccessful ones; hybrid frames when the layout has a splat, the
+  simulator's otherwise. Unfilmed episodes cost ~1.1x a bare gym loop (``tools/bench_eval.py``).
 
 An entry of ``layouts`` may be a layout set: each of its episodes runs in the layout its seed
 draws (a reconfiguration), and ``per_layout`` reports every layout drawn.
@@ -18,25 +22,15 @@ Each file is written under a temporary name and renamed when complete. An episod
 ManiSkill's ``terminated`` (``success`` or ``fail``) or at the env's episode limit; its
 success is ``evaluate()["success"]`` at its end, as ``collect`` grades demonstrations.
 
-Policies (:func:`load_policy`): ``expert`` (the scripted motion-planned solver, on
-``pd_joint_pos``), ``random`` (uniform over the action space, seeded by the episode), ``zero``,
-or ``module:factory`` / ``path/to/file.py:factory``: ``factory(env)`` (or ``factory()``)
-returns a callable from observations to actions or a ``torch.nn.Module`` (its ``reset(seed)``,
-if any, is called at each episode start). A policy receives
-the env's observation as ManiSkill returns it (torch tensors with a leading batch of 1, as from
-``ManiSkillVectorEnv``) and returns an action of shape ``(A,)`` or ``(1, A)``.
+Policies: :mod:`embodied_envs.pipelines.policies`.
 """
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import inspect
 import json
 import math
-import os
 import statistics
-import sys
+import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -47,16 +41,19 @@ import numpy as np
 
 from embodied_envs.paths import atomic_output
 from embodied_envs.pipelines.datasets import has_splat
+from embodied_envs.pipelines.policies import (
+    EvalError,
+    Policy,
+    at_step,
+    checked_action,
+    load_policy,
+    policy_raised,
+)
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 from embodied_envs.workers import WorkerError, run, started
 
-BUILTIN_POLICIES = ("expert", "random", "zero")
 VIDEO_CHOICES = ("all", "fail", "none")
 WILSON_Z = 1.959963984540054  # two-sided 95% normal quantile
-
-
-class EvalError(RuntimeError):
-    """An evaluation that cannot run (names the policy, the episode and the fix)."""
 
 
 @dataclass(frozen=True)
@@ -72,7 +69,10 @@ class EvalPlan:
         obs_mode: the env's observation mode (what the policy sees).
         control_mode: the env's control mode (None: the env's default; ``expert``:
             ``pd_joint_pos``).
-        video: ``all``, ``fail`` (unsuccessful episodes only) or ``none``.
+        video: which filmed episodes are kept: ``all``, ``fail`` (unsuccessful ones) or
+            ``none`` (nothing is filmed).
+        video_episodes: the first episodes of each entry of ``layouts`` (seeds ``seed`` ..
+            ``seed + video_episodes - 1``) that are filmed; later ones are not rendered.
         workers: processes (1: in this process).
         env_kwargs: further ``gym.make`` keywords (``--config`` files).
     """
@@ -83,7 +83,8 @@ class EvalPlan:
     seed: int = 0
     obs_mode: str = "state"
     control_mode: str | None = None
-    video: str = "fail"
+    video: str = "none"  # opt-in: a filmed episode costs ~50x an unfilmed one on the CPU
+    video_episodes: int = 2
     workers: int = 1
     env_kwargs: dict = field(default_factory=dict)
 
@@ -96,6 +97,15 @@ class EvalPlan:
         if render:
             kwargs["render_mode"] = "hybrid" if has_splat(layout) else "rgb_array"
         return kwargs | dict(sim_backend="physx_cpu")
+
+    @property
+    def renders(self) -> bool:
+        """Whether any episode is filmed (the env then has a render mode)."""
+        return self.video != "none" and self.video_episodes > 0
+
+    def filmed(self, seed: int) -> bool:
+        """Whether the episode of ``seed`` is filmed (the first ``video_episodes`` seeds)."""
+        return self.renders and seed - self.seed < self.video_episodes
 
     def tasks(self) -> list[tuple[str | tuple[str, ...], int]]:
         return [(lay, self.seed + k) for lay in self.layouts for k in range(self.episodes)]
@@ -126,129 +136,17 @@ class EpisodeResult:
 
 
 def wilson_interval(successes: int, n: int, z: float = WILSON_Z) -> tuple[float, float]:
-    """The Wilson score interval of a binomial proportion (95% by default); (0, 1) for n = 0."""
+    """The Wilson score interval of a binomial proportion (95% by default); (0, 1) for n = 0.
+
+    It holds the rate ``successes / n`` (exactly 0 below for no success, 1 above for all):
+    rounding alone would put the bound a few ulps past the rate (e.g. 0/3, 10/10)."""
     if n == 0:
         return (0.0, 1.0)
     p = successes / n
     denom = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
-
-
-# --- policies ------------------------------------------------------------------------------
-def _import_target(spec: str):
-    """The object named by ``module:attr`` or ``path/to/file.py:attr``."""
-    module_name, sep, attr = spec.rpartition(":")
-    if not sep or not module_name or not attr:
-        raise EvalError(
-            f"--policy {spec!r} is neither a built-in ({', '.join(BUILTIN_POLICIES)}) nor "
-            "module:factory. Fix: name a factory, e.g. --policy my_policy:make_policy"
-        )
-    try:
-        if module_name.endswith(".py"):
-            path = Path(module_name).resolve()
-            if not path.is_file():
-                raise FileNotFoundError(f"no such file {path}")
-            loaded = importlib.util.spec_from_file_location(path.stem, path)
-            module = importlib.util.module_from_spec(loaded)
-            loaded.loader.exec_module(module)
-        else:
-            if os.getcwd() not in sys.path:  # as `python -m` would: the user's own modules
-                sys.path.insert(0, os.getcwd())
-            module = importlib.import_module(module_name)
-    except Exception as e:  # whatever the user's module raises on import
-        raise EvalError(
-            f"--policy {spec}: cannot import {module_name!r} ({type(e).__name__}: {e}). Fix: "
-            "run from the folder that holds it, or give the file's path (file.py:factory)"
-        ) from None
-    if not hasattr(module, attr):
-        raise EvalError(f"--policy {spec}: {module_name!r} has no attribute {attr!r}")
-    return getattr(module, attr)
-
-
-class Policy:
-    """A policy for :class:`EpisodeRunner`: ``reset(seed)`` at each episode start, then
-    ``act(obs)`` each step."""
-
-    def __init__(self, act: Callable, reset: Callable[[int], None] | None = None):
-        self.act, self._reset = act, reset
-
-    def reset(self, seed: int) -> None:
-        if self._reset is not None:
-            self._reset(seed)
-
-
-def load_policy(spec: str, env) -> Policy | None:
-    """The :class:`Policy` named by ``spec``; ``None`` for ``expert`` (it drives the env
-    itself). A user policy with a ``reset(seed)`` method has it called at each episode start.
-
-    Raises:
-        EvalError: the policy cannot be imported or made.
-    """
-    if spec == "expert":
-        return None
-    space = env.action_space
-    shape = tuple(space.shape)
-    if spec == "zero":
-        return Policy(lambda obs: np.zeros(shape, np.float32))
-    if spec == "random":  # uniform over the action space, drawn from the episode's seed
-        low, high = np.asarray(space.low), np.asarray(space.high)
-        state = {"rng": np.random.default_rng(0)}
-
-        def reseed(seed: int) -> None:
-            state["rng"] = np.random.default_rng(seed)
-
-        return Policy(lambda obs: state["rng"].uniform(low, high).astype(np.float32), reseed)
-    factory = _import_target(spec)
-    if not callable(factory):
-        raise EvalError(f"--policy {spec}: {type(factory).__name__} is not callable")
-    try:
-        takes_env = bool(inspect.signature(factory).parameters)
-    except (TypeError, ValueError):
-        takes_env = False
-    try:
-        made = factory(env) if takes_env else factory()
-    except Exception as e:
-        raise EvalError(f"--policy {spec}: the factory raised {type(e).__name__}: {e}") from None
-    import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
-
-    reset = getattr(made, "reset", None)
-    reset = reset if callable(reset) else None
-    if isinstance(made, torch.nn.Module):
-        module = made.eval()
-
-        def run_module(obs):
-            with torch.no_grad():
-                return module(obs)
-
-        return Policy(run_module, reset)
-    if not callable(made):
-        raise EvalError(
-            f"--policy {spec}: the factory returned a {type(made).__name__}, not a callable "
-            "from observations to actions or a torch.nn.Module"
-        )
-    return Policy(made, reset)
-
-
-def checked_action(action, shape: tuple[int, ...], spec: str, step: int, seed: int, layout: str):
-    """The policy's action as a float32 array of ``shape``, or a one-line EvalError."""
-    where = f"at step {step} of episode seed {seed} ({Path(layout).name})"
-    try:
-        if hasattr(action, "detach"):
-            action = action.detach().cpu().numpy()
-        arr = np.asarray(action, dtype=np.float32)
-    except (TypeError, ValueError) as e:
-        raise EvalError(f"--policy {spec} returned {type(action).__name__} {where}: {e}") from None
-    if arr.shape != shape and arr.shape != (1, *shape):
-        raise EvalError(
-            f"--policy {spec} returned an action of shape {arr.shape} {where}; the env's action "
-            f"space is {shape}. Fix: return (A,) or (1, A), or pass the --control-mode it was "
-            "trained with"
-        )
-    if not np.isfinite(arr).all():
-        raise EvalError(f"--policy {spec} returned a non-finite action (NaN or inf) {where}")
-    return arr.reshape(shape)
+    return (min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half)))
 
 
 # --- episodes -----------------------------------------------------------------------------
@@ -262,8 +160,7 @@ class EpisodeRunner:
 
     def env(self, layout: str | tuple[str, ...]):
         if layout not in self.envs:
-            render = self.plan.video != "none"
-            env = gym.make(ENV_ID, **self.plan.env_make_kwargs(layout, render))
+            env = gym.make(ENV_ID, **self.plan.env_make_kwargs(layout, self.plan.renders))
             self.envs[layout] = env
             self.policies[layout] = load_policy(self.plan.policy, env)
             started()
@@ -277,7 +174,7 @@ class EpisodeRunner:
         env = self.env(layout)
         policy = self.policies[layout]
         u = env.unwrapped
-        record = self.plan.video != "none"
+        record = self.plan.filmed(seed)
         frames: list[np.ndarray] = []
 
         def frame():
@@ -296,19 +193,25 @@ class EpisodeRunner:
 
             PickPlaceSolver(tally, seed=seed).solve()
         else:
-            shape = tuple(env.action_space.shape)
-            policy.reset(seed)
+            spec, shape = self.plan.policy, tuple(env.action_space.shape)
+            try:
+                policy.reset(seed)
+            except Exception as e:  # the user's code: one line, naming the call
+                raise policy_raised(spec, "reset(seed)", e, at_step(0, seed, drawn)) from e
             limit = env.spec.max_episode_steps if env.spec is not None else None
             while limit is None or tally.steps < limit:
-                action = checked_action(
-                    policy.act(obs), shape, self.plan.policy, tally.steps, seed, drawn
-                )
+                try:
+                    raw = policy.act(obs)
+                except Exception as e:  # the user's code: one line, naming the step
+                    where = at_step(tally.steps, seed, drawn)
+                    raise policy_raised(spec, "the policy", e, where) from e
+                action = checked_action(raw, shape, spec, tally.steps, seed, drawn)
                 obs, _, terminated, truncated, _ = tally.step(action)
                 if bool(torch.as_tensor(terminated | truncated).reshape(-1)[0]):
                     break
         success = bool(u.evaluate()["success"][0])
         result = EpisodeResult(drawn, seed, success, tally.fail, tally.steps, round(tally.ret, 6))
-        keep = self.plan.video == "all" or (self.plan.video == "fail" and not success)
+        keep = self.plan.video == "all" or not success  # filmed: "all" or "fail"
         if record and keep and video_dir is not None:
             result.video = write_video(frames, video_dir / f"{Path(drawn).stem}_seed{seed}.mp4")
         return result
@@ -405,8 +308,9 @@ def plot_summary(summary: dict, results: list[EpisodeResult], path: Path) -> Non
     per = summary["per_layout"]
     names = [Path(lay).stem for lay in per]
     rates = [b["success_rate"] for b in per.values()]
-    lo = [b["success_rate"] - b["success_ci95"][0] for b in per.values()]
-    hi = [b["success_ci95"][1] - b["success_rate"] for b in per.values()]
+    # error bars are lengths: never negative, whatever the interval's rounding
+    lo = [max(0.0, b["success_rate"] - b["success_ci95"][0]) for b in per.values()]
+    hi = [max(0.0, b["success_ci95"][1] - b["success_rate"]) for b in per.values()]
     fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
     left.bar(names, rates, yerr=[lo, hi], capsize=6, color="tab:blue")
     left.set_ylim(0, 1.05)
@@ -460,7 +364,10 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
     summary = summarize(plan, results)
     with atomic_output(out / "episodes.json") as tmp:
         tmp.write_text(json.dumps([r.to_json() for r in results], indent=2))
-    plot_summary(summary, results, out / "summary.png")
-    with atomic_output(out / "summary.json") as tmp:  # last: its presence marks a complete run
+    with atomic_output(out / "summary.json") as tmp:  # its presence marks a complete run
         tmp.write_text(json.dumps(summary, indent=2))
+    try:  # the summary is written: a plot that cannot be drawn must not lose it
+        plot_summary(summary, results, out / "summary.png")
+    except Exception as e:  # matplotlib's, whatever they are: one line
+        warnings.warn(f"{out / 'summary.png'} not drawn: {type(e).__name__}: {e}", stacklevel=2)
     return summary

@@ -130,12 +130,37 @@ def test_numeric_and_flag_keywords_are_range_checked_before_simulation(kwargs, w
     "options, words",
     [
         (dict(reconfigure="no"), ["reconfigure='no'", "True or False"]),
-        (dict(reconfig=True), ["unknown keys ['reconfig']", "env_idx", "reconfigure"]),
         ("reconfigure", ["options is a dict"]),
+        (dict(reset_to_env_states=[0.0]), ["reset_to_env_states is a dict with 'env_states'",
+                                          "got list"]),
+        (dict(reset_to_env_states=dict(states={})), ["optionally 'obs'", "got keys ['states']"]),
     ],
-)
+)  # fmt: skip
 def test_reset_options_are_checked(env, options, words):
     with pytest.raises(ValueError) as e:
         env.reset(seed=0, options=options)
     for w in words:
         assert w in str(e.value), str(e.value)
+
+
+def test_options_maniskill_passes_on_are_ignored_with_a_warning(env):
+    """ManiSkill's BaseEnv.reset hands keys it does not read to the task, which reads none:
+    they are ignored (the same reset as without them), with a warning naming them."""
+    want = env.reset(seed=4)[0]
+    with pytest.warns(UserWarning, match=r"ignored keys \['reconfig', 'x'\]; this env reads "):
+        got = env.reset(seed=4, options=dict(reconfig=True, x=1, env_idx=[0]))[0]
+    assert torch.equal(got, want)
+
+
+def test_reset_to_env_states_takes_a_state_dict_or_a_flat_state(env):
+    """ManiSkill's reset option: the env's state (and its observation) as recorded."""
+    u = env.unwrapped
+    env.reset(seed=5)
+    state, flat, obs = u.get_state_dict(), u.get_state(), u.get_obs()
+    env.reset(seed=6)
+    assert not torch.equal(u.get_obs(), obs)
+    got = env.reset(options=dict(reset_to_env_states=dict(env_states=state)))[0]
+    assert torch.allclose(got, obs, atol=1e-6) and torch.allclose(u.get_state(), flat, atol=1e-6)
+    env.reset(seed=6)
+    got = env.reset(options=dict(reset_to_env_states=dict(env_states=flat, obs=obs)))[0]
+    assert torch.equal(got, obs) and torch.allclose(u.get_state(), flat, atol=1e-6)

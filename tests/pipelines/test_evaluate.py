@@ -6,7 +6,16 @@ import pytest
 from conftest import DEFAULT_LAYOUT, LAYOUTS
 
 from embodied_envs.cli.main import main
-from embodied_envs.pipelines.evaluate import EvalError, EvalPlan, evaluate, wilson_interval
+from embodied_envs.pipelines import evaluate as evaluate_module
+from embodied_envs.pipelines.evaluate import (
+    EpisodeResult,
+    EvalError,
+    EvalPlan,
+    evaluate,
+    plot_summary,
+    summarize,
+    wilson_interval,
+)
 
 POLICIES = '''
 import numpy as np
@@ -41,6 +50,30 @@ def nan_after_two(env):
         return a if len(steps) <= 2 else a * np.nan
 
     return act
+
+
+def raises_at_three(env):
+    steps = []
+
+    def act(obs):
+        steps.append(1)
+        if len(steps) > 3:
+            raise ValueError("weights not loaded")
+        return np.zeros(env.action_space.shape, np.float32)
+
+    return act
+
+
+class ResetRaises:
+    def __call__(self, obs):
+        return np.zeros(8, np.float32)
+
+    def reset(self, seed):
+        raise KeyError(seed)
+
+
+def returns_none():
+    return lambda obs: None
 '''
 
 
@@ -113,7 +146,25 @@ def test_a_torch_module_policy_runs_and_is_graded(tmp_path, policies):
     "spec, message",
     [
         ("{file}:wrong_shape", "returned an action of shape (3,) at step 0 of episode seed 0"),
-        ("{file}:nan_after_two", "non-finite action (NaN or inf) at step 2 of episode seed 0"),
+        (
+            "{file}:nan_after_two",
+            "non-finite action (NaN or inf) at step 2 of episode seed 0 "
+            "(default.json); expected finite values of shape (8,)",
+        ),
+        (
+            "{file}:raises_at_three",
+            ":raises_at_three: the policy raised ValueError: weights "
+            "not loaded at step 3 of episode seed 0 (default.json)",
+        ),
+        (
+            "{file}:ResetRaises",
+            ":ResetRaises: reset(seed) raised KeyError: 0 at step 0 of episode seed 0",
+        ),
+        (
+            "{file}:returns_none",
+            "returned an action of shape () at step 0 of episode seed 0 "
+            "(default.json); the env's action space is (8,)",
+        ),
         ("no_such_module_here:make", "cannot import 'no_such_module_here'"),
         ("{file}:missing", "has no attribute 'missing'"),
         ("noplace", "neither a built-in"),
@@ -123,8 +174,10 @@ def test_broken_policies_give_one_clear_line(tmp_path, policies, capsys, spec, m
     spec = spec.format(file=policies)
     code = main(["eval", "--policy", spec, "--episodes", "1", "--max-episode-steps", "5",
                  "--video", "none", "--out", str(tmp_path / "out")])  # fmt: skip
-    out = capsys.readouterr().out
-    assert code == 1
+    captured = capsys.readouterr()
+    out = captured.out
+    # no traceback: the message is on stdout's one line only (stderr may hold ManiSkill's logs)
+    assert code == 1 and "Traceback" not in out and message not in captured.err
     line = [x for x in out.splitlines() if x.startswith("error:")]
     assert len(line) == 1 and message in line[0], out
     assert not (tmp_path / "out" / "summary.json").exists()
@@ -145,3 +198,58 @@ def test_cli_workers_videos_and_the_error_from_a_worker(tmp_path, policies, caps
     assert frames[0].mean() > 60, "hybrid frames: the room, not the simulator's black"
     code = main([*args, "--policy", f"{policies}:wrong_shape", "--out", str(tmp_path / "bad")])
     assert code == 1 and "returned an action of shape (3,)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 6, 7, 10, 13, 25])
+def test_every_count_of_successes_gives_a_summary_and_a_plot(tmp_path, n):
+    """0/n and n/n for the counts whose interval bounds rounded past the rate (0/3, 10/10):
+    the interval holds the rate exactly and the plot's error bars are not negative."""
+    p = plan("zero", episodes=n)
+    for k in (0, n // 2, n):
+        results = [EpisodeResult(p.layouts[0], s, s < k, False, 5 + s, 0.5) for s in range(n)]
+        summary = summarize(p, results)
+        lo, hi = summary["success_ci95"]
+        assert summary["successes"] == k and summary["success_rate"] == k / n
+        assert lo <= k / n <= hi and (lo == 0.0) == (k == 0) and (hi == 1.0) == (k == n)
+        assert summary["steps_median"] == 5 + (n - 1) / 2
+        png = tmp_path / f"{n}_{k}.png"
+        plot_summary(summary, results, png)
+        assert png.stat().st_size > 1000
+
+
+def test_zero_policy_from_the_cli_writes_its_summary_and_no_video_by_default(tmp_path, capsys):
+    out = tmp_path / "zero"
+    code = main(["eval", "--policy", "zero", "--episodes", "3", "--max-episode-steps", "3",
+                 "--out", str(out)])  # fmt: skip
+    assert code == 0, capsys.readouterr()
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["episodes"], summary["successes"], summary["success_rate"]) == (3, 0, 0.0)
+    assert summary["success_ci95"] == [0.0, pytest.approx(0.5615, abs=1e-4)]
+    assert "zero: 0/3 successful (0%, 95% interval 0%-56%)" in capsys.readouterr().out
+    assert (out / "summary.png").is_file() and not (out / "videos").exists(), "opt-in videos"
+    with pytest.raises(SystemExit):
+        main(["eval", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "videos are opt-in" in help_text and "film only the first N episodes" in help_text
+
+
+def test_one_episode_keeps_its_summary_when_the_plot_fails(tmp_path, monkeypatch):
+    def broken_plot(*args):
+        raise RuntimeError("no fonts")
+
+    monkeypatch.setattr(evaluate_module, "plot_summary", broken_plot)
+    with pytest.warns(UserWarning, match="summary.png not drawn: RuntimeError: no fonts"):
+        s = evaluate(plan("zero", episodes=1, env_kwargs=dict(max_episode_steps=4)), tmp_path)
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    assert on_disk == s and s["episodes"] == 1 and s["steps_median"] == 4
+    assert s["success_ci95"] == [0.0, pytest.approx(0.7935, abs=1e-4)]
+
+
+def test_only_the_first_video_episodes_are_filmed(tmp_path):
+    p = plan("zero", episodes=3, video="all", video_episodes=1,
+             env_kwargs=dict(max_episode_steps=2))  # fmt: skip
+    assert [p.filmed(seed) for seed in (0, 1, 2)] == [True, False, False]
+    evaluate(p, tmp_path)
+    episodes = json.loads((tmp_path / "episodes.json").read_text())
+    assert [e["video"] for e in episodes] == ["default_seed0.mp4", None, None]
+    assert sorted(x.name for x in (tmp_path / "videos").iterdir()) == ["default_seed0.mp4"]

@@ -1,0 +1,164 @@
+"""Policies for ``embodied-envs eval``, and the checks on what they return.
+
+Policies (:func:`load_policy`): ``expert`` (the scripted motion-planned solver, on
+``pd_joint_pos``), ``random`` (uniform over the action space, seeded by the episode), ``zero``,
+or ``module:factory`` / ``path/to/file.py:factory``: ``factory(env)`` (or ``factory()``)
+returns a callable from observations to actions or a ``torch.nn.Module`` (its ``reset(seed)``,
+if any, is called at each episode start). A policy receives
+the env's observation as ManiSkill returns it (torch tensors with a leading batch of 1, as from
+``ManiSkillVectorEnv``) and returns an action of shape ``(A,)`` or ``(1, A)``.
+
+A policy's action that is not a finite array of that shape, or a policy that raises, stops the
+evaluation with one :class:`EvalError` line naming the policy, the step, the episode's seed and
+the expected shape; nothing is clipped or replaced.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import inspect
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+BUILTIN_POLICIES = ("expert", "random", "zero")
+
+
+class EvalError(RuntimeError):
+    """An evaluation that cannot run (names the policy, the episode and the fix)."""
+
+
+def _import_target(spec: str):
+    """The object named by ``module:attr`` or ``path/to/file.py:attr``."""
+    module_name, sep, attr = spec.rpartition(":")
+    if not sep or not module_name or not attr:
+        raise EvalError(
+            f"--policy {spec!r} is neither a built-in ({', '.join(BUILTIN_POLICIES)}) nor "
+            "module:factory. Fix: name a factory, e.g. --policy my_policy:make_policy"
+        )
+    try:
+        if module_name.endswith(".py"):
+            path = Path(module_name).resolve()
+            if not path.is_file():
+                raise FileNotFoundError(f"no such file {path}")
+            loaded = importlib.util.spec_from_file_location(path.stem, path)
+            module = importlib.util.module_from_spec(loaded)
+            loaded.loader.exec_module(module)
+        else:
+            if os.getcwd() not in sys.path:  # as `python -m` would: the user's own modules
+                sys.path.insert(0, os.getcwd())
+            module = importlib.import_module(module_name)
+    except Exception as e:  # whatever the user's module raises on import
+        raise EvalError(
+            f"--policy {spec}: cannot import {module_name!r} ({type(e).__name__}: {e}). Fix: "
+            "run from the folder that holds it, or give the file's path (file.py:factory)"
+        ) from None
+    if not hasattr(module, attr):
+        raise EvalError(f"--policy {spec}: {module_name!r} has no attribute {attr!r}")
+    return getattr(module, attr)
+
+
+class Policy:
+    """A policy for :class:`EpisodeRunner`: ``reset(seed)`` at each episode start, then
+    ``act(obs)`` each step."""
+
+    def __init__(self, act: Callable, reset: Callable[[int], None] | None = None):
+        self.act, self._reset = act, reset
+
+    def reset(self, seed: int) -> None:
+        if self._reset is not None:
+            self._reset(seed)
+
+
+def load_policy(spec: str, env) -> Policy | None:
+    """The :class:`Policy` named by ``spec``; ``None`` for ``expert`` (it drives the env
+    itself). A user policy with a ``reset(seed)`` method has it called at each episode start.
+
+    Raises:
+        EvalError: the policy cannot be imported or made.
+    """
+    if spec == "expert":
+        return None
+    space = env.action_space
+    shape = tuple(space.shape)
+    if spec == "zero":
+        return Policy(lambda obs: np.zeros(shape, np.float32))
+    if spec == "random":  # uniform over the action space, drawn from the episode's seed
+        low, high = np.asarray(space.low), np.asarray(space.high)
+        state = {"rng": np.random.default_rng(0)}
+
+        def reseed(seed: int) -> None:
+            state["rng"] = np.random.default_rng(seed)
+
+        return Policy(lambda obs: state["rng"].uniform(low, high).astype(np.float32), reseed)
+    factory = _import_target(spec)
+    if not callable(factory):
+        raise EvalError(f"--policy {spec}: {type(factory).__name__} is not callable")
+    try:
+        takes_env = bool(inspect.signature(factory).parameters)
+    except (TypeError, ValueError):
+        takes_env = False
+    try:
+        made = factory(env) if takes_env else factory()
+    except Exception as e:
+        raise EvalError(f"--policy {spec}: the factory raised {type(e).__name__}: {e}") from None
+    import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
+
+    reset = getattr(made, "reset", None)
+    reset = reset if callable(reset) else None
+    if isinstance(made, torch.nn.Module):
+        module = made.eval()
+
+        def run_module(obs):
+            with torch.no_grad():
+                return module(obs)
+
+        return Policy(run_module, reset)
+    if not callable(made):
+        raise EvalError(
+            f"--policy {spec}: the factory returned a {type(made).__name__}, not a callable "
+            "from observations to actions or a torch.nn.Module"
+        )
+    return Policy(made, reset)
+
+
+def at_step(step: int, seed: int, layout: str) -> str:
+    """Where in an evaluation an error happened, in words."""
+    return f"at step {step} of episode seed {seed} ({Path(layout).name})"
+
+
+def checked_action(action, shape: tuple[int, ...], spec: str, step: int, seed: int, layout: str):
+    """The policy's action as a float32 array of ``shape``, or a one-line EvalError naming the
+    policy, the step and the expected shape (a NaN is refused, never replaced)."""
+    where = at_step(step, seed, layout)
+    try:
+        if hasattr(action, "detach"):
+            action = action.detach().cpu().numpy()
+        arr = np.asarray(action, dtype=np.float32)
+    except (TypeError, ValueError) as e:
+        raise EvalError(
+            f"--policy {spec} returned {type(action).__name__} {where}, not an array of shape "
+            f"{shape}: {e}"
+        ) from None
+    if arr.shape != shape and arr.shape != (1, *shape):
+        raise EvalError(
+            f"--policy {spec} returned an action of shape {arr.shape} {where}; the env's action "
+            f"space is {shape}. Fix: return (A,) or (1, A), or pass the --control-mode it was "
+            "trained with"
+        )
+    if not np.isfinite(arr).all():
+        raise EvalError(
+            f"--policy {spec} returned a non-finite action (NaN or inf) {where}; expected finite "
+            f"values of shape {shape}"
+        )
+    return arr.reshape(shape)
+
+
+def policy_raised(spec: str, call: str, error: Exception, where: str) -> EvalError:
+    """The one-line error for a policy whose ``call`` raised ``error`` (its own message kept)."""
+    text = " ".join(str(error).split())
+    return EvalError(f"--policy {spec}: {call} raised {type(error).__name__}: {text} {where}")
