@@ -28,15 +28,8 @@ import yaml
 
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.limits import MAX_IMAGE_SIDE, GoalRegion, PlacementLimits
+from embodied_envs.layout.schema import ROBOT_REGISTRY
 
-# Layout robot names -> ManiSkill robot uids. An unknown name is an error unless the user
-# passes robot_uids explicitly (EmbodiedGen silently fell back to panda).
-ROBOT_REGISTRY = {
-    "franka": "panda",
-    "franka_panda": "panda",
-    "panda": "panda",
-    "panda_wristcam": "panda_wristcam",
-}
 SUPPORTED_ROBOTS = sorted(set(ROBOT_REGISTRY.values()))
 
 # init_3dgs_quat's default (x y z w): +90 deg about x, turning a splat stored Y-up (as 3DGS and
