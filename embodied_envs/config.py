@@ -10,11 +10,16 @@ Config files (YAML or JSON) hold ``gym.make`` keyword arguments of ``PickEmbodie
 :func:`load_config` merges several in order, a later file overriding an earlier one key by key
 (dict-valued settings merge field by field); ``gym.make(..., config=[...])`` and the CLI's
 ``--config`` use it, and keywords given directly win over every file.
+
+A relative path in a config file (``layout_file``: a file, folder or glob, or a list of them;
+``PATH_KEYS``) is relative to that file's folder, so the file works from any working folder;
+a path given directly as a keyword is relative to the working folder, as Python's are.
 """
 
 from __future__ import annotations
 
 import copy
+import glob
 import json
 import math
 import os
@@ -28,15 +33,8 @@ import yaml
 
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.limits import MAX_IMAGE_SIDE, GoalRegion, PlacementLimits
+from embodied_envs.layout.schema import ROBOT_REGISTRY
 
-# Layout robot names -> ManiSkill robot uids. An unknown name is an error unless the user
-# passes robot_uids explicitly (EmbodiedGen silently fell back to panda).
-ROBOT_REGISTRY = {
-    "franka": "panda",
-    "franka_panda": "panda",
-    "panda": "panda",
-    "panda_wristcam": "panda_wristcam",
-}
 SUPPORTED_ROBOTS = sorted(set(ROBOT_REGISTRY.values()))
 
 # init_3dgs_quat's default (x y z w): +90 deg about x, turning a splat stored Y-up (as 3DGS and
@@ -118,6 +116,10 @@ NESTED_KEYS: dict[str, tuple[str, ...]] = {
     "goal_region": tuple(f.name for f in fields(GoalRegion)),
     "camera_cfg": CameraSpec.KEYS,
 }
+
+
+# settings whose value is a path, or a list of paths: relative to the config file's folder
+PATH_KEYS = ("layout_file",)
 
 
 class ConfigError(ValueError):
@@ -253,7 +255,8 @@ def load_config(
     """Merge config files in order (later overrides earlier), checking every key.
 
     Args:
-        paths: one file or a list; None gives ``{}``.
+        paths: one file or a list; None gives ``{}``. Relative paths in a file (the values
+            of ``PATH_KEYS``) are relative to its folder.
         known: accepted top-level keys (the env's: ``PickEmbodiedGenEnv.keywords()``).
         check: ``check(key, value)`` raises ``ValueError`` for a value of the wrong type or
             range (the env's: ``PickEmbodiedGenEnv.check_keyword``); named with the file.
@@ -275,5 +278,22 @@ def load_config(
                     check(key, value)
             except ValueError as e:
                 raise ConfigError(f"{path}: {e}") from None
-        merged = merge_config(merged, data)
+        merged = merge_config(merged, _paths_from(data, Path(os.path.abspath(path)).parent))
     return merged
+
+
+def _paths_from(data: dict, folder: Path) -> dict:
+    """``data`` with each relative path of ``PATH_KEYS`` joined to ``folder`` (escaped where the
+    path is a glob, so that the folder's name matches itself); ``~`` is a home folder."""
+
+    def joined(value):
+        if not isinstance(value, str) or Path(value).expanduser().is_absolute():
+            return value  # a wrong type is named by the check of its key
+        is_glob = any(c in value for c in "*?[")
+        return os.path.join(glob.escape(str(folder)) if is_glob else folder, value)
+
+    out = dict(data)
+    for key in (k for k in PATH_KEYS if k in out):
+        value = out[key]
+        out[key] = [joined(v) for v in value] if isinstance(value, list) else joined(value)
+    return out

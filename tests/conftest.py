@@ -63,3 +63,22 @@ def per_layout_env(layouts: list[Path] = LAYOUTS, **kwargs):
         env.close()
 
     return fixture
+
+
+def make_unreadable(path: Path, monkeypatch) -> None:
+    """Make a file unreadable to this process: mode 000, and, where the tests run as root (who
+    reads any file), ``open`` refusing it as the kernel refuses other users."""
+    import builtins
+    import errno
+
+    os.chmod(path, 0)
+    if os.geteuid() != 0:
+        return
+    real_open, target = builtins.open, os.path.realpath(path)
+
+    def guarded(file, *args, **kwargs):
+        if isinstance(file, str | os.PathLike) and os.path.realpath(file) == target:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), os.fspath(file))
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", guarded)

@@ -218,3 +218,50 @@ def test_import_and_layout_commands_do_not_load_the_simulator():
     )
     assert out.returncode == 0, out.stderr
     assert "heavy []" in out.stdout
+
+
+def test_relative_paths_in_a_config_file_are_relative_to_its_folder(tmp_path, monkeypatch):
+    folder = tmp_path / "configs"
+    folder.mkdir()
+    cfg = write(
+        folder / "c.yaml",
+        "layout_file: [scenes/a.json, 'scenes/*.json', /abs/b.json, ~/c.json]\n",
+    )
+    monkeypatch.chdir(tmp_path)  # the working folder is not the config's
+    got = load_config("configs/c.yaml", ["layout_file"])["layout_file"]
+    assert got == [str(folder / "scenes/a.json"), str(folder / "scenes/*.json"), "/abs/b.json",
+                   "~/c.json"]  # fmt: skip
+    write(cfg, "layout_file: one.json\n")
+    assert load_config(cfg, ["layout_file"]) == {"layout_file": str(folder / "one.json")}
+    odd = tmp_path / "[odd]"  # a glob matches the config's folder by its own name
+    odd.mkdir()
+    write(odd / "c.yaml", "layout_file: 'x*.json'\n")
+    assert (
+        load_config(odd / "c.yaml", ["layout_file"])["layout_file"] == f"{tmp_path}/[[]odd]/x*.json"
+    )
+
+
+def test_a_config_files_layout_works_from_any_folder_and_a_keyword_from_the_working_one(
+    scene_copy, monkeypatch
+):
+    """A config file naming ../../layouts/round_table.json: found from another working
+    folder. A layout_file keyword is relative to the working folder, and wins over the file."""
+    (scene_copy / "configs" / "nested").mkdir(parents=True)
+    cfg = write(
+        scene_copy / "configs" / "nested" / "a.yaml",
+        "layout_file: ../../layouts/round_table.json\n",
+    )
+    work = scene_copy / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    env = gym.make("PickEmbodiedGen-v1", config=str(cfg))
+    try:
+        assert env.unwrapped.layout_file == (scene_copy / "layouts" / "round_table.json").resolve()
+    finally:
+        env.close()
+    monkeypatch.chdir(scene_copy)
+    env = gym.make("PickEmbodiedGen-v1", config=str(cfg), layout_file="layouts/default.json")
+    try:
+        assert env.unwrapped.layout_file == (scene_copy / "layouts" / "default.json").resolve()
+    finally:
+        env.close()

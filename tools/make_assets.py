@@ -320,13 +320,13 @@ def room_mesh() -> trimesh.Trimesh:
     return room
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     data = Path(__file__).resolve().parent.parent / "embodied_envs" / "data"  # package data
     ap.add_argument("--out", type=Path, default=data / "assets")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     for make in ASSETS:
         asset = make()
         write_asset(asset, args.out)

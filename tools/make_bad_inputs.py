@@ -10,13 +10,17 @@ folders it needs). ``case.json`` says what is wrong and what must happen:
 - ``env_kwargs``: extra ``gym.make`` arguments;
 - ``validate``: whether ``embodied-envs layout validate`` must report it (exit code 1).
 
-Layouts point at the shipped assets with paths relative to their own folder, as users' do.
-Usage: python tools/make_bad_inputs.py
+Layouts point at the shipped assets with paths relative to their own folder, as users' do
+(written relative to ``tests/data/bad_inputs/<case>/`` wherever ``--out`` is, so that a corpus
+written elsewhere is byte for byte the shipped one: ``tests/test_shipped_data.py``).
+Usage: python tools/make_bad_inputs.py [--out tests/data/bad_inputs]
 """
 
 from __future__ import annotations
 
+import argparse
 import copy
+import functools
 import json
 import re
 import shutil
@@ -44,7 +48,8 @@ def copy_asset(case: Path, name: str, new_name: str) -> Path:
     return dst
 
 
-def write_case(
+def write_case_to(
+    out: Path,
     name: str,
     what: str,
     error: str | None,
@@ -55,7 +60,7 @@ def write_case(
     raw_layout: str | None = None,
     setup=None,
 ):
-    case = OUT / name
+    case = out / name
     case.mkdir(parents=True)
     if setup is not None:
         setup(case)
@@ -77,10 +82,14 @@ def tiny_ply(names: list[str], n: int = 4, cut: int = 0) -> bytes:
 PLY_PROPS = list(REQUIRED)
 
 
-def main() -> None:
-    if OUT.exists():
-        shutil.rmtree(OUT)
-    OUT.mkdir(parents=True)
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--out", type=Path, default=OUT, help="the corpus folder (replaced)")
+    out = ap.parse_args(argv).out
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    write_case = functools.partial(write_case_to, out)
     b = base_layout()
 
     def mutated(fn):
@@ -446,6 +455,13 @@ def main() -> None:
             ["cannot name a URDF file", "Fix: rename the node"],
             layout=mutated(renamed(node)),
         )
+    write_case(
+        "node_named_like_the_goal_marker",
+        "a node named goal_site, the env's own goal marker (ManiSkill asserted on the duplicate)",
+        "LayoutError",
+        ['node name "goal_site" is reserved', 'Fix: rename the node (e.g. "goal_site_1")'],
+        layout=mutated(renamed("goal_site")),
+    )
 
     # poses that validate as numbers but cannot be simulated as written
     def moved(node, index, value):
@@ -559,7 +575,7 @@ def main() -> None:
         [],
         layout=b,
     )
-    print(f"wrote {len(list(OUT.iterdir()))} cases to {OUT}")
+    print(f"wrote {len(list(out.iterdir()))} cases to {out}")
 
 
 if __name__ == "__main__":

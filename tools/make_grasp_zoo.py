@@ -142,10 +142,10 @@ def write_layout(path: Path, name: str, desc: str, assets: Path) -> None:
     path.write_text(json.dumps(data, indent=4) + "\n")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", type=Path, default=ROOT / "zoo")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     assets, layouts = args.out / "assets", args.out / "layouts"
     for folder in (assets, layouts):
         if folder.exists():

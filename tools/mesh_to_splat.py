@@ -24,7 +24,7 @@ DATA = ROOT / "embodied_envs" / "data"  # package data; ./layouts and ./assets l
 BACKGROUND = DATA / "assets" / "background"
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -44,7 +44,7 @@ def main() -> None:
     ap.add_argument(
         "--normals", action="store_true", help="also write nx ny nz (unused by renderers; +21%%)"
     )
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     mesh = trimesh.load(args.mesh, force="mesh")
     splat = mesh_to_splat(
         mesh, args.count, seed=args.seed, visible_from=None if args.all_faces else args.visible_from

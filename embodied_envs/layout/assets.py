@@ -23,6 +23,7 @@ from PIL import Image
 from scipy.spatial import ConvexHull, QhullError
 
 from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.folders import resolve_path
 from embodied_envs.layout.limits import MAX_IMAGE_SIDE
 from embodied_envs.layout.pose import rpy_to_matrix, rpy_to_quat_wxyz
 
@@ -119,7 +120,7 @@ def _mesh(link: ET.Element, tag: str, urdf: Path) -> MeshRef:
     if mesh is None or not mesh.get("filename"):
         raise LayoutError(f"{urdf}: <{tag}> has no <geometry><mesh filename=...>. Fix: add it.")
     filename = mesh.get("filename").replace("package://", "")
-    path = (urdf.parent / filename).resolve()
+    path = resolve_path(urdf.parent / filename, f"{urdf}: <{tag}> mesh file")
     if not path.is_relative_to(urdf.parent):
         raise LayoutError(
             f"{urdf}: <{tag}> mesh file {filename} lies outside the asset folder {urdf.parent}"
@@ -169,7 +170,7 @@ def parse_urdf(urdf: Path | str) -> AssetSpec:
     Raises:
         LayoutError: when the file is missing or not valid URDF, or a mesh is missing.
     """
-    urdf = Path(urdf).resolve()
+    urdf = resolve_path(urdf, "URDF")
     if not urdf.is_file():
         raise LayoutError(f"{urdf}: URDF file does not exist. Fix: restore it or fix `assets`.")
     try:
@@ -439,7 +440,7 @@ def check_visual_mesh(spec: AssetSpec) -> None:
 
 def _inside(path: Path, folder: Path, what: str, source: Path, name: str) -> Path:
     """``path`` resolved, refused when outside ``folder`` or missing."""
-    path = path.resolve()
+    path = resolve_path(path, f"{source}: {what}")
     if not path.is_relative_to(folder):
         raise LayoutError(
             f"{source}: {what} {name} lies outside the asset folder {folder}. Fix: copy it into"

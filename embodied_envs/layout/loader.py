@@ -14,6 +14,7 @@ from embodied_envs.layout.assets import (
     parse_urdf,
 )
 from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.folders import check_folder
 from embodied_envs.layout.placement import check_file_poses
 from embodied_envs.layout.pools import asset_pools, with_assets
 from embodied_envs.layout.schema import LayoutInfo, label
@@ -27,6 +28,11 @@ def check_asset_files(info: LayoutInfo) -> list[str]:
     pooled = asset_pools(info)
     problems = _check_nodes(info, [n for n in info.objs_mapping if n not in pooled])
     for node, members in pooled.items():
+        try:  # the pool's own entries; each member is walked as an asset folder
+            check_folder(info.asset_dir(node), recursive=False)
+        except LayoutError as e:
+            problems.extend(f'{label(info.source)}: assets["{node}"]: {p}' for p in e.problems)
+            continue
         for member in members:
             problems += _check_nodes(with_assets(info, {node: member}), [node])
     return problems
@@ -37,12 +43,21 @@ def _check_nodes(info: LayoutInfo, nodes: list[str]) -> list[str]:
     problems = []
     for node in nodes:
         cat = info.objs_mapping[node]
-        d = info.asset_dir(node)
+        try:
+            d = info.asset_dir(node)
+        except LayoutError as e:
+            problems.extend(e.problems)
+            continue
         if not d.is_dir():
             problems.append(
                 f'{f}: assets["{node}"] folder {info.assets[node]} does not exist (looked at {d}).'
                 " Fix: make the path relative to the layout file's folder."
             )
+            continue
+        try:  # the folder as a whole first: a loop or an unreadable file is named by its path
+            check_folder(d)
+        except LayoutError as e:
+            problems.extend(f'{f}: assets["{node}"]: {p}' for p in e.problems)
             continue
         if cat == "background":
             continue

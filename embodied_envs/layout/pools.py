@@ -25,9 +25,9 @@ def pool_members(layout: LayoutInfo, node: str) -> list[str] | None:
     path = os.path.join(layout.asset_base, layout.assets[node])
     try:
         version = FileVersion.of(path)
+        names = ASSET_FILES.get(("pool", version, node), lambda: _members(Path(path), node))
     except OSError:
-        return None  # a missing folder: load_layout names it
-    names = ASSET_FILES.get(("pool", version, node), lambda: _members(Path(path), node))
+        return None  # a missing or unreadable folder: load_layout names it
     return None if names is None else [f"{layout.assets[node].rstrip('/')}/{n}" for n in names]
 
 

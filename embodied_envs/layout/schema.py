@@ -12,6 +12,7 @@ import functools
 import json
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ import numpy as np
 
 from embodied_envs.layout.assets import AssetSpec, parse_urdf, urdf_path_for
 from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.folders import resolve_path
 from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE, LayoutPose
 from embodied_envs.layout.task import Task, resolve_task
 from embodied_envs.paths import atomic_output
@@ -33,6 +35,32 @@ WORLD_BOUND = 20.0  # m: every position coordinate lies within +-WORLD_BOUND of 
 MAX_NODE_NAME = 128  # characters: a node name names its URDF file
 REST_TOLERANCE = 0.05  # m: a file's object rests this close to its parent's top (in height)
 MAX_INTERPENETRATION = 0.01  # m: sibling footprints in a file may overlap at most this deep
+
+# Layout robot names -> ManiSkill robot uids. An unknown name is an error unless the user
+# passes robot_uids explicitly (EmbodiedGen silently fell back to panda).
+ROBOT_REGISTRY = {
+    "franka": "panda",
+    "franka_panda": "panda",
+    "panda": "panda",
+    "panda_wristcam": "panda_wristcam",
+}
+# Slots of envs that hold different layouts (scene/layout_scene.py): the context, the graded
+# object, and the others as OBJECT_SLOT + 1, 2, ...; the graded objects merged over envs.
+CONTEXT_SLOT, TARGET_SLOT, OBJECT_SLOT, TARGET_ACTOR = "context", "target", "object", "target_obj"
+# Names the env gives its own scene objects, slots and cameras, which a layout node must not
+# take (ManiSkill asserts unique names, minutes into building the scene): the floor and the goal
+# marker (envs/pick_embodiedgen.py), the slots and merged target above, the robots'
+# articulations, the sensor and render cameras; and OBJECT_SLOT followed by digits. Per-env
+# actors are named "env<i>/<node>", which no node can be: a node name holds no "/".
+RESERVED_NAMES = (
+    "ground", "goal_site", CONTEXT_SLOT, TARGET_SLOT, TARGET_ACTOR,
+    *sorted(set(ROBOT_REGISTRY.values())), "base_camera", "render_camera",
+)  # fmt: skip
+
+
+def is_reserved(node: str) -> bool:
+    """Whether the env registers ``node`` itself (``RESERVED_NAMES``, ``object1``, ...)."""
+    return node in RESERVED_NAMES or re.fullmatch(OBJECT_SLOT + "[0-9]+", node) is not None
 
 
 @dataclass
@@ -119,7 +147,9 @@ class LayoutInfo:
         return self.asset_root or (self.source.parent if self.source else Path.cwd())
 
     def asset_dir(self, node: str) -> Path:
-        return (self.asset_base / self.assets[node]).resolve()
+        """A node's asset folder, absolute (``LayoutError`` on a symbolic link loop)."""
+        where = f'{label(self.source)}: assets["{node}"]'
+        return resolve_path(self.asset_base / self.assets[node], where)
 
     def urdf_path(self, node: str) -> Path:
         return urdf_path_for(self.asset_dir(node), node)
@@ -279,6 +309,18 @@ def _check_node_name(f: str, node: str) -> str | None:
     return None
 
 
+def _check_reserved(f: str, node: str) -> str | None:
+    """A node may not take a name the env gives its own scene objects (``RESERVED_NAMES``)."""
+    if not is_reserved(node):
+        return None
+    return (
+        f'{f}: node name "{node}" is reserved: the env names its own scene objects, slots and'
+        f" cameras {list(RESERVED_NAMES)} and {OBJECT_SLOT}1, {OBJECT_SLOT}2, ... (ManiSkill"
+        f' would fail on the duplicate). Fix: rename the node (e.g. "{node}_1") everywhere in'
+        " the layout file; its URDF is found by the new name or by its folder's name."
+    )
+
+
 def _check_structure(data, f: str) -> list[str]:
     """Structural checks that need no files, in stages (a stage runs when the ones before it
     found nothing it depends on). Returns every problem found."""
@@ -360,6 +402,10 @@ def _check_nodes(data: dict, f: str) -> list[str]:
     robot = rel["robot"]
     for node in [*mapping, robot]:
         msg = _check_node_name(f, node)
+        if msg:
+            problems.append(msg)
+    for node in mapping:  # not the robot: its node names the robot itself
+        msg = _check_reserved(f, node)
         if msg:
             problems.append(msg)
     listed = rel["manipulated_objs"] + rel["distractor_objs"]

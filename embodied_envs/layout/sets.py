@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.folders import resolve_path
 from embodied_envs.layout.loader import load_layout
 from embodied_envs.layout.pools import asset_pools, with_assets, with_first_members
 from embodied_envs.layout.schema import LayoutInfo
@@ -86,7 +87,7 @@ def layout_files(spec: LayoutSpec) -> list[Path]:
                 )
         else:
             found = [path]  # a missing file is named by load_layout
-        files += [p.resolve() for p in found]
+        files += [resolve_path(p, "layout_file") for p in found]
     unique = list(dict.fromkeys(files))
     if len(unique) > MAX_SET_SIZE:
         raise LayoutError(

@@ -15,7 +15,14 @@ from mani_skill.utils.structs.pose import Pose
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.limits import GoalRegion, PlacementLimits
 from embodied_envs.layout.placement import derive_seed, floor_height, place
-from embodied_envs.layout.schema import LayoutInfo, label
+from embodied_envs.layout.schema import (
+    CONTEXT_SLOT,
+    OBJECT_SLOT,
+    TARGET_ACTOR,
+    TARGET_SLOT,
+    LayoutInfo,
+    label,
+)
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.scene.builder import build_asset_actor
 from embodied_envs.scene.episode import NOISE_DIMS, EpisodeSampler, EpisodeStart, Region
@@ -240,8 +247,8 @@ def scene_slots(layouts: list[LayoutInfo]) -> list[dict[str, str]]:
     slots = []
     for x in layouts:
         others = [n for n in x.object_nodes() if n not in (x.context, x.target_node)]
-        names = {x.context: "context", x.target_node: "target"}
-        slots.append(names | {n: f"object{j + 1}" for j, n in enumerate(others)})
+        names = {x.context: CONTEXT_SLOT, x.target_node: TARGET_SLOT}
+        slots.append(names | {n: f"{OBJECT_SLOT}{j + 1}" for j, n in enumerate(others)})
     return slots
 
 
@@ -283,7 +290,7 @@ def load_layout_scene(
         ]
         node_actors[name] = Actor.merge(per_env, name=name)
     target_actor = Actor.merge(
-        [env_actors[f"env{i}"][layouts[i].target_node] for i in range(num_envs)], name="target_obj"
+        [env_actors[f"env{i}"][layouts[i].target_node] for i in range(num_envs)], name=TARGET_ACTOR
     )
     groups: dict[tuple, list[int]] = {}  # envs holding the same layout and assets
     for i, layout in enumerate(layouts):

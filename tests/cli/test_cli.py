@@ -1,11 +1,12 @@
 import json
+import os
 import subprocess
 import sys
 
 import imageio_ffmpeg
 import numpy as np
 import pytest
-from conftest import DEFAULT_LAYOUT, LAYOUTS, ROOT, snapshot
+from conftest import DEFAULT_LAYOUT, LAYOUTS, ROOT, make_unreadable, snapshot
 from PIL import Image
 
 from embodied_envs.cli.main import main
@@ -28,6 +29,38 @@ def test_validate_ok_and_broken(tmp_path, scene_copy, capsys):
     out = capsys.readouterr().out
     assert 'position["can"] has 6 numbers, expected 7' in out
     assert 'assets["mug"] folder ../assets/nope does not exist' in out
+
+
+def _reserved_name(scene, monkeypatch):
+    layout = scene / "layouts" / "default.json"
+    layout.write_text(layout.read_text().replace('"mug"', '"goal_site"'))
+    return ['node name "goal_site" is reserved', 'Fix: rename the node (e.g. "goal_site_1")']
+
+
+def _link_loop(scene, monkeypatch):
+    os.symlink("loop", scene / "assets" / "mug" / "loop")
+    return ['assets["mug"]: ', f"{scene / 'assets' / 'mug' / 'loop'}: a symbolic link loop",
+            "Fix: point the link at a real file or folder, or remove it."]  # fmt: skip
+
+
+def _unreadable(scene, monkeypatch):
+    urdf = scene / "assets" / "mug" / "mug.urdf"
+    make_unreadable(urdf, monkeypatch)
+    return ['assets["mug"]: ', f"{urdf}: the file cannot be read", "Fix: make it readable"]
+
+
+@pytest.mark.parametrize("breaks", [_reserved_name, _link_loop, _unreadable])
+def test_validate_refuses_reserved_names_link_loops_and_unreadable_files_in_one_line(
+    scene_copy, capsys, monkeypatch, breaks
+):
+    words = breaks(scene_copy, monkeypatch)
+    layout = scene_copy / "layouts" / "default.json"
+    assert main(["layout", "validate", str(layout)]) == 1
+    out = capsys.readouterr().out
+    assert out.splitlines()[0] == f"FAIL {layout}" and len(out.splitlines()) == 2, out
+    assert out.splitlines()[1].startswith(f"  - {layout}: "), out
+    for word in words:
+        assert word in out, out
 
 
 def test_generate_writes_variants_with_rewritten_asset_paths(tmp_path, scene_copy):

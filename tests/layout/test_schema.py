@@ -5,6 +5,7 @@ import pytest
 from conftest import DATA, DEFAULT_LAYOUT, deep, snapshot, write_layout
 
 from embodied_envs.layout import LayoutError, LayoutInfo, load_layout
+from embodied_envs.layout.schema import RESERVED_NAMES, is_reserved
 
 
 def test_round_trip_is_lossless_with_unknown_keys(tmp_path, layout_dict):
@@ -158,3 +159,41 @@ def test_a_layout_file_over_its_size_bound_is_refused_unread(tmp_path, layout_di
     with pytest.raises(LayoutError) as e:
         load_layout(path)
     assert str(path) in str(e.value) and "over the 1,048,576 a layout may hold" in str(e.value)
+
+
+RESERVED = [*RESERVED_NAMES, "object1", "object12"]
+
+
+def _renamed(data: dict, old: str, new: str) -> dict:
+    """The layout with node ``old`` renamed ``new`` in every field."""
+    return json.loads(json.dumps(data).replace(f'"{old}"', f'"{new}"'))
+
+
+@pytest.mark.parametrize("name", RESERVED)
+def test_a_node_named_like_what_the_env_registers_is_refused(tmp_path, layout_dict, name):
+    """A node named "goal_site" (the env's goal marker) used to pass validation and fail inside
+    ManiSkill with an AssertionError; every name the env registers is refused in one line."""
+    path = write_layout(tmp_path, _renamed(_abs_assets(deep(layout_dict)), "mug", name))
+    with pytest.raises(LayoutError) as e:
+        load_layout(path)
+    assert len(e.value.problems) == 1, e.value.problems
+    msg = e.value.problems[0]
+    assert msg.startswith(f'{path}: node name "{name}" is reserved'), msg
+    assert f'Fix: rename the node (e.g. "{name}_1")' in msg and "\n" not in msg
+
+
+def test_the_reserved_names_are_what_the_env_and_the_scene_name_their_own():
+    assert {"ground", "goal_site", "target_obj", "context", "target"} <= set(RESERVED_NAMES)
+    assert {"panda", "panda_wristcam", "base_camera", "render_camera"} <= set(RESERVED_NAMES)
+    assert is_reserved("object3") and not is_reserved("object") and not is_reserved("objects1")
+
+
+@pytest.mark.parametrize("name", ["ground_1", "Goal_site", "object", "object_1", "targets"])
+def test_names_near_the_reserved_ones_are_accepted(layout_dict, name):
+    info = LayoutInfo.from_dict(_renamed(deep(layout_dict), "mug", name))
+    assert name in info.object_nodes()
+
+
+def test_a_robot_named_by_its_uid_is_not_a_reserved_clash(layout_dict):
+    info = LayoutInfo.from_dict(_renamed(deep(layout_dict), "franka", "panda"))
+    assert info.robot == "panda"
