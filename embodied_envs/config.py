@@ -26,8 +26,9 @@ from typing import Any
 
 import yaml
 
+from embodied_envs.layout.assets import MAX_IMAGE_SIDE
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.limits import MAX_IMAGE_SIDE, GoalRegion, PlacementLimits
+from embodied_envs.layout.placement.limits import GoalRegion, PlacementLimits
 
 # Layout robot names -> ManiSkill robot uids. An unknown name is an error unless the user
 # passes robot_uids explicitly (EmbodiedGen silently fell back to panda).

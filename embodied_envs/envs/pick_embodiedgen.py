@@ -28,9 +28,9 @@ from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.contacts import is_grasping
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
 from embodied_envs.layout import GoalRegion, LayoutError, LayoutInfo, PlacementLimits
-from embodied_envs.layout.limits import check_number
+from embodied_envs.layout.errors import check_number
 from embodied_envs.layout.placement import place
-from embodied_envs.layout.rules import array_module
+from embodied_envs.layout.placement.rules import array_module
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import default_layout
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID, MAX_EPISODE_STEPS
@@ -105,7 +105,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
     **Arguments:** ``__init__``'s keywords (each commented there), ManiSkill's own, and
     ``config`` (YAML/JSON files merged in order, :mod:`embodied_envs.config`).
     ``placement_limits`` and ``goal_region`` take the fields of
-    :mod:`embodied_envs.layout.limits`; ``camera_cfg`` those of ``config.CameraSpec``.
+    :mod:`embodied_envs.layout.placement.limits`; ``camera_cfg`` those of ``config.CameraSpec``.
     """
 
     SUPPORTED_ROBOTS = SUPPORTED_ROBOTS
