@@ -1,8 +1,10 @@
-"""Seeded, strict BFS placement of a layout's nodes.
+"""Seeded, strict BFS placement of a layout's nodes (per configuration).
 
 ``place(layout, seed)`` re-draws the poses of the background, the context (table), the robot and
-every object, breadth first from the table and larger footprints first. Every draw comes from
-one ``numpy.random.Generator`` made from the seed. Candidates are sampled in vectorised batches;
+every object, in the order of the support tree (``tree.support_tree``, breadth first from the
+table, larger footprints first; the per-episode sampler follows the same walk), then the
+objects standing on the floor. Every draw comes from one ``numpy.random.Generator`` made from
+the seed. Candidates are sampled in vectorised batches;
 when an object cannot be placed a :class:`PlacementError` names it and the constraint that
 rejected the most candidates.
 """
