@@ -31,8 +31,9 @@ from typing import Any
 
 import yaml
 
+from embodied_envs.layout.assets import MAX_IMAGE_SIDE
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.limits import MAX_IMAGE_SIDE, GoalRegion, PlacementLimits
+from embodied_envs.layout.placement.limits import GoalRegion, PlacementLimits
 from embodied_envs.layout.schema import ROBOT_REGISTRY
 
 SUPPORTED_ROBOTS = sorted(set(ROBOT_REGISTRY.values()))

@@ -12,7 +12,7 @@ import embodied_envs  # noqa: F401
 from embodied_envs.cli.main import main
 from embodied_envs.config import ConfigError, load_config, merge_config
 from embodied_envs.envs import PickEmbodiedGenEnv
-from embodied_envs.layout.limits import GoalRegion, PlacementLimits
+from embodied_envs.layout import GoalRegion, PlacementLimits
 
 KNOWN = ["robot_init_qpos_noise", "placement_limits", "goal_region", "camera_cfg", "obs_mode"]
 

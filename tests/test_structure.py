@@ -60,6 +60,15 @@ def test_the_command_line_starts_without_the_simulator():
     assert not heavy, heavy
 
 
+def test_placement_needs_torch_only_for_the_episode_sampler():
+    """The placement room holds the per-episode sampler (torch arrays on a GPU), imported from
+    its own module: ``place()`` and the layout commands run without torch."""
+    _, heavy = imported_by("layout.placement")
+    assert not heavy, heavy
+    _, heavy = imported_by("layout.placement.episode")
+    assert "torch" in heavy and "mani_skill" not in heavy, heavy
+
+
 def module_name(path: Path) -> str:
     rel = path.relative_to(ROOT).with_suffix("")
     parts = list(rel.parts)

@@ -23,8 +23,8 @@ from embodied_envs.layout.placement import (
     top_surface,
     world_vertices,
 )
+from embodied_envs.layout.placement.rules import rotate
 from embodied_envs.layout.pools import asset_pools
-from embodied_envs.layout.rules import rotate
 from embodied_envs.layout.sets import LayoutSet, layout_files
 from embodied_envs.paths import atomic_output
 from embodied_envs.splat import SplatFileError, check_ply

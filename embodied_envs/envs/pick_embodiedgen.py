@@ -28,7 +28,7 @@ from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
 from embodied_envs.envs.tasks import INFO_KEYS, KIND_IDS, RULES, pick
 from embodied_envs.envs.tasks.scene import TaskReader, TaskScene
 from embodied_envs.layout import GoalRegion, LayoutError, LayoutInfo, PlacementLimits
-from embodied_envs.layout.limits import check_number
+from embodied_envs.layout.errors import check_number
 from embodied_envs.layout.placement import place
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import default_layout
@@ -94,7 +94,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
     **Arguments:** ``__init__``'s keywords (each commented there), ManiSkill's own, and
     ``config`` (YAML/JSON files merged in order, :mod:`embodied_envs.config`).
     ``placement_limits`` and ``goal_region`` take the fields of
-    :mod:`embodied_envs.layout.limits`; ``camera_cfg`` those of ``config.CameraSpec``.
+    :mod:`embodied_envs.layout.placement.limits`; ``camera_cfg`` those of ``config.CameraSpec``.
     """
 
     SUPPORTED_ROBOTS = SUPPORTED_ROBOTS

@@ -24,7 +24,6 @@ from scipy.spatial import ConvexHull, QhullError
 
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.folders import resolve_path
-from embodied_envs.layout.limits import MAX_IMAGE_SIDE
 from embodied_envs.layout.pose import rpy_to_matrix, rpy_to_quat_wxyz
 
 STATIC_FRICTION_RANGE = (0.1, 0.7)  # mu1 is clipped to this range
@@ -36,6 +35,7 @@ DEFAULT_DENSITY = 1000.0  # kg/m^3, when the URDF gives no mass
 MASS_RANGE = (1e-3, 1e3)  # kg: a graspable or supporting object (a paper clip to a table)
 MIN_COLLISION_THICKNESS = 1e-3  # m: a collision mesh thinner than this along an axis is flat
 HEAVY_COLLISION_FACES = 50_000  # a collision mesh with more faces is warned about (cost)
+MAX_IMAGE_SIDE = 8192  # pixels a side of any image rendered or read: larger ones are refused
 
 
 def node_stem(node: str) -> str:

@@ -1,6 +1,9 @@
-"""Exception types of the layout package."""
+"""Exception types of the layout package, and the check that refuses a number out of range."""
 
 from __future__ import annotations
+
+import math
+import numbers
 
 
 class LayoutError(ValueError):
@@ -38,10 +41,13 @@ class PlacementError(RuntimeError):
         self.detail = detail
         self.source = source
         msg = f"{source}: " if source else ""
-        msg += (
-            f'cannot place "{node}": no pose out of {attempts} candidates satisfied the '
-            f'constraints; the one failed most often was "{constraint}"'
-        )
+        if attempts:
+            msg += (
+                f'cannot place "{node}": no pose out of {attempts} candidates satisfied the '
+                f'constraints; the one failed most often was "{constraint}"'
+            )
+        else:  # a constraint no candidate can meet: none was drawn
+            msg += f'cannot place "{node}": no candidate can meet "{constraint}"'
         if detail:
             msg += f" ({detail})"
         msg += ". Fix: use a larger parent surface, fewer or smaller objects, or relax the limit."
@@ -50,3 +56,33 @@ class PlacementError(RuntimeError):
     def with_source(self, source: str) -> PlacementError:
         """The same error, naming the layout file it concerns."""
         return PlacementError(self.node, self.constraint, self.attempts, self.detail, source)
+
+
+def check_number(
+    where: str,
+    value,
+    lo: float,
+    hi: float,
+    *,
+    integer: bool = False,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> None:
+    """Refuse a value that is not a (finite) number in its range, naming it and the range.
+
+    Raises:
+        ValueError: ``where=value`` is not a number, not an integer when ``integer``, or
+            outside ``[lo, hi]`` (``(`` / ``)`` when open).
+    """
+    kind = "an integer" if integer else "a number"
+    ok_type = isinstance(value, numbers.Integral if integer else numbers.Real) and not isinstance(
+        value, bool
+    )
+    span = f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
+    if not ok_type:
+        raise ValueError(f"{where}={value!r} must be {kind} in {span}")
+    v = float(value)
+    if not (
+        math.isfinite(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+    ):
+        raise ValueError(f"{where}={value!r} is outside {span}. Fix: give {kind} in {span}")

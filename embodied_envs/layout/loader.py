@@ -15,7 +15,7 @@ from embodied_envs.layout.assets import (
 )
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.folders import check_folder
-from embodied_envs.layout.placement import check_file_poses
+from embodied_envs.layout.placement.file_poses import check_file_poses
 from embodied_envs.layout.pools import asset_pools, with_assets
 from embodied_envs.layout.schema import LayoutInfo, label
 

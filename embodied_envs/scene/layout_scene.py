@@ -13,8 +13,10 @@ from mani_skill.utils.structs import Actor
 from mani_skill.utils.structs.pose import Pose
 
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.limits import GoalRegion, PlacementLimits
 from embodied_envs.layout.placement import derive_seed, floor_height, place
+from embodied_envs.layout.placement.batch import Region
+from embodied_envs.layout.placement.episode import NOISE_DIMS, EpisodeSampler, EpisodeStart
+from embodied_envs.layout.placement.limits import GoalRegion, PlacementLimits
 from embodied_envs.layout.schema import (
     CONTEXT_SLOT,
     OBJECT_SLOT,
@@ -25,7 +27,6 @@ from embodied_envs.layout.schema import (
 )
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.scene.builder import build_asset_actor
-from embodied_envs.scene.episode import NOISE_DIMS, EpisodeSampler, EpisodeStart, Region
 
 if TYPE_CHECKING:
     from mani_skill.envs.scene import ManiSkillScene

@@ -391,7 +391,7 @@ def test_heterogeneous_episode_draws_are_batched_per_layout(scenes, backend):
     from mani_skill.envs.utils.randomization.batched_rng import BatchedRNG
 
     from embodied_envs.layout import GoalRegion, PlacementLimits
-    from embodied_envs.scene.episode import EpisodeSampler
+    from embodied_envs.layout.placement.episode import EpisodeSampler
     from embodied_envs.scene.layout_scene import SceneEpisodes, scene_slots
 
     four = LayoutSet.load(scenes["four"])

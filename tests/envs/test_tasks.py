@@ -108,7 +108,7 @@ def test_a_mover_the_tree_puts_in_the_receptacle_is_refused():
 def task_state(**over):
     """One env, one mover: a 0.2 m square receptacle at the origin, top 0.1 m, rim 0.05 m."""
     square = np.array([[-0.1, -0.1], [0.1, -0.1], [0.1, 0.1], [-0.1, 0.1]])
-    from embodied_envs.layout.rules import half_planes
+    from embodied_envs.layout.placement.rules import half_planes
 
     normals, offsets = half_planes(square)
     base = dict(

@@ -14,7 +14,7 @@ from embodied_envs.envs.contacts import is_grasping
 from embodied_envs.envs.tasks import KIND_IDS, move
 from embodied_envs.envs.tasks.state import TaskState
 from embodied_envs.layout.assets import asset_geometry
-from embodied_envs.layout.rules import half_planes, pad_polygons
+from embodied_envs.layout.placement.rules import half_planes, pad_polygons
 from embodied_envs.layout.task import Task
 
 # a move's direction in the robot base's frame (forward: away from the robot)

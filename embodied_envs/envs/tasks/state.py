@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from embodied_envs.layout.rules import array_module
+from embodied_envs.layout.placement.rules import array_module
 
 # thresholds every kind shares (docs/tasks.md says why these)
 STATIC_ARM = 0.2  # rad/s: every arm joint slower is a static robot (ManiSkill's Panda.is_static)

@@ -9,41 +9,9 @@ same reach, kept :attr:`GoalRegion.inset` away from its edges. Both are set thro
 
 from __future__ import annotations
 
-import math
-import numbers
 from dataclasses import dataclass
 
-MAX_IMAGE_SIDE = 8192  # pixels a side of any image rendered or read: larger ones are refused
-
-
-def check_number(
-    where: str,
-    value,
-    lo: float,
-    hi: float,
-    *,
-    integer: bool = False,
-    lo_open: bool = False,
-    hi_open: bool = False,
-) -> None:
-    """Refuse a value that is not a (finite) number in its range, naming it and the range.
-
-    Raises:
-        ValueError: ``where=value`` is not a number, not an integer when ``integer``, or
-            outside ``[lo, hi]`` (``(`` / ``)`` when open).
-    """
-    kind = "an integer" if integer else "a number"
-    ok_type = isinstance(value, numbers.Integral if integer else numbers.Real) and not isinstance(
-        value, bool
-    )
-    span = f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
-    if not ok_type:
-        raise ValueError(f"{where}={value!r} must be {kind} in {span}")
-    v = float(value)
-    if not (
-        math.isfinite(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
-    ):
-        raise ValueError(f"{where}={value!r} is outside {span}. Fix: give {kind} in {span}")
+from embodied_envs.layout.errors import check_number
 
 
 @dataclass(frozen=True)

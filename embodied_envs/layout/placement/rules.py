@@ -6,11 +6,11 @@
 - **within reach**: a manipulated object's centre within the robot's distance band and heading
   cone (goals use the same rule with the band shrunk by ``GoalRegion.inset``).
 
-Both placements use these functions: per configuration (``layout.placement.place``, numpy,
-float64) and per episode (``scene.episode.EpisodeSampler``, numpy on the CPU, torch on a GPU).
+Both placements use these functions: per configuration (``configuration.place``, numpy,
+float64) and per episode (``episode.EpisodeSampler``, numpy on the CPU, torch on a GPU).
 Every function takes the arrays of either library and computes with that library's operations
 (:func:`array_module`), so the rule is the same code whichever array it runs on. The limits
-themselves live in ``layout/limits.py``.
+themselves live in ``limits.py``.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""Per-episode randomisation (scene/episode.py), through the batched sampler directly: many
-envs at once on CPU, as the GPU simulation would call it, without a simulator."""
+"""Per-episode randomisation (layout/placement/episode.py), through the batched sampler
+directly: many envs at once on CPU, as the GPU simulation would call it, without a simulator."""
 
 import math
 import warnings
@@ -12,10 +12,10 @@ from placement_checks import check_constraints
 from shapely.geometry import MultiPoint, Point, Polygon
 from shapely.ops import unary_union
 
-from embodied_envs.layout import LayoutPose, load_layout, rules
-from embodied_envs.layout.limits import GoalRegion, PlacementLimits
-from embodied_envs.layout.placement import place
-from embodied_envs.scene.episode import EpisodeSampler, uniforms
+from embodied_envs.layout import GoalRegion, LayoutPose, PlacementLimits, load_layout
+from embodied_envs.layout.placement import place, rules
+from embodied_envs.layout.placement.batch import uniforms
+from embodied_envs.layout.placement.episode import EpisodeSampler
 
 OFFSET = 0.002  # objs_z_offset of the sampler under test
 # the sampler's arrays: numpy (CPU envs) and torch (GPU envs; here on the CPU)
@@ -58,7 +58,7 @@ def test_uniforms_are_splitmix64_of_key_stream_and_index():
 
 
 def test_the_rules_give_the_same_answers_in_numpy_and_torch():
-    """``layout/rules.py`` runs on either library: the per-configuration placer's numpy
+    """``layout/placement/rules.py`` runs on either library: the per-configuration placer's numpy
     float64 and the GPU sampler's torch float32 agree (up to float32 at the boundary)."""
     rng = np.random.default_rng(0)
     square = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 0.05
@@ -160,7 +160,7 @@ def test_the_first_fit_does_not_depend_on_the_chunks(monkeypatch, chunk, backend
     """Candidates are tested in chunks until every env has its first fit: any chunk size
     (one candidate at a time, a few, all 128 at once) gives the same starts, fallbacks
     included (3 candidates per object leave some draws without a fit)."""
-    from embodied_envs.scene import episode
+    from embodied_envs.layout.placement import episode
 
     cases = [(LAYOUTS[0], 4, PlacementLimits()), (LAYOUTS[1], 3, PlacementLimits())]
     cases.append((LAYOUTS[0], 4, PlacementLimits(episode_candidates=3)))  # falls back at times
@@ -325,7 +325,7 @@ def test_many_objects_on_the_table_are_warned_about(scene_copy):
     import json
     import shutil
 
-    from embodied_envs.scene.episode import MANY_OBJECTS
+    from embodied_envs.layout.placement.episode import MANY_OBJECTS
 
     data = json.loads((scene_copy / "layouts" / "default.json").read_text())
     for k in range(MANY_OBJECTS - 3):

@@ -1,10 +1,11 @@
 """Per-episode randomisation on each env's fixed table: object starts, goals, joint noise.
 
 A configuration (construction or ``reconfigure``) fixes each env's table, robot spot and
-background (``layout.placement.place``). Every episode then re-draws, for the reset envs only:
+background (``configuration.place``). Every episode then re-draws, for the reset envs only:
 
-- the pose of every object standing on the table (or on another object) by the placement rules
-  of ``layout/rules.py``, the same functions ``place()`` runs: the whole footprint inside its
+- the pose of every object standing on the table (or on another object), in the order of the
+  support tree ``place()`` walks (``tree.support_tree``), by the placement rules of
+  ``rules.py``, the same functions ``place()`` runs: the whole footprint inside its
   parent's shrunk top, clear of placed footprints (robot base square included), manipulated
   objects within reach and heading of the robot; its lowest point resting on the parent's top;
 - the goal, uniformly over the reachable region above the table top (:class:`GoalRegion`).
@@ -13,15 +14,15 @@ Everything is an array over envs, so one code path serves one CPU env and thousa
 envs: each object gets one batch of ``episode_candidates`` candidates per env and takes the
 first that meets every rule (no loop over envs or tries). The arrays are numpy's on a CPU env
 (a few envs; each torch operation's fixed cost would dominate) and torch's on a GPU; the rules
-and this module's code run unchanged on either (``rules.array_module``). An env where some
-object found no candidate keeps its configuration's arrangement for that episode; this is
-counted in ``EpisodeSampler.fallbacks`` and warned about once.
+and this module's code run unchanged on either (``batch.Arrays``, ``rules.array_module``). An
+env where some object found no candidate keeps its configuration's arrangement for that
+episode; this is counted in ``EpisodeSampler.fallbacks`` and warned about once.
 
 Random numbers are counter-based: each episode of an env has one key, drawn from that env's
-ManiSkill episode RNG, and every uniform is a hash of (key, stream, index). The same seed gives
-the same start, and a partial reset draws nothing for the other envs. With few envs
-:meth:`EpisodeSampler.draw` prepares a block of each env's next episode starts at once (keys
-drawn in blocks from its RNG); a block is dropped when ManiSkill reseeds that env's RNG
+ManiSkill episode RNG, and every uniform is a hash of (key, stream, index) (``batch.uniforms``).
+The same seed gives the same start, and a partial reset draws nothing for the other envs. With
+few envs :meth:`EpisodeSampler.draw` prepares a block of each env's next episode starts at once
+(keys drawn in blocks from its RNG); a block is dropped when ManiSkill reseeds that env's RNG
 (:meth:`invalidate`), and the draw after a reseed makes only the start the seeded reset uses:
 seeded resets (evaluation, ``collect``, replays) pay for one start, not a block.
 """
@@ -30,205 +31,29 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.limits import GoalRegion, PlacementLimits
-from embodied_envs.layout.placement import (
-    local_top,
-    node_footprint,
-    node_geometry,
-    square,
-    support_order,
+from embodied_envs.layout.placement.batch import (
+    Arrays,
+    Region,
+    Shapes,
+    normals,
+    uniforms,
+    yaw_raw_poses,
 )
-from embodied_envs.layout.rules import (
-    array_module,
-    candidates_fit,
-    first_true,
-    half_planes,
-    inside,
-    inward_normals,
-    pad_polygons,
-    rotate,
-    within_reach,
-)
+from embodied_envs.layout.placement.geometry import local_top, square
+from embodied_envs.layout.placement.limits import GoalRegion, PlacementLimits
+from embodied_envs.layout.placement.rules import candidates_fit, first_true, rotate, within_reach
+from embodied_envs.layout.placement.tree import support_tree
 from embodied_envs.layout.schema import LayoutInfo
 
-# --- counter-based random numbers ----------------------------------------------------------
+# --- random number streams of an episode key (``batch.uniforms``) --------------------------
 GOAL_STREAM = 1 << 20  # object j uses stream j; these are far from any object index
 NOISE_STREAM = GOAL_STREAM + 1
-_GOLDEN = 0x9E3779B97F4A7C15  # splitmix64 constants
-_MIX1 = 0xBF58476D1CE4E5B9
-_MIX2 = 0x94D049BB133111EB
-
-
-def _int64(x: int) -> int:
-    """A 64-bit constant as the signed value int64 arithmetic wraps around."""
-    return x - (1 << 64) if x >= 1 << 63 else x
-
-
-def _shift_right(z, k: int):
-    """Logical right shift of int64 (numpy's and torch's ``>>`` are arithmetic)."""
-    return (z >> k) & ((1 << (64 - k)) - 1)
-
-
-def _as(x, dtype: str):
-    """``x`` as ``dtype`` (a name), in its own library and on its own device."""
-    return x.astype(dtype) if isinstance(x, np.ndarray) else x.to(getattr(torch, dtype))
-
-
-def uniforms(keys, stream: int, n: int):
-    """``(b, n)`` float32 uniforms in [0, 1), a splitmix64 hash of (key, stream, index).
-
-    Args:
-        keys: ``(b,)`` integer key per env (numpy or torch; the result is the same library's).
-        stream: which sequence of the key (objects, goal, noise use different streams).
-        n: numbers per env.
-    """
-    if isinstance(keys, np.ndarray):
-        index = np.arange(n, dtype=np.int64)
-    else:
-        index = torch.arange(n, device=keys.device, dtype=torch.int64)
-    z = _as(keys, "int64")[:, None] * _int64(_GOLDEN) + (index + (stream << 32))
-    z = (z ^ _shift_right(z, 30)) * _int64(_MIX1)
-    z = (z ^ _shift_right(z, 27)) * _int64(_MIX2)
-    z = z ^ _shift_right(z, 31)
-    return _as(_shift_right(z, 40), "float32") * 2.0**-24  # 24 bits: exact in float32
-
-
-def normals(keys, stream: int, n: int):
-    """``(b, n)`` standard normal numbers (Box-Muller over :func:`uniforms`)."""
-    xp = array_module(keys)
-    u = uniforms(keys, stream, 2 * n).reshape(-1, 2, n)
-    return xp.sqrt(-2.0 * xp.log1p(-u[:, 0])) * xp.cos(2 * math.pi * u[:, 1])
-
-
-# --- arrays of a sampler: numpy on the CPU, torch elsewhere ----------------------------------
-class Arrays:
-    """Where a sampler's arrays live: ``numpy`` (float32) for a CPU env, ``torch`` on the
-    env's device otherwise; ``backend`` forces one (tests run the torch path on the CPU)."""
-
-    def __init__(self, device: torch.device | str, backend: str | None = None):
-        self.device = torch.device(device)
-        if backend is None:
-            backend = "numpy" if self.device.type == "cpu" else "torch"
-        if backend not in ("numpy", "torch"):
-            raise ValueError(f"backend={backend!r} must be 'numpy' or 'torch'")
-        self.xp = np if backend == "numpy" else torch
-
-    def __call__(self, x, dtype: str = "float32"):
-        """``x`` (numbers, a numpy array or a tensor) as this backend's array of ``dtype``."""
-        if self.xp is np:
-            if isinstance(x, torch.Tensor):
-                x = x.detach().cpu().numpy()
-            return np.asarray(x, dtype=dtype)
-        if not isinstance(x, torch.Tensor):
-            x = np.array(x)  # a copy: cached asset arrays are read-only
-        return torch.as_tensor(x, dtype=getattr(torch, dtype), device=self.device)
-
-    def zeros(self, shape, dtype: str = "float32"):
-        if self.xp is np:
-            return np.zeros(shape, dtype=dtype)
-        return torch.zeros(shape, dtype=getattr(torch, dtype), device=self.device)
-
-    def index(self, idx):
-        """Env indices (a tensor, array or list) as this backend's int64 array."""
-        return self(idx, "int64")
-
-    @staticmethod
-    def numpy(x) -> np.ndarray:
-        """``x`` (either backend's array) as a numpy array."""
-        return x if isinstance(x, np.ndarray) else x.detach().cpu().numpy()
-
-    def tensor(self, x) -> torch.Tensor:
-        """A result for the env: a tensor on its device (numpy arrays are shared, not copied,
-        on the CPU)."""
-        return torch.as_tensor(x, device=self.device)
-
-
-@dataclass(frozen=True)
-class Shapes:
-    """Convex polygons in their own frames, as the placement rules take them.
-
-    Padded to a common vertex count ``M`` (``rules.pad_polygons``).
-
-    Attributes:
-        vertices: ``(S, M, 2)`` counter-clockwise vertices.
-        normals: ``(S, M, 2)`` inward unit edge normals.
-        radii: ``(S,)`` bounding radius about the frame's origin.
-    """
-
-    vertices: object
-    normals: object
-    radii: object
-
-    @classmethod
-    def of(cls, polygons: list[np.ndarray], arrays: Arrays) -> Shapes:
-        verts = pad_polygons(polygons)
-        radii = np.linalg.norm(verts, axis=-1).max(-1)
-        return cls(arrays(verts), arrays(inward_normals(verts)), arrays(radii))
-
-
-def yaw_raw_poses(xy, z, yaw):
-    """ManiSkill raw poses ``(b, 7)``, ``[x, y, z, qw, qx, qy, qz]``, of yaw-only rotations."""
-    xp = array_module(yaw)
-    zeros = xp.zeros_like(yaw)
-    return xp.stack([xy[:, 0], xy[:, 1], z, xp.cos(yaw / 2), zeros, zeros, xp.sin(yaw / 2)], -1)
-
-
-@dataclass(frozen=True)
-class Region:
-    """Convex regions per env: ``inside(x) iff normals @ x >= offsets``, with their boxes
-    (numpy arrays or tensors)."""
-
-    normals: object  # (b, e, 2)
-    offsets: object  # (b, e)
-    lo: object  # (b, 2)
-    hi: object  # (b, 2)
-    z: object  # (b,) height of the surface
-
-    @classmethod
-    def of(cls, poly, z) -> Region:
-        xp = array_module(poly)
-        n, c = half_planes(poly)
-        return cls(n, c, xp.amin(poly, -2), xp.amax(poly, -2), z)
-
-    def map(self, fn) -> Region:
-        """The region with ``fn`` applied to every array (e.g. to make tensors of them)."""
-        return Region(*(fn(getattr(self, f.name)) for f in fields(self)))
-
-    def rows(self, idx) -> Region:
-        return self.map(lambda x: x[idx])
-
-    def candidates(self, u):
-        """Candidate positions ``(b, k, 2)`` uniform over each env's box and yaws ``(b, k)``,
-        from uniforms ``u (b, 3, k)``."""
-        lo, hi = self.lo[:, None], self.hi[:, None]
-        return lo + u[:, :2].swapaxes(-1, -2) * (hi - lo), (2 * u[:, 2] - 1) * math.pi
-
-    def contains(self, points):
-        """``points (b, ..., 2)`` -> ``(b, ...)`` bool (``rules.inside`` of each point)."""
-        b = self.offsets.shape[0]
-        flat = points.reshape(b, -1, 1, 2)  # each point a one-vertex polygon
-        ok = inside(flat, self.normals[:, None], self.offsets[:, None])
-        return ok.reshape(points.shape[:-1])
-
-
-@dataclass(frozen=True)
-class _Item:
-    """One object to place each episode (its footprint is shape ``1 + its index``)."""
-
-    node: str
-    parent: str
-    min_z: float  # lowest collision point in its own frame
-    manipulated: bool
-    avoid: object  # int array: the placed footprints it keeps clear of (shape indices: robot
-    # base 0, then the items before it), not its ancestors, on which it stands
-    top: object | None  # (e, 2) shrunk top hull in its own frame, if it supports objects
-    top_z: float  # height of its top in its own frame
 
 
 @dataclass(frozen=True)
@@ -269,6 +94,7 @@ class EpisodeSampler:
 
     Raises:
         LayoutError: when no point of a table top is within the goal region of its robot.
+        PlacementError: a top that something stands on is too small (``tree.support_tree``).
     """
 
     def __init__(
@@ -292,38 +118,12 @@ class EpisodeSampler:
         self._rng_rows = self.env_ids.cpu().numpy()  # into ManiSkill's (numpy) episode RNGs
         ctx = self.context = base.context
 
-        order = support_order(base)
-        parents = {parent for _, parent in order}
-        feet = [node_footprint(base, node) for node, _ in order]
+        tree = support_tree(base, limits)  # the objects in placement order (as ``place``)
+        self.items = tree.items  # item j's footprint is shape 1 + j (0: the robot base)
         robot_square = square(np.zeros(2), limits.robot_footprint, 0.0)  # in its own frame
-        self.shapes = Shapes.of([robot_square, *feet], a)  # robot base, then items
-        obstacles = ["robot"] + [node for node, _ in order]
-        ancestors = {ctx: {ctx}}
-        self.items: list[_Item] = []
-        for j, (node, parent) in enumerate(order):
-            ancestors[node] = ancestors[parent] | {node}
-            top = None
-            hull, top_z, shrunk = local_top(base, node, limits.top_band, limits.hull_margin)
-            if node in parents:
-                if shrunk is None:
-                    raise LayoutError(
-                        f"{base.source or '<layout>'}: the top of {node!r} is smaller than twice"
-                        f" the hull margin ({limits.hull_margin} m), so nothing can stand on it."
-                        " Fix: move its children to the table."
-                    )
-                top = a(shrunk)
-            avoid = [i for i, o in enumerate(obstacles[: j + 1]) if o not in ancestors[parent]]
-            self.items.append(
-                _Item(
-                    node=node,
-                    parent=parent,
-                    min_z=node_geometry(base, node).min_z,
-                    manipulated=node in base.reach_nodes,
-                    avoid=a.index(avoid),
-                    top=top,
-                    top_z=top_z,
-                )
-            )
+        self.shapes = Shapes.of([robot_square, *(it.footprint for it in self.items)], a)
+        self.avoid = [a.index(it.avoid) for it in self.items]  # shapes each keeps clear of
+        self.tops = [a(it.top.shrunk) if it.supports else None for it in self.items]
         n = len(self.items)
         if n > MANY_OBJECTS:
             warnings.warn(
@@ -341,12 +141,7 @@ class EpisodeSampler:
         # per env: the table top (shrunk by the placement margin) and the robot
         ctx_poses = [lay.pose(ctx) for lay in layouts]
         robots = [lay.pose(lay.robot) for lay in layouts]
-        ctx_hull, ctx_top, ctx_shrunk = local_top(base, ctx, limits.top_band, limits.hull_margin)
-        if ctx_shrunk is None:
-            raise LayoutError(
-                f"{base.source or '<layout>'}: the top of {ctx!r} is smaller than twice the hull"
-                f" margin ({limits.hull_margin} m). Fix: use a larger table."
-            )
+        ctx_hull, ctx_top, ctx_shrunk = tree.context_top
         self.top_z = a([ctx_top + p.p[2] for p in ctx_poses])
         self.table = Region.of(self._posed(ctx_shrunk, ctx_poses), self.top_z)
         self.top = Region.of(self._posed(ctx_hull, ctx_poses), self.top_z)  # whole top
@@ -536,8 +331,9 @@ class EpisodeSampler:
                 polys[:, shape] = rotate(shapes.vertices[shape], yaw) + xy[:, None]
                 poly_normals[:, shape] = rotate(shapes.normals[shape], yaw)
                 origins[:, shape] = xy
-            if it.top is not None:
-                regions[it.node] = Region.of(rotate(it.top, yaw) + xy[:, None], z + it.top_z)
+            if self.tops[j] is not None:
+                top = rotate(self.tops[j], yaw) + xy[:, None]
+                regions[it.node] = Region.of(top, z + it.top.z)
         failed = int((~ok_env).sum())
         if failed:
             if self.fallbacks == 0:
@@ -567,8 +363,9 @@ class EpisodeSampler:
         lim, shapes, shape, xp = self.limits, self.shapes, j + 1, self.arrays.xp
         b, k = u.shape[0], u.shape[-1]
         polys, poly_normals, origins = placed
-        keep_clear = (polys[:, it.avoid], poly_normals[:, it.avoid], origins[:, it.avoid],
-                      shapes.radii[it.avoid])  # fmt: skip
+        avoid = self.avoid[j]
+        keep_clear = (polys[:, avoid], poly_normals[:, avoid], origins[:, avoid],
+                      shapes.radii[avoid])  # fmt: skip
         reach = None
         if it.manipulated:
             band = (lim.reach_min, lim.reach_max)
