@@ -2,7 +2,8 @@
 
 Policies (:func:`load_policy`): ``expert`` (the scripted motion-planned solver, on
 ``pd_joint_pos``), ``random`` (uniform over the action space, seeded by the episode), ``zero``,
-or ``module:factory`` / ``path/to/file.py:factory``: ``factory(env)`` (or ``factory()``)
+a TorchScript file ``path/to/policy.pt`` (a module from observations to actions, as
+``tools/train_bc.py`` saves), or ``module:factory`` / ``path/to/file.py:factory``: ``factory(env)`` (or ``factory()``)
 returns a callable from observations to actions or a ``torch.nn.Module`` (its ``reset(seed)``,
 if any, is called at each episode start). A policy receives
 the env's observation as ManiSkill returns it (torch tensors with a leading batch of 1, as from
@@ -95,6 +96,8 @@ def load_policy(spec: str, env) -> Policy | None:
             state["rng"] = np.random.default_rng(seed)
 
         return Policy(lambda obs: state["rng"].uniform(low, high).astype(np.float32), reseed)
+    if spec.endswith((".pt", ".ts")) and ":" not in spec:
+        return _torchscript_policy(spec)
     factory = _import_target(spec)
     if not callable(factory):
         raise EvalError(f"--policy {spec}: {type(factory).__name__} is not callable")
@@ -124,6 +127,34 @@ def load_policy(spec: str, env) -> Policy | None:
             "from observations to actions or a torch.nn.Module"
         )
     return Policy(made, reset)
+
+
+def _torchscript_policy(spec: str) -> Policy:
+    """A TorchScript module saved at ``spec`` (``torch.jit.save``), run without gradients."""
+    import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
+
+    path = Path(spec)
+    if not path.is_file():
+        raise EvalError(f"--policy {spec}: no such file. Fix: give the path of a saved policy")
+    try:
+        module = torch.jit.load(str(path), map_location="cpu").eval()
+    except Exception as e:  # whatever torch says about a file that is not TorchScript
+        text = " ".join(str(e).split())[:200]
+        raise EvalError(
+            f"--policy {spec}: not a TorchScript module ({type(e).__name__}: {text}). Fix: save "
+            "it with torch.jit.save(torch.jit.script(model), path), or use module:factory"
+        ) from None
+
+    def run(obs):
+        if not isinstance(obs, torch.Tensor):
+            raise TypeError(
+                f"a TorchScript policy takes a tensor observation, got {type(obs).__name__}: "
+                "evaluate it with --obs-mode state"
+            )
+        with torch.no_grad():
+            return module(obs.float())
+
+    return Policy(run)
 
 
 def at_step(step: int, seed: int, layout: str) -> str:
