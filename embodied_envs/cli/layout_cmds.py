@@ -14,6 +14,7 @@ from tqdm import tqdm
 from embodied_envs.cli.args import image_side, positive_int, seed_int, writable_dir
 from embodied_envs.config import resolve_robot
 from embodied_envs.layout import LayoutError, LayoutInfo, PlacementError, load_layout
+from embodied_envs.layout.collision import DECOMPOSED, obj_objects
 from embodied_envs.layout.placement import (
     PlacementLimits,
     node_footprint,
@@ -147,8 +148,26 @@ def cmd_validate(args) -> int:
             for p in problems:
                 print(f"  - {p}")
         else:  # the task as the env grades it (layout/task.py)
-            print(f"ok   {path}  task: {load_layout(path).task.describe()}")
+            layout = load_layout(path)
+            print(f"ok   {path}  task: {layout.task.describe()}")
+            for line in decomposed_meshes(layout):
+                print(f"     {line}")
     return 1 if bad else 0
+
+
+def decomposed_meshes(layout: LayoutInfo) -> list[str]:
+    """A line per collision mesh of ``layout`` decomposed on load (layout/collision.py)."""
+    built = {out: (orig, reason) for orig, (reason, out) in DECOMPOSED.items()}
+    lines = []
+    for node in layout.assets:
+        if node == layout.background:
+            continue
+        path = layout.asset_spec(node).collision.path
+        if path in built:
+            orig, reason = built[path]
+            parts = len(obj_objects(path))
+            lines.append(f"{node}: {orig}: {reason}; decomposed into {parts} convex parts ({path})")
+    return lines
 
 
 def draw_top_down(layout: LayoutInfo, size: int = 640, limits: PlacementLimits | None = None):

@@ -22,6 +22,7 @@ import numpy as np
 from PIL import Image
 from scipy.spatial import ConvexHull, QhullError
 
+from embodied_envs.layout.collision import convex_collision, obj_objects
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.folders import resolve_path
 from embodied_envs.layout.pose import rpy_to_matrix, rpy_to_quat_wxyz
@@ -192,6 +193,8 @@ def parse_urdf(urdf: Path | str) -> AssetSpec:
     link = links[0]
     visual = _mesh(link, "visual", urdf)
     collision = _mesh(link, "collision", urdf)
+    # a one-object concave mesh the simulator would fill in: its convex parts (layout/collision.py)
+    collision = dataclasses.replace(collision, path=convex_collision(collision.path))
     mu1 = _float_text(link.find("collision/gazebo/mu1"), urdf, "collision/gazebo/mu1")
     mu2 = _float_text(link.find("collision/gazebo/mu2"), urdf, "collision/gazebo/mu2")
     mass = _float_text(link.find("inertial/mass"), urdf, "inertial/mass")
@@ -272,29 +275,10 @@ def _load_parts(mesh: MeshRef) -> list:
     loaded = _load_parts_checked(mesh)
     if mesh.path.suffix.lower() != ".obj":
         return [loaded]
-    objects = _obj_objects(mesh.path)
+    objects = obj_objects(mesh.path)
     if len(objects) <= 1:
         return [loaded]
     return [trimesh.Trimesh(vertices=v, process=False) for v in objects if len(v) >= 4]
-
-
-def _obj_objects(path: Path) -> list[np.ndarray]:
-    """The vertices each object (``o`` or ``g``) of an OBJ file uses in its faces."""
-    vertices: list[list[bytes]] = []
-    groups: list[list[int]] = [[]]
-    with open(path, "rb") as fh:
-        for line in fh:
-            if line.startswith(b"v "):
-                vertices.append(line.split()[1:4])
-            elif line.startswith((b"o ", b"g ")):
-                if groups[-1]:
-                    groups.append([])
-            elif line.startswith(b"f "):
-                for token in line.split()[1:]:
-                    i = int(token.split(b"/")[0])
-                    groups[-1].append(i - 1 if i > 0 else len(vertices) + i)
-    table = np.asarray(vertices, dtype=np.float64)
-    return [table[np.unique(g)] for g in groups if g]
 
 
 def _load_parts_checked(mesh: MeshRef, collision: bool = True):
