@@ -40,6 +40,12 @@ KINDS = ("pick", "place", "move")
 RELATIONS = ("in", "on")
 DIRECTIONS = ("left", "right", "forward", "backward")
 TASK_FIELD = "task"  # relation[TASK_FIELD]: the structured task
+# a move's direction in the robot base's frame (forward: away from the robot), and how far the
+# expert and the reward take a mover along it (success needs envs/tasks/move.py's MIN_SHIFT);
+# placement keeps that destination on the table and within reach
+DIRECTION_XY = {"forward": (1.0, 0.0), "backward": (-1.0, 0.0), "left": (0.0, 1.0),
+                "right": (0.0, -1.0)}  # fmt: skip
+MOVE_SHIFT = 0.15  # m
 
 PICK_VERBS = ("pick", "lift", "grab", "grasp", "raise", "take")
 PLACE_VERBS = ("put", "place", "set", "drop", "move", "transfer", "stack", "lay")
@@ -81,6 +87,14 @@ class Task:
             "kind": self.kind, "objects": list(self.objects), "receptacle": self.receptacle,
             "relation": self.relation, "direction": self.direction,
         }  # fmt: skip
+
+    def shift(self) -> tuple[float, float] | None:
+        """A move's destination relative to each mover's start, in the robot base's frame
+        (``MOVE_SHIFT`` along the direction); None for other kinds."""
+        if self.kind != "move":
+            return None
+        x, y = DIRECTION_XY[self.direction]
+        return x * MOVE_SHIFT, y * MOVE_SHIFT
 
     def describe(self) -> str:
         """One line, as ``layout validate`` prints it."""

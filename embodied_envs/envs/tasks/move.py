@@ -4,7 +4,8 @@
 **Success**, for every mover: its displacement in the table's plane at least ``MIN_SHIFT``
 along the direction and within ``MAX_ANGLE_DEG`` of it; on the table (its lowest point within
 ``place.TOUCH`` of the top); released and at rest (``state``). **Reward**:
-``state.staged_reward`` towards ``SHIFT`` along the direction; ``MAX_REWARD`` on success.
+``state.staged_reward`` towards ``layout.task.MOVE_SHIFT`` along the direction; ``MAX_REWARD``
+on success.
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ from embodied_envs.envs.tasks.state import (
 
 MIN_SHIFT = 0.10  # m along the direction
 MAX_ANGLE_DEG = 45.0  # the displacement within this of the direction
-SHIFT = 0.15  # m: the destination the expert and the reward aim at
 MAX_REWARD = STAGES + 1
 
 

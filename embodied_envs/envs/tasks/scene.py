@@ -11,15 +11,12 @@ from mani_skill.utils.structs import Actor
 from scipy.spatial import ConvexHull
 
 from embodied_envs.envs.contacts import is_grasping
-from embodied_envs.envs.tasks import KIND_IDS, move
+from embodied_envs.envs.tasks import KIND_IDS
 from embodied_envs.envs.tasks.state import TaskState
 from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.layout.placement.rules import half_planes, pad_polygons
-from embodied_envs.layout.task import Task
+from embodied_envs.layout.task import DIRECTION_XY, MOVE_SHIFT, Task
 
-# a move's direction in the robot base's frame (forward: away from the robot)
-DIRECTION_XY = {"forward": (1.0, 0.0), "backward": (-1.0, 0.0), "left": (0.0, 1.0),
-                "right": (0.0, -1.0)}  # fmt: skip
 SPREAD = 0.9  # several movers' destinations spread over this part of the receptacle's length
 
 
@@ -134,7 +131,7 @@ class TaskScene:
 
     def destinations(self, rows, rec_pose, start, goal) -> torch.Tensor:
         """``(b, m, 3)`` each mover's destination for an episode of the envs ``rows (b,)``: on
-        the receptacle (its raw pose ``rec_pose (b, 7)`` now), ``move.SHIFT`` along the
+        the receptacle (its raw pose ``rec_pose (b, 7)`` now), ``MOVE_SHIFT`` along the
         direction from ``start (b, m, 3)`` (``move``), or over the ``goal (b, 3)`` on the
         table (a place on the table)."""
         def t(x):
@@ -145,7 +142,7 @@ class TaskScene:
         on_table = torch.cat([goal[:, None, :2].expand_as(start[..., :2]), on_rec[..., 2:]], -1)
         place = torch.where(t(self.rec_is_table)[:, None, None], on_table, on_rec)
         shifted = start.clone()
-        shifted[..., :2] += t(self.direction)[:, None] * move.SHIFT
+        shifted[..., :2] += t(self.direction)[:, None] * MOVE_SHIFT
         is_move = (t(self.kinds) == KIND_IDS["move"])[:, None, None]
         return torch.where(is_move, shifted, place)
 

@@ -76,7 +76,7 @@ class _Placer:
         radii = np.linalg.norm(padded - centres[:, :, None], axis=-1).max(-1)[0]
         return padded, inward_normals(padded), centres, radii
 
-    def draws(self, node: str, region, placed, reach, fails, xy_draw):
+    def draws(self, node: str, region, placed, reach, shift, fails, xy_draw):
         """Candidates of ``node`` in batches until one meets every rule (``candidates_fit``);
         its ``(x, y, yaw)`` and world footprint, or None after ``max_attempts``. Rejections
         are added to ``fails`` (per rule; the clearance among the candidates meeting the
@@ -92,10 +92,10 @@ class _Placer:
             xy = xy_draw(b)
             masks = candidates_fit(
                 xy[None], yaw[None], foot, self.foot_normals[node], radius, region, placed,
-                lim.clearance, reach,
+                lim.clearance, reach, shift,
             )  # fmt: skip
             ok = np.ones(b, bool)
-            for rule in ("inside", "in_band", "facing"):
+            for rule in ("inside", "in_band", "facing", "destination"):
                 if rule in masks:
                     fails[rule] += int((~masks[rule][0]).sum())
                     ok &= masks[rule][0]
@@ -121,10 +121,11 @@ class _Placer:
                 (lim.reach_min, lim.reach_max), lim.max_heading_deg,
             )  # fmt: skip
         placed = self.placed([self.obstacles[i] for i in it.avoid])
-        fails = dict.fromkeys(["inside", "in_band", "facing", "clear"] if reach else
-                              ["inside", "clear"], 0)  # fmt: skip
+        rules = ["inside", "in_band", "facing"] if reach else ["inside"]
+        shift = it.shift if reach else None
+        fails = dict.fromkeys(rules + (["destination"] if shift else []) + ["clear"], 0)
         found = self.draws(
-            it.node, (normals[None], offsets[None]), placed, reach, fails,
+            it.node, (normals[None], offsets[None]), placed, reach, shift, fails,
             lambda b: self.rng.uniform(lo, hi, (b, 2)),
         )  # fmt: skip
         if found is None:
@@ -133,6 +134,7 @@ class _Placer:
                 "clear": "no overlap with placed footprints",
                 "in_band": f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base",
                 "facing": f"within {lim.max_heading_deg:g} deg of the robot heading",
+                "destination": "its move's destination on the top and within reach",
             }
             named = {names[k]: v for k, v in fails.items()}
             worst = max(named, key=named.get)
@@ -154,7 +156,7 @@ class _Placer:
 
         fails = {"clear": 0}
         placed = self.placed([*self.obstacles, ctx_poly])
-        found = self.draws(node, None, placed, None, fails, disc)
+        found = self.draws(node, None, placed, None, None, fails, disc)
         if found is None:
             rule = "no overlap with placed footprints"
             raise PlacementError(node, rule, lim.max_attempts, str({rule: fails["clear"]}))

@@ -379,6 +379,7 @@ class EpisodeSampler:
             masks = candidates_fit(
                 xy, yaw, shapes.vertices[shape], shapes.normals[shape], shapes.radii[shape],
                 (region.normals, region.offsets), keep_clear, lim.clearance, reach,
+                it.shift if reach is not None else None,
             )  # fmt: skip
             ok = masks.pop("clear")
             for mask in masks.values():

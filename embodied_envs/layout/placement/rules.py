@@ -4,7 +4,9 @@
 - **clear**: its footprint no closer than the clearance to any placed footprint (the robot
   base's square included), by the separating-axis test;
 - **within reach**: a manipulated object's centre within the robot's distance band and heading
-  cone (goals use the same rule with the band shrunk by ``GoalRegion.inset``).
+  cone (goals use the same rule with the band shrunk by ``GoalRegion.inset``);
+- **its destination too**: a ``move`` task's mover also has its footprint inside the top and
+  its centre within reach where the task takes it (``Task.shift``, in the robot's frame).
 
 Both placements use these functions: per configuration (``configuration.place``, numpy,
 float64) and per episode (``episode.EpisodeSampler``, numpy on the CPU, torch on a GPU).
@@ -142,7 +144,8 @@ def first_true(mask):
 
 
 def candidates_fit(
-    xy, yaw, foot, foot_normals, radius, region, placed, clearance: float, reach=None
+    xy, yaw, foot, foot_normals, radius, region, placed, clearance: float, reach=None,
+    shift=None,
 ):
     """Which candidate poses of one object meet every rule, in each env; the one test both
     placements run.
@@ -160,12 +163,15 @@ def candidates_fit(
         clearance: the minimum gap between footprints.
         reach: None, or ``(robot_xy (b, 2), robot_yaw (b,), band, max_heading_deg)`` for a
             manipulated object (:func:`within_reach`).
+        shift: None, or ``(dx, dy)`` in the robot's frame: where a move task takes the object
+            from each candidate (needs ``reach``); the footprint there must be inside the
+            region and its centre within reach.
 
     Returns:
         ``dict`` of ``(b, c)`` bool masks: ``inside`` (with a region) and, with ``reach``,
-        ``in_band`` and ``facing`` for every candidate; ``clear`` for those meeting the
-        others (True where they do not: the separating-axis test runs only there, and only
-        where bounding circles meet).
+        ``in_band`` and ``facing`` for every candidate, with ``shift`` ``destination``;
+        ``clear`` for those meeting the others (True where they do not: the separating-axis
+        test runs only there, and only where bounding circles meet).
     """
     xp = array_module(xy)
     poly = rotate(foot, yaw) + xy[..., None, :]  # (b, c, m, 2)
@@ -179,6 +185,20 @@ def candidates_fit(
             xy, robot_xy[:, None], robot_yaw[:, None], band, heading
         )
         ok = ok & masks["in_band"] & masks["facing"]
+        if shift is not None:
+            vec = (np.asarray([shift], dtype=xy.dtype) if xp is np else
+                   xp.as_tensor([shift], dtype=xy.dtype, device=xy.device))  # fmt: skip
+            offset = rotate(vec, robot_yaw)  # (b, 1, 2)
+            dest = xy + offset
+            band_ok, facing_ok = within_reach(
+                dest, robot_xy[:, None], robot_yaw[:, None], band, heading
+            )
+            there = band_ok & facing_ok
+            if region is not None:
+                there = there & inside(poly + offset[..., None, :], region[0][:, None],
+                                       region[1][:, None])  # fmt: skip
+            masks["destination"] = there
+            ok = ok & there
     polys, normals, origins, radii = placed
     rel = xy[:, :, None] - origins[:, None]  # (b, c, o, 2)
     near = xp.hypot(rel[..., 0], rel[..., 1]) < radius + radii + clearance

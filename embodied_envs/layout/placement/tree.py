@@ -42,6 +42,8 @@ class Standing:
         top: its top in its own frame, shrunk by the hull margin.
         supports: whether objects stand on it (then its shrunk top exists).
         manipulated: whether the robot is to grasp it (it stands within reach).
+        shift: for a mover of a ``move`` task, its destination relative to its start in the
+            robot's frame (``Task.shift``), kept on the top and within reach; else None.
         avoid: the obstacles it keeps clear of, as indices into ``[robot base, items...]``:
             the robot base (0) and the objects placed before it (``1 + their index``), less
             those it stands on (its parent's chain down to the context).
@@ -56,6 +58,7 @@ class Standing:
     supports: bool
     manipulated: bool
     avoid: tuple[int, ...]
+    shift: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -127,6 +130,7 @@ def support_tree(layout: LayoutInfo, limits: PlacementLimits) -> SupportTree:
                 supports=node in parents,
                 manipulated=node in layout.reach_nodes,
                 avoid=avoid,
+                shift=layout.task.shift() if node in layout.task.objects else None,
             )
         )
     first_child = {ctx: layout.robot}  # the first to stand on each support
