@@ -245,6 +245,20 @@ def fruit_bowl() -> Asset:
     return Asset("fruit_bowl", [Part(shell, (0.55, 0.75, 0.9))], collision=collision, mass=0.35)
 
 
+def tray() -> Asset:
+    """A flat serving tray with low rims: the receptacle of the shipped "on" tasks."""
+    lx, ly, base, rim, t = 0.26, 0.19, 0.008, 0.022, 0.008
+    parts = [
+        box([lx, ly, base], [0, 0, base / 2]),
+        box([lx, t, rim], [0, (ly - t) / 2, rim / 2]),
+        box([lx, t, rim], [0, -(ly - t) / 2, rim / 2]),
+        box([t, ly - 2 * t, rim], [(lx - t) / 2, 0, rim / 2]),
+        box([t, ly - 2 * t, rim], [-(lx - t) / 2, 0, rim / 2]),
+    ]
+    colour = (0.75, 0.3, 0.3)
+    return Asset("tray", [Part(m, colour) for m in parts], collision=parts, mass=0.3)
+
+
 def banana() -> Asset:
     """An irregular curved object: ellipsoid segments along an arc."""
     parts, collision = [], []
@@ -262,7 +276,7 @@ def banana() -> Asset:
     return Asset("banana", parts, collision=collision, mass=0.12)
 
 
-ASSETS = [rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana, fruit_bowl]
+ASSETS = [rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana, fruit_bowl, tray]
 
 
 def room_mesh() -> trimesh.Trimesh:

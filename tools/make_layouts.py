@@ -43,6 +43,8 @@ class LayoutSpec:
     task: str
     # [x, y, z, qx, qy, qz, qw] of every node and the robot; empty: placed by this script
     poses: dict[str, list[float]] = field(default_factory=dict)
+    # node -> its asset folder's name where they differ (two cans: can1, can2 -> can)
+    asset_of: dict[str, str] = field(default_factory=dict)
 
 
 LAYOUTS = [
@@ -125,6 +127,38 @@ LAYOUTS = [
             "bowl": [-0.0381, 0.2461, 0.785, 0.0, 0.0, 0.9914, 0.1307],
             "franka": [-0.412, 0.1598, 0.76, 0.0, 0.0, -0.1839, 0.9829],
         },
+    ),    LayoutSpec(
+        name="place_tray",
+        context="table",
+        manipulated=("mug",),
+        distractors=("tray", "can", "bowl"),
+        task="Place the mug on the tray.",
+        poses={
+            "background": [0.0, 0.0, 0.0, 0.0, 0.0, 0.7727, 0.6347],
+            "table": [0.0, 0.0, 0.38, 0.0, 0.0, 0.3264, 0.9452],
+            "mug": [0.3611, 0.1939, 0.805, 0.0, 0.0, 0.9094, 0.4158],
+            "tray": [-0.0381, 0.2461, 0.771, 0.0, 0.0, 0.9914, 0.1307],
+            "can": [0.3204, 0.4159, 0.82, 0.0, 0.0, 0.2549, 0.967],
+            "bowl": [0.2174, 0.04, 0.785, 0.0, 0.0, 0.6341, 0.7733],
+            "franka": [-0.412, 0.1598, 0.76, 0.0, 0.0, -0.1839, 0.9829],
+        },
+    ),
+    LayoutSpec(
+        name="place_two",
+        context="table",
+        manipulated=("can1", "can2"),
+        distractors=("tray", "mug"),
+        task="Put the cans on the tray.",
+        poses={
+            "background": [0.0, 0.0, 0.0, 0.0, 0.0, 0.7727, 0.6347],
+            "table": [0.0, 0.0, 0.38, 0.0, 0.0, 0.3264, 0.9452],
+            "can1": [0.3611, 0.1939, 0.82, 0.0, 0.0, 0.9094, 0.4158],
+            "can2": [0.3204, 0.4159, 0.82, 0.0, 0.0, 0.2549, 0.967],
+            "tray": [-0.0381, 0.2461, 0.771, 0.0, 0.0, 0.9914, 0.1307],
+            "mug": [0.2174, 0.04, 0.805, 0.0, 0.0, 0.6341, 0.7733],
+            "franka": [-0.412, 0.1598, 0.76, 0.0, 0.0, -0.1839, 0.9829],
+        },
+        asset_of={"can1": "can", "can2": "can"},
     ),
 ]
 
@@ -138,6 +172,7 @@ DESCRIPTIONS = {
     "bottle": "a green bottle with a white cap",
     "banana": "a yellow banana",
     "fruit_bowl": "a wide light-blue fruit bowl",
+    "tray": "a red serving tray with low rims",
     "background": "a room with a window and a bookshelf",
 }
 
@@ -162,9 +197,9 @@ def base_layout(spec: LayoutSpec) -> LayoutInfo:
             "task_desc": spec.task,
         },
         "objs_mapping": mapping,
-        "assets": {n: f"../assets/{n}" for n in mapping},
+        "assets": {n: f"../assets/{spec.asset_of.get(n, n)}" for n in mapping},
         "position": {n: [0, 0, 0, 0, 0, 0, 1] for n in [*mapping, ROBOT]},
-        "objs_desc": {n: DESCRIPTIONS[n] for n in mapping},
+        "objs_desc": {n: DESCRIPTIONS[spec.asset_of.get(n, n)] for n in mapping},
     }
     return LayoutInfo.from_dict(data, source=DATA / "layouts" / f"{spec.name}.json")
 
