@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "embodied_envs" / "data"  # the shipped data (./layouts and ./assets link here)
 # the shipped pick layouts: the per-layout tests written for the pick task run on these; the
 # place and move layouts are tested in tests/envs/test_tasks.py
-TASK_LAYOUTS = ("place_box", "place_bowl", "move_left")
+TASK_LAYOUTS = ("place_box", "place_bowl", "place_tray", "place_two", "move_left")
 LAYOUTS = sorted(p for p in (DATA / "layouts").glob("*.json") if p.stem not in TASK_LAYOUTS)
 DEFAULT_LAYOUT = DATA / "layouts" / "default.json"
 

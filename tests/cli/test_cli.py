@@ -18,6 +18,7 @@ def test_validate_ok_and_broken(tmp_path, scene_copy, capsys):
     out = capsys.readouterr().out
     assert "place_box.json  task: place [can] on cracker_box" in out
     assert "move_left.json  task: move [can] left" in out
+    assert "place_two.json  task: place [can1, can2] on tray" in out
     assert "default.json  task: pick [can]" in out
     broken = scene_copy / "layouts" / "default.json"
     data = json.loads(broken.read_text())

@@ -186,7 +186,9 @@ def test_holding_the_mover_over_the_receptacle_scores_clearly_below_success():
 
 
 # --- the expert in the env ----------------------------------------------------------------
-@pytest.mark.parametrize("name, seed", [("place_box", 0), ("place_bowl", 1), ("move_left", 2)])
+@pytest.mark.parametrize(
+    "name, seed", [("place_box", 0), ("place_bowl", 1), ("place_tray", 0), ("move_left", 2)]
+)
 def test_the_expert_finishes_place_and_move_tasks_and_the_reward_rises(name, seed):
     from embodied_envs.solvers.pick_place import PickPlaceSolver
 
@@ -214,3 +216,61 @@ def test_the_expert_finishes_place_and_move_tasks_and_the_reward_rises(name, see
     assert r.max() == pytest.approx(1.0) and r[0] < 0.4
     # nearly monotone: the running best is never undercut by more than a tenth
     assert (np.maximum.accumulate(r) - r).max() < 0.1 * 7 / 7 + 0.05
+
+
+# --- placement keeps tasks doable ---------------------------------------------------------
+@pytest.mark.parametrize("backend", ["numpy", "torch"])
+def test_a_move_destination_off_the_top_or_out_of_reach_is_refused(backend):
+    from embodied_envs.layout.placement.rules import candidates_fit, half_planes, inward_normals
+
+    to = np.asarray if backend == "numpy" else torch.as_tensor
+    top = np.array([[-0.5, -0.3], [0.5, -0.3], [0.5, 0.3], [-0.5, 0.3]])  # 1 x 0.6 m table
+    foot = np.array([[-0.02, -0.02], [0.02, -0.02], [0.02, 0.02], [-0.02, 0.02]])
+    normals, offsets = half_planes(top)
+    # robot at x = -0.6 facing +x; candidates: centre, near the left edge, far forward
+    xy = to(np.array([[[0.0, 0.0], [0.0, 0.2], [0.1, 0.0]]]))
+    yaw = to(np.zeros((1, 3)))
+    none = (to(np.zeros((1, 0, 4, 2))), to(np.zeros((1, 0, 4, 2))), to(np.zeros((1, 0, 2))),
+            to(np.zeros(0)))  # fmt: skip
+    reach = (to(np.array([[-0.6, 0.0]])), to(np.array([0.0])), (0.3, 0.8), 60.0)
+    region = (to(normals[None]), to(offsets[None]))
+    left = candidates_fit(xy, yaw, to(foot), to(inward_normals(foot)), 0.03, region, none,
+                          0.01, reach, shift=(0.0, 0.15))  # fmt: skip
+    # 0.2 + 0.15 leaves the 0.3 m half-width; the others stay on the top
+    assert np.asarray(left["destination"][0]).tolist() == [True, False, True]
+    forward = candidates_fit(xy, yaw, to(foot), to(inward_normals(foot)), 0.03, region, none,
+                             0.01, reach, shift=(0.15, 0.0))  # fmt: skip
+    # x 0.1 + 0.15 is 0.85 m from the robot: beyond the 0.8 m reach
+    assert np.asarray(forward["destination"][0]).tolist() == [True, True, False]
+    plain = candidates_fit(xy, yaw, to(foot), to(inward_normals(foot)), 0.03, region, none,
+                           0.01, reach)  # fmt: skip
+    assert "destination" not in plain
+
+
+def test_layout_generate_keeps_move_destinations_on_the_table_within_reach(tmp_path):
+    from embodied_envs.cli.main import main
+    from embodied_envs.layout import load_layout
+    from embodied_envs.layout.placement.limits import PlacementLimits
+    from embodied_envs.layout.placement.rules import half_planes, inside, rotate, within_reach
+    from embodied_envs.layout.placement.tree import support_tree
+
+    src = DATA / "layouts" / "move_left.json"
+    assert main(["layout", "generate", str(src), "--num", "12", "--seed", "3",
+                 "--out", str(tmp_path)]) == 0  # fmt: skip
+    lim = PlacementLimits()
+    files = sorted(tmp_path.glob("*.json"))
+    assert len(files) == 12
+    for f in files:
+        lay = load_layout(f)
+        assert lay.task.kind == "move" and lay.task.shift() == (0.0, 0.15)
+        robot, can, table = lay.pose(lay.robot), lay.pose("can"), lay.pose(lay.context)
+        dest = can.p[:2] + rotate(np.array([[0.0, 0.15]]), np.array([robot.yaw]))[0, 0]
+        band, facing = within_reach(dest, robot.p[:2], robot.yaw, (lim.reach_min, lim.reach_max),
+                                    lim.max_heading_deg)  # fmt: skip
+        assert band and facing, f.name
+        shrunk = support_tree(lay, lim).context_top[2]
+        top = rotate(shrunk, np.array([table.yaw]))[0] + table.p[:2]
+        item = next(it for it in support_tree(lay, lim).items if it.node == "can")
+        foot = rotate(item.footprint, np.array([can.yaw]))[0] + dest
+        n, o = half_planes(top)
+        assert inside(foot[None], n[None], o[None])[0], f.name
