@@ -184,6 +184,17 @@ def cracker_box() -> Asset:
     return Asset("cracker_box", parts, mass=0.2)
 
 
+def storage_box() -> Asset:
+    """A low, wide cardboard box with a lid: the receptacle of the shipped "on top of" task
+    (its 18 x 13 cm top holds a can standing; the cracker box's 5 x 9 cm top would not)."""
+    x, y, z = 0.18, 0.13, 0.07
+    parts = [
+        Part(box([x, y, z * 0.85], [0, 0, z * 0.425]), (0.6, 0.45, 0.3)),
+        Part(box([x, y, z * 0.15], [0, 0, z * 0.925]), (0.5, 0.37, 0.24)),
+    ]
+    return Asset("storage_box", parts, mass=0.3)
+
+
 def bottle() -> Asset:
     body = revolve([[0, 0], [0.03, 0], [0.03, 0.13], [0.012, 0.17], [0, 0.17]], sections=32)
     neck = cylinder(0.012, 0.035, [0, 0, 0.1875], sections=24)
@@ -276,7 +287,7 @@ def banana() -> Asset:
     return Asset("banana", parts, collision=collision, mass=0.12)
 
 
-ASSETS = [rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana, fruit_bowl, tray]
+ASSETS = [rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana, fruit_bowl, tray, storage_box]
 
 
 def room_mesh() -> trimesh.Trimesh:

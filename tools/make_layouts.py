@@ -84,15 +84,15 @@ LAYOUTS = [
         name="place_box",
         context="table",
         manipulated=("can",),
-        distractors=("cracker_box", "mug", "bowl"),
-        task="Put the can on the cracker box.",
+        distractors=("storage_box", "mug", "bowl"),
+        task="Put the can on the storage box.",
         poses={
             "background": [0.0, 0.0, 0.0, 0.0, 0.0, 0.7727, 0.6347],
             "table": [0.0, 0.0, 0.38, 0.0, 0.0, 0.3264, 0.9452],
             "can": [0.3204, 0.4159, 0.82, 0.0, 0.0, 0.2549, 0.967],
-            "cracker_box": [0.3611, 0.1939, 0.825, 0.0, 0.0, 0.9094, 0.4158],
-            "mug": [0.2174, 0.04, 0.805, 0.0, 0.0, 0.6341, 0.7733],
-            "bowl": [-0.0381, 0.2461, 0.785, 0.0, 0.0, 0.9914, 0.1307],
+            "storage_box": [-0.0381, 0.2461, 0.795, 0.0, 0.0, 0.9914, 0.1307],
+            "mug": [0.3611, 0.1939, 0.805, 0.0, 0.0, 0.9094, 0.4158],
+            "bowl": [0.2174, 0.04, 0.785, 0.0, 0.0, 0.6341, 0.7733],
             "franka": [-0.412, 0.1598, 0.76, 0.0, 0.0, -0.1839, 0.9829],
         },
     ),
@@ -173,6 +173,7 @@ DESCRIPTIONS = {
     "banana": "a yellow banana",
     "fruit_bowl": "a wide light-blue fruit bowl",
     "tray": "a red serving tray with low rims",
+    "storage_box": "a low brown cardboard storage box",
     "background": "a room with a window and a bookshelf",
 }
 

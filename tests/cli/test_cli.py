@@ -16,7 +16,7 @@ def test_validate_ok_and_broken(tmp_path, scene_copy, capsys):
     shipped = sorted((ROOT / "embodied_envs" / "data" / "layouts").glob("*.json"))  # task ones too
     assert main(["layout", "validate", *map(str, shipped)]) == 0
     out = capsys.readouterr().out
-    assert "place_box.json  task: place [can] on cracker_box" in out
+    assert "place_box.json  task: place [can] on storage_box" in out
     assert "move_left.json  task: move [can] left" in out
     assert "place_two.json  task: place [can1, can2] on tray" in out
     assert "default.json  task: pick [can]" in out
