@@ -24,13 +24,13 @@ def quat_matrix(q):
     """Rotation matrices ``(..., 3, 3)`` of scalar-first quaternions ``q (..., 4)`` (numpy or
     torch, as ManiSkill's raw poses hold them)."""
     w, x, y, z = (q[..., i] for i in range(4))
-    rows = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ]
+    entries = [
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ]  # fmt: skip
     stack = np.stack if isinstance(q, np.ndarray) else torch.stack
-    return stack([stack(r, -1) for r in rows], -2)
+    return stack(entries, -1).reshape(*q.shape[:-1], 3, 3)
 
 
 def support_height(parts: tuple[np.ndarray, ...], xy: np.ndarray, default: float) -> float:

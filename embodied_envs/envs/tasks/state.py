@@ -116,7 +116,8 @@ def take(x, k):
 def staged_evaluate(s: TaskState, pose) -> dict:
     """``place`` and ``move``: success when every mover is in its pose (``pose (n, m)``, the
     kind's own rule), released and at rest; the flags of the current mover."""
-    done = pose & released(s) & at_rest(s)
+    free = released(s)
+    done = pose & free & at_rest(s)
     k = current(done)
     return {
         "success": done.all(1),
@@ -124,8 +125,9 @@ def staged_evaluate(s: TaskState, pose) -> dict:
         "is_obj_placed": pose.all(1),
         "is_robot_static": robot_static(s),
         "obj_to_goal_pos": take(s.dest, k) - take(s.movers, k),
-        "done": done,  # (n, m), and the poses: for the reward, not in info
+        "done": done,  # (n, m), the poses and releases: for the reward, not in info
         "pose": pose,
+        "released": free,
     }
 
 
@@ -134,19 +136,22 @@ def staged_dense(s: TaskState, result: dict, max_reward: float):
     ``max_reward`` on success."""
     done = result["done"]
     k = current(done)
-    staged = staged_reward(s, k, take(result["pose"], k), done.sum(1), done.shape[1])
+    staged = staged_reward(s, k, take(result["pose"], k), done.sum(1), done.shape[1],
+                           take(result["released"], k))  # fmt: skip
     return s.xp.where(result["success"], max_reward, staged)
 
 
-def staged_reward(s: TaskState, k, in_pose, done_before, count: int):
+def staged_reward(s: TaskState, k, in_pose, done_before, count: int, free=None):
     """The staged reward of ``place`` and ``move``, per env, in [0, ``STAGES``]: for the
     current mover ``k`` (``(n,)``), reach (1) and grasp (1); while grasped, carry over the
     destination (1) and lower to it (1); in its pose (``in_pose (n,)``), released (1) and the
     arm still (1); then (``done_before``: movers already done, ``(n,)``) each finished mover
-    adds a whole share: ``(done_before + stage / STAGES) * STAGES / count``."""
+    adds a whole share: ``(done_before + stage / STAGES) * STAGES / count``. ``free``: the
+    current mover's :func:`released` when the caller has it."""
     xp, f = s.xp, as_float
     p, dest = take(s.movers, k), take(s.dest, k)
-    grasped, free = f(take(s.grasped, k)), f(take(released(s), k))
+    grasped = f(take(s.grasped, k))
+    free = f(take(released(s), k) if free is None else free)
     reach = 1 - xp.tanh(5 * norm(s.tcp - p))
     carry = 1 - xp.tanh(5 * norm(p[:, :2] - dest[:, :2]))
     lower = (1 - xp.tanh(5 * xp.abs(p[:, 2] - dest[:, 2]))) * (carry > 0.9)

@@ -1,0 +1,77 @@
+#!/usr/bin/env python
+"""Benchmark: the per-step cost of grading each task kind, against the pick task, same run.
+
+For each layout (default: the shipped pick layout ``default`` and the task layouts), one CPU
+env (``obs_mode="state"``, ``reward_mode="normalized_dense"``) is reset with a seed and stepped
+a few times with zero actions; then ``evaluate()`` followed by ``compute_normalized_dense_reward``
+(what every ``step`` computes) is timed over ``--calls`` calls, in alternating rounds so drift
+hits every layout alike. Prints the median microseconds per call and the ratio to the first
+layout (the issue's target: a place task at most 1.2x the pick task).
+
+Usage: python tools/bench_tasks.py [--calls 2000] [--rounds 5] [--layout FILE ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+from pathlib import Path
+
+os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+
+import gymnasium as gym  # noqa: E402
+import torch  # noqa: E402
+
+import embodied_envs  # noqa: E402,F401
+from embodied_envs.paths import default_layout  # noqa: E402
+
+TASKS = ("place_box", "place_bowl", "place_two", "move_left")
+
+
+def make(path: Path):
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(path), obs_mode="state",
+                   reward_mode="normalized_dense")  # fmt: skip
+    env.reset(seed=0)
+    zero = torch.zeros(env.action_space.shape)
+    for _ in range(5):
+        env.step(zero)
+    return env
+
+
+def per_call(env, calls: int) -> float:
+    u = env.unwrapped
+    action = torch.zeros(env.action_space.shape)
+    start = time.perf_counter()
+    for _ in range(calls):
+        info = u.evaluate()
+        u.compute_normalized_dense_reward(obs=None, action=action, info=info)
+    return (time.perf_counter() - start) / calls * 1e6
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--calls", type=int, default=2000)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--layout", type=Path, nargs="+", default=None)
+    args = ap.parse_args()
+    layouts = args.layout or [default_layout()] + [
+        default_layout().with_name(f"{n}.json") for n in TASKS
+    ]
+    envs = [make(p) for p in layouts]
+    times = [[] for _ in envs]
+    for _ in range(args.rounds):
+        for env, t in zip(envs, times, strict=True):
+            t.append(per_call(env, args.calls))
+    base = statistics.median(times[0])
+    for path, env, t in zip(layouts, envs, times, strict=True):
+        us = statistics.median(t)
+        kind = env.unwrapped.tasks[0].kind
+        print(f"{path.stem:12s} {kind:5s} evaluate + reward {us:7.1f} us per step, "
+              f"{us / base:.2f}x {layouts[0].stem}")  # fmt: skip
+        env.close()
+
+
+if __name__ == "__main__":
+    main()
