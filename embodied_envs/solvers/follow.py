@@ -13,12 +13,13 @@ targets keep, with ``MARGIN`` to spare, to:
   can follow in one step (its velocity limit over the control rate) and ``pd_joint_delta_pos``
   too (its delta limit);
 - ``lead``: the most a target leads the measured joint position, ``pd_joint_delta_pos``'s limit;
-- ``speed``: the joint speed plans are timed at: a PD joint drive lags a target moving at ``v``
-  by ``damping / stiffness * v``, so ``speed`` keeps that lag within ``lead`` and the target's
-  steps within ``step``.
+- ``speed``: the joint speed plans are timed at, ``SPEED_SHARE`` of the same limits: a PD
+  joint drive lags a target moving at ``v`` by ``damping / stiffness * v``, so ``speed`` keeps
+  that lag within ``lead`` and the target's steps within ``step``, with room for the target to
+  get ahead of its path by the lag (``PickPlaceSolver._commands``) and for the arm's inertia.
 
 Every number is read from the robot's controller configs (``agent._controller_configs``), none
-is written here but ``MARGIN``.
+is written here but ``MARGIN`` and ``SPEED_SHARE``.
 """
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MARGIN = 0.8  # part of each controller's limit the expert's targets use
+MARGIN = 0.9  # part of each controller's limit the expert's targets use at most
+SPEED_SHARE = 0.8  # part of those limits the plans' joint speeds use: below MARGIN, so that a
+# target can get ahead of its path by the lag while moving with it
 JOINT_MODES = ("pd_joint_delta_pos", "pd_joint_vel")  # whose limits bound the targets
 RECORDED_MODE = "pd_joint_pos"  # what the expert records (its PD gains give the lag)
 
@@ -65,20 +68,27 @@ def follow_limits(agent, control_freq: float, margin: float = MARGIN) -> FollowL
     lag = np.broadcast_to(np.asarray(pos.damping, np.float64) / pos.stiffness, (dof,))  # s
     step = margin * np.minimum(vel / control_freq, delta)
     lead = margin * delta
-    speed = np.minimum(step * control_freq, lead / lag)
+    speed = SPEED_SHARE * np.minimum(np.minimum(vel, delta * control_freq), delta / lag)
     return FollowLimits(step=step, lead=lead, speed=speed)
 
 
+def shortened(move: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """``move`` (..., dof) scaled down, as a whole, until every joint's part is within
+    ``bound``: the same direction (a target on a straight joint line stays on it)."""
+    need = np.abs(move) / bound
+    return move / np.maximum(need.max(axis=-1, keepdims=True), 1.0)
+
+
 def rate_limited(targets: np.ndarray, start: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """``targets`` (T, dof) followed from ``start`` with each change clipped to ``step``; where
-    the clipped sequence has not reached the last target by then, steps toward it are
+    """``targets`` (T, dof) followed from ``start``, each change :func:`shortened` to
+    ``step``; where the sequence has not reached the last target by then, steps toward it are
     appended until it has."""
     out, prev = [], np.asarray(start, dtype=np.float64)
     for target in targets:
-        prev = prev + np.clip(target - prev, -step, step)
+        prev = prev + shortened(target - prev, step)
         out.append(prev)
     end = targets[-1]
     while not np.allclose(prev, end, rtol=0.0, atol=1e-9):
-        prev = prev + np.clip(end - prev, -step, step)
+        prev = prev + shortened(end - prev, step)
         out.append(prev)
     return np.asarray(out)

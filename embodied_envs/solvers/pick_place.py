@@ -24,7 +24,7 @@ import torch
 
 from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
-from embodied_envs.solvers.follow import follow_limits, rate_limited
+from embodied_envs.solvers.follow import follow_limits, rate_limited, shortened
 from embodied_envs.solvers.grasps import (
     GraspConfig,
     GripperModel,
@@ -352,9 +352,9 @@ class PickPlaceSolver:
         """The arm targets ``arm`` (per env) moved at most ``follow.step`` from the last ones
         and leading the measured joints by at most ``follow.lead`` (a joint lagging its target
         more than planned, e.g. the lag building up as it starts, slows the targets down)."""
-        arm = np.clip(arm, self.command - self.follow.step, self.command + self.follow.step)
+        arm = self.command + shortened(arm - self.command, self.follow.step)
         q = self._qpos()[:, :7]
-        return np.clip(arm, q - self.follow.lead, q + self.follow.lead)
+        return q + shortened(arm - q, self.follow.lead)
 
     def _step(self, action: np.ndarray) -> None:
         a = action if self._batched_actions else action[0]

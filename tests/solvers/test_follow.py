@@ -15,7 +15,7 @@ import embodied_envs  # noqa: F401
 from embodied_envs.paths import default_layout
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 from embodied_envs.solvers import PickPlaceSolver
-from embodied_envs.solvers.follow import MARGIN, follow_limits, rate_limited
+from embodied_envs.solvers.follow import MARGIN, SPEED_SHARE, follow_limits, rate_limited, shortened
 
 MODES = ("pd_joint_delta_pos", "pd_joint_vel", "pd_ee_delta_pos", "pd_ee_delta_pose")
 
@@ -35,7 +35,7 @@ def test_limits_are_read_from_the_controllers(env):
     lim = follow_limits(agent, CONTROL_FREQ)
     np.testing.assert_allclose(lim.step, np.full(7, MARGIN * 0.02))
     np.testing.assert_allclose(lim.lead, np.full(7, MARGIN * 0.1))
-    np.testing.assert_allclose(lim.speed, np.full(7, MARGIN * 1.0))
+    np.testing.assert_allclose(lim.speed, np.full(7, SPEED_SHARE * 1.0))
 
     class Slow:  # the same agent with pd_joint_vel's limit halved
         _controller_configs = copy.deepcopy(agent._controller_configs)
@@ -57,6 +57,8 @@ def test_rate_limited_targets_step_at_most_the_limit_and_reach_the_end():
     targets = np.array([[0.0], [0.5], [0.5]])
     out = rate_limited(targets, np.array([0.0]), np.array([0.2]))
     np.testing.assert_allclose(out[:, 0], [0.0, 0.2, 0.4, 0.5])
+    # a move is shortened as a whole: its direction kept
+    np.testing.assert_allclose(shortened(np.array([0.4, 0.1]), np.array([0.2, 0.2])), [0.2, 0.05])
 
 
 def test_the_experts_targets_and_speeds_stay_within_the_limits(env):
