@@ -66,7 +66,9 @@ class SolverConfig:
     gripper_steps: int = 8  # control steps to open the gripper, and at most to close it
     finger_rest: float = 1e-4  # m per step: fingers moving less are at rest (closed on the
     # object: 3 steps on the shipped layouts)
-    hold_steps: int = 10  # control steps holding still at the goal
+    hold_steps: int = 10  # control steps holding still at the goal; a demo goes on for this
+    # many steps after its task succeeds (the env terminates there), so that an arm replayed in
+    # another controller, which lags the recorded one, comes to rest in success too
     # rad/s and rad/s^2 per arm joint, within the Panda's (Franka's datasheet: velocity 2.175
     # for joints 1-4 and 2.61 for 5-7; acceleration 15, 7.5, 10, 12.5, 15, 20, 20)
     joint_vel_limits: tuple[float, ...] = (2.0, 2.0, 2.0, 2.0, 2.5, 2.5, 2.5)
@@ -227,7 +229,8 @@ class PickPlaceSolver:
         self.motion = [SeededPlanner(p, self.cfg.motion, _levers(self.base)) for p in self.planners]
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
         self.steps = 0
-        self.ended = False  # the episode was truncated (or terminated) in every env
+        self.ended = False  # every env was truncated, failed, or succeeded hold_steps ago
+        self.succeeded = np.zeros(self.num_envs, dtype=int)  # per env, steps in success so far
         self.last_info: dict = {}
         self._batched_actions = len(self.env.action_space.shape) == 2
         self.gripper = np.full(self.num_envs, GRIPPER_OPEN)
@@ -361,7 +364,11 @@ class PickPlaceSolver:
         _, _, terminated, truncated, info = self.env.step(a)
         self.last_info = info
         self.steps += 1
-        self.ended = bool(np.all(np.asarray(torch.as_tensor(terminated | truncated).cpu())))
+        flag = lambda x: np.asarray(torch.as_tensor(x).cpu()).reshape(-1)  # noqa: E731
+        success = flag(info["success"])
+        self.succeeded = np.where(success, self.succeeded + 1, 0)
+        over = flag(truncated) | (flag(terminated) & ~success)
+        self.ended = bool(np.all(over | (self.succeeded >= self.cfg.hold_steps)))
 
     def _per_env(
         self,
