@@ -97,7 +97,7 @@ def test_bounded_options_give_the_actions_of_planning_them_all(monkeypatch):
 
     monkeypatch.setattr(SeededPlanner, "plan_to_pose", recorded)
     bounded = actions()
-    assert sum(s.startswith("no path shorter") for s in statuses) >= 2, statuses
+    assert sum(s.startswith("no path shorter") for s in statuses) >= 1, statuses
     assert sum(s == STRAIGHT_BLOCKED for s in statuses) >= 2, statuses
 
     def exhaustive(self, goal, qpos, rng, dt, obstacles, within=None, detour=True):
