@@ -77,7 +77,9 @@ class SolverConfig:
     # speeds and per-step changes within pd_joint_delta_pos's and pd_joint_vel's limits);
     # False: the speeds above, which only pd_joint_pos replays
     motion: MotionConfig = MotionConfig()  # the seeded IK and RRT-Connect (solvers/motion.py)
-    max_path_steps: int = 120  # a longer plan (a wrist flip, a detour) is refused as "long"
+    max_path_steps: int = 180  # a longer plan (a wrist flip, a detour) is refused as "long"
+    # (at the convertible speeds: default seeds 17 and 37 plan approaches and carries of
+    # 121-150 steps, which a cap of 120 refused)
     obstacle_points: int = 3000  # surface samples per obstacle actor
     obstacle_radius: float = 0.01  # m, radius of each obstacle point
     base_clearance: float = 0.15  # m, obstacle points this close to the base (in XY) and
