@@ -24,6 +24,7 @@ import torch
 
 from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.solvers.follow import follow_limits, rate_limited, shortened
 from embodied_envs.solvers.grasps import (
     GraspConfig,
     GripperModel,
@@ -65,13 +66,20 @@ class SolverConfig:
     gripper_steps: int = 8  # control steps to open the gripper, and at most to close it
     finger_rest: float = 1e-4  # m per step: fingers moving less are at rest (closed on the
     # object: 3 steps on the shipped layouts)
-    hold_steps: int = 10  # control steps holding still at the goal
+    hold_steps: int = 10  # control steps holding still at the goal; a demo goes on for this
+    # many steps after its task succeeds (the env terminates there), so that an arm replayed in
+    # another controller, which lags the recorded one, comes to rest in success too
     # rad/s and rad/s^2 per arm joint, within the Panda's (Franka's datasheet: velocity 2.175
     # for joints 1-4 and 2.61 for 5-7; acceleration 15, 7.5, 10, 12.5, 15, 20, 20)
     joint_vel_limits: tuple[float, ...] = (2.0, 2.0, 2.0, 2.0, 2.5, 2.5, 2.5)
     joint_acc_limits: tuple[float, ...] = (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
+    convertible: bool = True  # joint targets every arm controller can replay (``follow.py``:
+    # speeds and per-step changes within pd_joint_delta_pos's and pd_joint_vel's limits);
+    # False: the speeds above, which only pd_joint_pos replays
     motion: MotionConfig = MotionConfig()  # the seeded IK and RRT-Connect (solvers/motion.py)
-    max_path_steps: int = 120  # a longer plan (a wrist flip, a detour) is refused as "long"
+    max_path_steps: int = 180  # a longer plan (a wrist flip, a detour) is refused as "long"
+    # (at the convertible speeds: default seeds 17 and 37 plan approaches and carries of
+    # 121-150 steps, which a cap of 120 refused)
     obstacle_points: int = 3000  # surface samples per obstacle actor
     obstacle_radius: float = 0.01  # m, radius of each obstacle point
     base_clearance: float = 0.15  # m, obstacle points this close to the base (in XY) and
@@ -211,19 +219,26 @@ class PickPlaceSolver:
             )
         base_poses = self.base.agent.robot.pose.raw_pose.cpu().numpy()
         self.planners = _planners(self.base)
+        # the joint targets' bounds, so that other controllers replay them (solvers/follow.py)
+        self.follow = follow_limits(self.base.agent, 1 / self.base.control_timestep)
+        vel = np.asarray(self.cfg.joint_vel_limits, dtype=np.float64)
+        if self.cfg.convertible:
+            vel = np.minimum(vel, self.follow.speed)
         for i, planner in enumerate(self.planners):
             planner.set_base_pose(base_poses[i])
-            planner.joint_vel_limits = np.asarray(self.cfg.joint_vel_limits, dtype=np.float64)
+            planner.joint_vel_limits = vel
             planner.joint_acc_limits = np.asarray(self.cfg.joint_acc_limits, dtype=np.float64)
         self.motion = [SeededPlanner(p, self.cfg.motion, _levers(self.base)) for p in self.planners]
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
         self.steps = 0
-        self.ended = False  # the episode was truncated (or terminated) in every env
+        self.ended = False  # every env was truncated, failed, or succeeded hold_steps ago
+        self.succeeded = np.zeros(self.num_envs, dtype=int)  # per env, steps in success so far
         self.last_info: dict = {}
         self._batched_actions = len(self.env.action_space.shape) == 2
         self.gripper = np.full(self.num_envs, GRIPPER_OPEN)
         self.clouds: list[np.ndarray] = []  # per env, the obstacle surface points (world)
         self.slot = 0  # the mover slot being taken (``env.task_scene.movers``)
+        self.command = self._qpos()[:, :7]  # per env, the arm's last joint targets
         self._set_obstacles()
 
     # --- state ---------------------------------------------------------------------------
@@ -292,8 +307,8 @@ class PickPlaceSolver:
     def _execute(self, paths: list[np.ndarray | None], extra_steps: int = 0, until=None) -> None:
         """Step all envs along their paths in lockstep; envs without a path hold still.
         ``until()``: checked after every step; True ends the steps early."""
-        qpos = self._qpos()
-        paths = [None if p is None or not len(p) else self._commands(p) for p in paths]
+        paths = [None if p is None or not len(p) else self._commands(p, i)
+                 for i, p in enumerate(paths)]  # fmt: skip
         lengths = [len(p) if p is not None else 0 for p in paths]
         n = max(lengths, default=0) + extra_steps
         for t in range(n):
@@ -303,15 +318,18 @@ class PickPlaceSolver:
             for i, path in enumerate(paths):
                 if path is not None:
                     action[i, :7] = path[min(t, len(path) - 1)]
-                else:
-                    action[i, :7] = qpos[i, :7]
+                else:  # holds its last targets
+                    action[i, :7] = self.command[i]
                 action[i, 7] = self.gripper[i]
+            if self.cfg.convertible:
+                action[:, :7] = self._bounded(action[:, :7])
+            self.command = action[:, :7].astype(np.float64)
             self._step(action)
             if until is not None and until():
                 return
 
-    def _commands(self, path: np.ndarray) -> np.ndarray:
-        """The arm's joint targets that follow ``path`` (a waypoint per control step).
+    def _commands(self, path: np.ndarray, i: int) -> np.ndarray:
+        """Env i's arm joint targets that follow ``path`` (a waypoint per control step).
 
         ``pd_joint_pos`` drives each joint with ``stiffness * (target - q) - damping * qvel``,
         so a joint lags a moving target by ``damping / stiffness`` (0.1 s for the Panda, 5
@@ -319,23 +337,40 @@ class PickPlaceSolver:
         path's velocity, within the joint limits; the last target is the path's end. On a
         0.5 rad line at the solver's limits the arm stays within 0.022 rad of the path at
         every step instead of 0.16 (``test_joint_targets_lead_the_path...``).
+        With ``convertible``, the targets move from the last ones at most ``follow.step`` a
+        step (``follow.rate_limited``; the path's speed is within ``follow.speed``).
         """
         q = np.asarray(path, dtype=np.float64)[:, :7]
-        if len(q) < 3:
-            return q
-        arm = self.base.agent.controller.controllers["arm"].config
-        dt = self.base.control_timestep
-        lead = q + arm.damping / arm.stiffness * np.gradient(q, dt, axis=0)
-        lead[-1] = q[-1]  # the path ends at rest there
-        space = self.base.single_action_space
-        return np.clip(lead, space.low[:7], space.high[:7])
+        lead = q.copy()
+        if len(q) >= 3:
+            arm = self.base.agent.controller.controllers["arm"].config
+            dt = self.base.control_timestep
+            lead = q + arm.damping / arm.stiffness * np.gradient(q, dt, axis=0)
+            lead[-1] = q[-1]  # the path ends at rest there
+            space = self.base.single_action_space
+            lead = np.clip(lead, space.low[:7], space.high[:7])
+        if not self.cfg.convertible:
+            return lead
+        return rate_limited(lead, self.command[i], self.follow.step)
+
+    def _bounded(self, arm: np.ndarray) -> np.ndarray:
+        """The arm targets ``arm`` (per env) moved at most ``follow.step`` from the last ones
+        and leading the measured joints by at most ``follow.lead`` (a joint lagging its target
+        more than planned, e.g. the lag building up as it starts, slows the targets down)."""
+        arm = self.command + shortened(arm - self.command, self.follow.step)
+        q = self._qpos()[:, :7]
+        return q + shortened(arm - q, self.follow.lead)
 
     def _step(self, action: np.ndarray) -> None:
         a = action if self._batched_actions else action[0]
         _, _, terminated, truncated, info = self.env.step(a)
         self.last_info = info
         self.steps += 1
-        self.ended = bool(np.all(np.asarray(torch.as_tensor(terminated | truncated).cpu())))
+        flag = lambda x: np.asarray(torch.as_tensor(x).cpu()).reshape(-1)  # noqa: E731
+        success = flag(info["success"])
+        self.succeeded = np.where(success, self.succeeded + 1, 0)
+        over = flag(truncated) | (flag(terminated) & ~success)
+        self.ended = bool(np.all(over | (self.succeeded >= self.cfg.hold_steps)))
 
     def _per_env(
         self,

@@ -1,7 +1,7 @@
-"""Conversion of the expert's ``pd_joint_pos`` demos to end-effector control
-(``solvers/ee_actions.py``): a demo ends at the first step its task succeeds, the arm still
-slowing down; the converted arm lags a little, so it holds the last target until the task
-succeeds too."""
+"""Conversion of ``pd_joint_pos`` demos to end-effector control (``solvers/ee_actions.py``): a
+demo that ends at the first step its task succeeds, the arm still slowing down (as ManiSkill's
+``RecordEpisode`` datasets of other experts, and this expert's time-optimal ones, do); the
+converted arm lags a little, so it holds the last target until the task succeeds too."""
 
 import gymnasium as gym
 import numpy as np
@@ -12,23 +12,32 @@ import embodied_envs  # noqa: F401
 from embodied_envs.paths import default_layout
 from embodied_envs.solvers import PickPlaceSolver
 from embodied_envs.solvers.ee_actions import SETTLE_STEPS, joint_pos_to_ee
+from embodied_envs.solvers.pick_place import SolverConfig
 
 ENV_ID = "PickEmbodiedGen-v1"
 
 
 def demo(seed: int) -> np.ndarray:
-    """The expert's actions for ``seed`` on the default layout (they end at its success)."""
+    """The time-optimal expert's actions for ``seed`` on the default layout (``convertible``
+    off: the Panda's datasheet speeds), up to the first step its task succeeds."""
     env = gym.make(ENV_ID, layout_file=str(default_layout()), control_mode="pd_joint_pos")
-    actions = []
+    actions, success = [], []
     step = env.step
-    env.step = lambda a: actions.append(np.asarray(a, np.float32).copy()) or step(a)
+
+    def recorded(a):
+        out = step(a)
+        actions.append(np.asarray(a, np.float32).copy())
+        success.append(bool(out[4]["success"][0]))
+        return out
+
+    env.step = recorded
     try:
         env.reset(seed=seed)
-        result = PickPlaceSolver(env, seed=seed).solve()
+        result = PickPlaceSolver(env, SolverConfig(convertible=False), seed=seed).solve()
         assert bool(result.success[0])
     finally:
         env.close()
-    return np.array(actions)
+    return np.array(actions[: success.index(True) + 1])
 
 
 def convert(actions: np.ndarray, seed: int, **kwargs):

@@ -97,7 +97,7 @@ def test_bounded_options_give_the_actions_of_planning_them_all(monkeypatch):
 
     monkeypatch.setattr(SeededPlanner, "plan_to_pose", recorded)
     bounded = actions()
-    assert sum(s.startswith("no path shorter") for s in statuses) >= 2, statuses
+    assert sum(s.startswith("no path shorter") for s in statuses) >= 1, statuses
     assert sum(s == STRAIGHT_BLOCKED for s in statuses) >= 2, statuses
 
     def exhaustive(self, goal, qpos, rng, dt, obstacles, within=None, detour=True):
@@ -138,14 +138,15 @@ def _follow(env, monkeypatch, lead: bool):
     from embodied_envs.solvers.motion import straight_line_trajectory
 
     if not lead:
-        monkeypatch.setattr(PickPlaceSolver, "_commands", lambda self, p: np.asarray(p)[:, :7])
+        monkeypatch.setattr(PickPlaceSolver, "_commands", lambda self, p, i: np.asarray(p)[:, :7])
     env.reset(seed=0)
     solver = PickPlaceSolver(env, seed=0)
     cfg = solver.cfg
     start = solver._qpos()[0, :7]
     goal = start + np.array([0.4, 0.3, -0.3, 0.3, 0.4, 0.3, 0.5])
     dt = env.unwrapped.control_timestep
-    path = straight_line_trajectory(start, goal, cfg.joint_vel_limits, cfg.joint_acc_limits, dt)
+    vel = solver.planners[0].joint_vel_limits  # the speeds plans are timed at
+    path = straight_line_trajectory(start, goal, vel, cfg.joint_acc_limits, dt)
     errors = []
     step = solver._step
 
