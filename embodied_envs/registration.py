@@ -15,10 +15,10 @@ ENV_ID = "PickEmbodiedGen-v1"
 # the id with its module, as datasets store it: gymnasium imports the plugin on make
 ENTRY_ID = f"embodied_envs:{ENV_ID}"
 CONTROL_FREQ = 50  # Hz, control steps per second (the simulation runs at twice this)
-# 300 control steps = 6 s at CONTROL_FREQ: the scripted expert's longest successful
-# episode over 50 seeded episodes per shipped layout was 297 steps (mean ~150;
-# tools/bench_solver.py), so every demonstration fits in one episode
-MAX_EPISODE_STEPS = 300
+# 500 control steps = 10 s at CONTROL_FREQ: at the speeds every controller follows (joint
+# targets at most 1 rad/s, solvers/follow.py) the expert's pick and single-mover place
+# episodes take about 130-300 steps and two movers about 400 (tools/bench_solver.py)
+MAX_EPISODE_STEPS = 500
 
 
 def register() -> None:

@@ -66,7 +66,7 @@ def add_parser(sub) -> None:
         "--max-episode-steps",
         type=positive_int,
         default=None,
-        help="episode limit (default: the registered 300 control steps)",
+        help="episode limit (default: the registered 500 control steps)",
     )
     p.add_argument(
         "--video",

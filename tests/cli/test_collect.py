@@ -47,7 +47,7 @@ def test_dataset_is_maniskill_trajectory_format(dataset):
     assert info["env_kwargs"]["control_mode"] == "pd_joint_pos"
     assert info["env_kwargs"]["goal_region"] == {"inset": 0.12}  # the config file's, spelled out
     assert "config" not in info["env_kwargs"]
-    assert info["max_episode_steps"] == 300
+    assert info["max_episode_steps"] == 500
     assert meta["source_type"] == "motionplanning" and "PickPlaceSolver" in meta["source_desc"]
     episodes = meta["episodes"]
     assert [e["episode_seed"] for e in episodes] == [5, 6, 7]
@@ -64,7 +64,7 @@ def test_dataset_is_maniskill_trajectory_format(dataset):
             assert g["actions"].shape == (n, 8) and np.isfinite(g["actions"][:]).all()
             assert not g["truncated"][:-1].any(), "no step before the last is truncated"
             assert bool(g["success"][-1]) == e["success"]
-            assert n <= 300
+            assert n <= 500
             assert g["env_states/actors/goal_site"].shape[0] == n + 1
 
 

@@ -31,7 +31,7 @@ def test_make_without_arguments_uses_default_layout():
         assert e.unwrapped.layouts[0].target_node == "can"
         from mani_skill.utils.registration import REGISTERED_ENVS
 
-        assert REGISTERED_ENVS[ENV_ID].max_episode_steps == 300
+        assert REGISTERED_ENVS[ENV_ID].max_episode_steps == 500
     finally:
         e.close()
 
