@@ -144,10 +144,11 @@ def staged_dense(s: TaskState, result: dict, max_reward: float):
 def staged_reward(s: TaskState, k, in_pose, done_before, count: int, free=None):
     """The staged reward of ``place`` and ``move``, per env, in [0, ``STAGES``]: for the
     current mover ``k`` (``(n,)``), reach (1) and grasp (1); while grasped, carry over the
-    destination (1) and lower to it (1); in its pose (``in_pose (n,)``), released (1) and the
-    arm still (1); then (``done_before``: movers already done, ``(n,)``) each finished mover
-    adds a whole share: ``(done_before + stage / STAGES) * STAGES / count``. ``free``: the
-    current mover's :func:`released` when the caller has it."""
+    destination (1) and lower to it (1) (kept when let go within 2 cm of it); in its pose
+    (``in_pose (n,)``), released (1) and the arm still (1); then (``done_before``: movers
+    already done, ``(n,)``) each finished mover adds a whole share: ``(done_before + stage /
+    STAGES) * STAGES / count``. ``free``: the current mover's :func:`released` when the caller
+    has it."""
     xp, f = s.xp, as_float
     p, dest = take(s.movers, k), take(s.dest, k)
     grasped = f(take(s.grasped, k))
@@ -156,7 +157,8 @@ def staged_reward(s: TaskState, k, in_pose, done_before, count: int, free=None):
     carry = 1 - xp.tanh(5 * norm(p[:, :2] - dest[:, :2]))
     lower = (1 - xp.tanh(5 * xp.abs(p[:, 2] - dest[:, 2]))) * (carry > 0.9)
     still = 1 - xp.tanh(5 * norm(s.arm_qvel))
-    stage = xp.where(grasped > 0, 2 + carry + lower, reach + grasped)
+    # held, or just let go over its destination (falling the release gap): carried and lowered
+    stage = xp.where((grasped > 0) | (lower > 0.9), 2 + carry + lower, reach + grasped)
     stage = xp.where(in_pose, 4 + free + free * still, stage)
     return (done_before + stage / STAGES) * STAGES / count
 
