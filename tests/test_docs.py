@@ -1,12 +1,15 @@
 """The README and docs/ stay a user guide whose references hold: the README's size limits, every
 relative link and anchor resolves, every repository path the docs name exists, every page is
-reachable from the README, and the datasets' ``source_desc`` names files that exist."""
+reachable from the README, and the datasets' ``source_desc`` names files that exist and what the
+expert does for each task kind."""
 
 import ast
 import re
 
 import pytest
 from conftest import ROOT
+
+from embodied_envs.layout.task import KINDS
 
 README = ROOT / "README.md"
 DOCS = sorted((ROOT / "docs").glob("*.md"))
@@ -94,7 +97,7 @@ def test_every_docs_page_is_linked_from_the_readme():
     assert not unlinked, f"pages the README does not link to: {unlinked}"
 
 
-def test_the_datasets_source_desc_names_files_that_exist():
+def test_the_datasets_source_desc_names_files_that_exist_and_each_task_kind():
     found = []
     for module in sorted((ROOT / "embodied_envs").rglob("*.py")):
         for node in ast.walk(ast.parse(module.read_text(encoding="utf-8"))):
@@ -106,3 +109,7 @@ def test_the_datasets_source_desc_names_files_that_exist():
     paths = re.findall(r"embodied_envs/[\w/]+\.py", found[0])
     assert paths, "SOURCE_DESC names no file of the expert"
     assert all((ROOT / p).is_file() for p in paths), f"SOURCE_DESC names missing files: {paths}"
+    # what the expert does with each task kind a layout can name, a new kind failing here
+    said = {"pick": "hold still (pick)", "place": "released (place, move)", "move": "(place, move)"}
+    assert set(KINDS) == set(said), f"SOURCE_DESC: say what the expert does for {set(KINDS)}"
+    assert all(words in found[0] for words in said.values()), found[0]

@@ -1,4 +1,4 @@
-"""Convert a textured or coloured mesh into a 3DGS splat PLY (flat Gaussians, SH degree 0).
+"""Make the shipped room's splat: ``embodied-envs splat from-mesh`` with the room's defaults.
 
 With no arguments it makes the shipped room background:
 
@@ -6,22 +6,22 @@ With no arguments it makes the shipped room background:
       -> assets/background/gs_model.ply from assets/background/mesh_model.ply
 
 The mesh keeps its frame (the shipped room is Y-up, metres, floor at y = 0). Only faces that
-face ``--visible-from`` are sampled when it is given (a room seen from the inside).
+face ``--visible-from`` are sampled (a room seen from the inside) unless ``--all-faces``. The
+conversion is the package's (``embodied_envs.splat.mesh_file_to_splat``), which the
+``embodied-envs splat from-mesh`` command runs on any mesh.
 """
 
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
-import trimesh
-
-from embodied_envs.splat import mesh_to_splat, write_ply
+from embodied_envs.splat import mesh_file_to_splat
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "embodied_envs" / "data"  # package data; ./layouts and ./assets link here
 BACKGROUND = DATA / "assets" / "background"
+ROOM_INSIDE = (0.0, 1.3, 0.0)  # m, a point inside the shipped room, Y-up
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> None:
         "--visible-from",
         type=float,
         nargs=3,
-        default=(0.0, 1.3, 0.0),
+        default=ROOM_INSIDE,
         metavar=("X", "Y", "Z"),
         help="sample only faces facing this point",
     )
@@ -45,13 +45,10 @@ def main(argv: list[str] | None = None) -> None:
         "--normals", action="store_true", help="also write nx ny nz (unused by renderers; +21%%)"
     )
     args = ap.parse_args(argv)
-    mesh = trimesh.load(args.mesh, force="mesh")
-    splat = mesh_to_splat(
-        mesh, args.count, seed=args.seed, visible_from=None if args.all_faces else args.visible_from
+    visible_from = None if args.all_faces else args.visible_from
+    splat = mesh_file_to_splat(
+        args.mesh, args.out, args.count, args.seed, visible_from, normals=args.normals
     )
-    if not args.normals:
-        splat = replace(splat, normals=None)
-    write_ply(splat, args.out)
     size_mb = args.out.stat().st_size / 1e6
     print(f"wrote {args.out}: {len(splat)} Gaussians, {size_mb:.1f} MB")
 

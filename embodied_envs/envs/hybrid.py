@@ -81,8 +81,8 @@ class HybridRenderer:
                     f'hybrid rendering (render_mode="hybrid" or hybrid_obs=True) needs the '
                     f"background splat of {layout_file}, and this file does not exist",
                     "put a 3DGS gs_model.ply in the background's asset folder "
-                    '(tools/mesh_to_splat.py makes one from a mesh), or use render_mode="rgb_array"'
-                    " and hybrid_obs=False",
+                    "(`embodied-envs splat from-mesh MESH --out gs_model.ply` makes one from a "
+                    'mesh), or use render_mode="rgb_array" and hybrid_obs=False',
                 )
         self.backend = resolve_backend(backend)
         self.device = torch.device(device)

@@ -8,33 +8,25 @@ from typing import Any
 import numpy as np
 import sapien
 import torch
-from mani_skill.sensors.camera import CameraConfig
-from mani_skill.utils import sapien_utils
 from mani_skill.utils.building import actors
 from mani_skill.utils.building.ground import build_ground
 from mani_skill.utils.registration import register
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
-from embodied_envs.config import (
-    SPLAT_Y_UP_TO_Z_UP,
-    SUPPORTED_ROBOTS,
-    CameraSpec,
-    resolve_robot,
-)
+from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP, SUPPORTED_ROBOTS, CameraSpec
+from embodied_envs.envs import fast_reads, keywords
 from embodied_envs.envs.arguments import check_quaternion, dataclass_arg
 from embodied_envs.envs.base import CheckedEnv
-from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
+from embodied_envs.envs.rendering import HybridRendering, base_camera, render_camera
 from embodied_envs.envs.tasks import INFO_KEYS, KIND_IDS, RULES, pick
 from embodied_envs.envs.tasks.scene import TaskReader, TaskScene
-from embodied_envs.layout import GoalRegion, LayoutError, LayoutInfo, PlacementLimits
-from embodied_envs.layout.errors import check_number
-from embodied_envs.layout.placement import place
+from embodied_envs.layout import GoalRegion, LayoutInfo, PlacementLimits
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import default_layout
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID, MAX_EPISODE_STEPS
 from embodied_envs.scene import load_layout_scene
-from embodied_envs.scene.layout_scene import configuration_layouts, scene_slots
+from embodied_envs.scene.layout_scene import configuration_layouts
 
 # arm at the Panda's rest pose, fingers open (0.04 m each)
 REST_QPOS = np.array(
@@ -42,7 +34,7 @@ REST_QPOS = np.array(
 )
 
 
-class PickEmbodiedGenEnv(CheckedEnv):
+class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     """**Task Description:**
     Pick up the layout's target object (the first of ``relation.manipulated_objs``) with the
     Panda, which stands on the table's edge as the layout places it, and hold it still at a goal
@@ -69,9 +61,8 @@ class PickEmbodiedGenEnv(CheckedEnv):
     the goal), ``place`` (movers in or on a receptacle) or ``move`` (a mover 10 cm or more along
     a direction). Success, fail extras and the dense reward of each kind: ``envs/tasks/``.
 
-    **Fail Conditions:** ``fail`` when a mover is off the table: more than ``fail_drop``
-    (0.05 m) below the table's top, or its origin outside the top's footprint seen from above;
-    or a receptacle object knocked off likewise.
+    **Fail Conditions:** ``fail`` when a mover, or a receptacle object, is off the table: more
+    than ``fail_drop`` (0.05 m) below the table's top, or its origin outside the top's footprint.
 
     **Action Space:** the Panda controller's (default ``pd_joint_delta_pos``).
 
@@ -80,21 +71,20 @@ class PickEmbodiedGenEnv(CheckedEnv):
     pick, place, move); in state modes also ``obj_pose``, ``tcp_to_obj_pos``, ``obj_to_goal_pos``.
     Visual modes add the 128x128 ``base_camera`` (composited over the splat with ``hybrid_obs``).
 
-    **Rewards:** :meth:`compute_dense_reward`, in [0, the kind's ``MAX_REWARD``]; the
-    normalised one is in [0, 1].
+    **Rewards:** :meth:`compute_dense_reward`, in [0, its kind's ``MAX_REWARD``]; normalised [0, 1].
 
     **Episode End:** ``terminated`` on ``success`` or ``fail`` (ManiSkill sets it from both);
     truncation after ``MAX_EPISODE_STEPS`` (300) control steps, 6 s. Both flags are in ``info``.
 
-    **Render modes:** ManiSkill's, and ``"hybrid"``: the env then is an ``rgb_array`` env
-    (``env.render_mode == "rgb_array"``, so ManiSkill's ``CPUGymWrapper``, ``RecordEpisode``
-    and ``FrameStack`` take its frames unchanged) whose ``render()`` composites the human
-    render cameras over the splat; ``env.unwrapped.render_hybrid`` says so.
+    **Render modes:** ManiSkill's, and ``"hybrid"`` (``envs/rendering.py``): the env then is an
+    ``rgb_array`` env (so ManiSkill's ``CPUGymWrapper``, ``RecordEpisode`` and ``FrameStack``
+    take its frames unchanged) whose ``render()`` composites the human render cameras over the
+    splat; ``env.unwrapped.render_hybrid`` says so.
 
-    **Arguments:** ``__init__``'s keywords (each commented there), ManiSkill's own, and
-    ``config`` (YAML/JSON files merged in order, :mod:`embodied_envs.config`).
-    ``placement_limits`` and ``goal_region`` take the fields of
-    :mod:`embodied_envs.layout.placement.limits`; ``camera_cfg`` those of ``config.CameraSpec``.
+    **Arguments:** ``__init__``'s keywords (each commented there; checked in ``envs/keywords.py``),
+    ManiSkill's own, and ``config`` (YAML/JSON files merged in order, ``embodied_envs/config.py``).
+    ``placement_limits`` and ``goal_region`` take the fields of ``layout/placement/limits.py``,
+    ``camera_cfg`` those of ``config.CameraSpec``.
     """
 
     SUPPORTED_ROBOTS = SUPPORTED_ROBOTS
@@ -108,33 +98,19 @@ class PickEmbodiedGenEnv(CheckedEnv):
     # away from the robot, looking back at the robot over the table
     render_camera_back = 0.9  # m from the table's centre, away from the robot
     render_camera_rise = (0.34, 0.14)  # m above the table's top: the eye, the target
-
-    number_ranges = {  # numeric keywords: (low, high), checked before any simulation object
-        "robot_init_qpos_noise": (0.0, 0.5),  # rad, std of the arm joints' start noise
-        "objs_z_offset": (0.0, 0.1),  # m, objects start this far above their rest
-        "robot_z_offset": (0.0, 0.1),  # m, the robot base stands this far above its spot
-    }
+    number_ranges = keywords.NUMBER_RANGES  # numeric keywords: (low, high)
 
     @classmethod
     def check_keyword(cls, name: str, value) -> None:
         """A keyword's type (``CheckedEnv``) and range, checked as ``__init__`` checks it."""
         super().check_keyword(name, value)
-        if name in cls.number_ranges:
-            check_number(name, value, *cls.number_ranges[name])
-        elif name == "placement_limits":
-            dataclass_arg(PlacementLimits, value, name)
-        elif name == "goal_region":
-            dataclass_arg(GoalRegion, value, name)
-        elif name == "camera_cfg":
-            CameraSpec.from_cfg(value)
-        elif name == "init_3dgs_quat":
-            check_quaternion(name, value)
+        keywords.check_value(name, value)
 
     def __init__(
         self,
         *args,
-        # one layout file, a folder of them, a glob, or a list of these (a layout set: each
-        # env draws one per configuration); default: the shipped default layout
+        # a layout file, a folder, a glob, or a list of these (a set: each env draws one per
+        # configuration); default: the shipped default layout
         layout_file: str | os.PathLike | list | None = None,
         replace_objs: bool = True,
         robot_uids: str | None = None,
@@ -142,8 +118,7 @@ class PickEmbodiedGenEnv(CheckedEnv):
         init_3dgs_quat: tuple[float, float, float, float] = SPLAT_Y_UP_TO_Z_UP,
         objs_z_offset: float = 0.002,
         robot_z_offset: float = 0.002,
-        camera_cfg: dict
-        | None = None,  # render camera: camera_eye, camera_target_pt, image_hw, fovy_deg
+        camera_cfg: dict | None = None,  # camera_eye, camera_target_pt, image_hw, fovy_deg
         enable_grasp: bool = False,  # EmbodiedGen's keyword: accepted, has no effect
         hybrid_obs: bool = False,  # sensor RGB over the splat, whatever render_mode is
         hybrid_depth_test: bool = True,  # simulated pixels behind the splat surface are hidden
@@ -158,107 +133,55 @@ class PickEmbodiedGenEnv(CheckedEnv):
         # no eye or target given: the render camera is framed on the robot and the table
         self.frame_render_camera = not {"camera_eye", "camera_target_pt"} & set(camera_cfg or {})
         self.layout_set = LayoutSet.load(default_layout() if layout_file is None else layout_file)
-        files = self.layout_set.files
-        self.layout_file = files[0] if len(files) == 1 else files  # absolute
+        files = self.layout_set.files  # absolute
+        self.layout_file = files[0] if len(files) == 1 else files
         self.base_layout: LayoutInfo = self.layout_set.layouts[0]
-        robot = self._one_robot(robot_uids)
+        robot = keywords.one_robot(self.layout_set, robot_uids)
         self.placement_limits = dataclass_arg(PlacementLimits, placement_limits, "placement_limits")
         self.goal_region = dataclass_arg(GoalRegion, goal_region, "goal_region")
         self.goal_region.check_reach(self.placement_limits)
-        for name, value in (
-            ("robot_init_qpos_noise", robot_init_qpos_noise),
-            ("objs_z_offset", objs_z_offset),
-            ("robot_z_offset", robot_z_offset),
-            ("replace_objs", replace_objs),
-            ("enable_grasp", enable_grasp),
-            ("hybrid_obs", hybrid_obs),
-            ("hybrid_depth_test", hybrid_depth_test),
-            ("init_3dgs_quat", init_3dgs_quat),
-        ):
+        for name, value in dict(
+            robot_init_qpos_noise=robot_init_qpos_noise, objs_z_offset=objs_z_offset,
+            robot_z_offset=robot_z_offset, replace_objs=replace_objs, enable_grasp=enable_grasp,
+            hybrid_obs=hybrid_obs, hybrid_depth_test=hybrid_depth_test,
+            init_3dgs_quat=init_3dgs_quat,
+        ).items():  # fmt: skip
             self.check_keyword(name, value)  # as a config file's values are checked
         init_3dgs_quat = check_quaternion("init_3dgs_quat", init_3dgs_quat)
         self.replace_objs = bool(replace_objs)
-        self._check_layout_set(kwargs.get("num_envs", 1))
+        keywords.check_layout_set(
+            self.layout_set, self.replace_objs, self.placement_limits, kwargs.get("num_envs", 1)
+        )
         self.robot_init_qpos_noise = float(robot_init_qpos_noise)
         self.objs_z_offset, self.robot_z_offset = float(objs_z_offset), float(robot_z_offset)
-        self.hybrid_obs = bool(hybrid_obs)
-        self.render_hybrid = render_mode == "hybrid"
-        self.hybrid: HybridRenderer | None = None
-        if self.render_hybrid or self.hybrid_obs:  # moves to the sim's device when known
-            rooms = {x.gs_model_path(): x.source for x in reversed(self.layout_set.layouts)}
-            self.hybrid = HybridRenderer(
-                rooms,
-                tuple(float(v) for v in init_3dgs_quat),
-                depth_test=bool(hybrid_depth_test),
-                backend=splat_backend,
-            )
+        render_mode = self._set_up_hybrid(  # a hybrid env is an rgb_array env to ManiSkill
+            render_mode, hybrid_obs, hybrid_depth_test, splat_backend, init_3dgs_quat,
+            self.layout_set.layouts,
+        )  # fmt: skip
         self._num_configurations = 0
-        if self.render_hybrid:  # an rgb_array env to every wrapper; render() composites
-            render_mode = "rgb_array"
         super().__init__(*args, robot_uids=robot, render_mode=render_mode, **kwargs)
-
-    def _one_robot(self, robot_uids: str | None) -> str:
-        """The robot every layout of the set names (one agent serves every env)."""
-        robots = {
-            x.source: resolve_robot(x.robot, robot_uids, str(x.source))
-            for x in self.layout_set.layouts
-        }
-        if len(set(robots.values())) > 1:
-            raise LayoutError(
-                f"layout_file: the layouts of a set must name one robot, and these differ: "
-                f"{ {str(k): v for k, v in robots.items()} }. Fix: split the set by robot."
-            )
-        return next(iter(robots.values()))
-
-    def _check_layout_set(self, num_envs: int) -> None:
-        """What a configuration could meet, refused now: a layout or asset pool member that
-        cannot be placed, parallel envs that cannot merge their objects, file poses that do
-        not fit a pool's members."""
-        layout_set = self.layout_set
-        if self.replace_objs:  # an impossible layout fails here, not mid-simulation
-            for member in layout_set.members():
-                place(member, 0, self.placement_limits)
-        elif any(layout_set.pools):
-            pooled = next(x for x, p in zip(layout_set.layouts, layout_set.pools, strict=True) if p)
-            raise LayoutError(
-                f"{pooled.source}: asset pools need replace_objs=True (the file's poses were "
-                "made for one asset, and a drawn one may not rest there). Fix: pass "
-                "replace_objs=True, or name one asset folder."
-            )
-        if num_envs > 1 and layout_set.varies:
-            scene_slots(list(layout_set.layouts))
 
     @property
     def _default_sim_config(self):
+        gpu_memory = GPUMemoryConfig(max_rigid_contact_count=2**20, max_rigid_patch_count=2**19)
         return SimConfig(
-            sim_freq=2 * CONTROL_FREQ,
-            control_freq=CONTROL_FREQ,
+            sim_freq=2 * CONTROL_FREQ, control_freq=CONTROL_FREQ, gpu_memory_config=gpu_memory,
             scene_config=SceneConfig(solver_position_iterations=30),
-            gpu_memory_config=GPUMemoryConfig(
-                max_rigid_contact_count=2**20, max_rigid_patch_count=2**19
-            ),
-        )
+        )  # fmt: skip
 
     @property
     def _default_sensor_configs(self):
-        pose = sapien_utils.look_at(eye=self.base_camera_eye, target=self.base_camera_target)
-        mount = self.agent.robot.links_map[self.agent.robot.links[0].name]
-        return [CameraConfig("base_camera", pose, 128, 128, np.pi / 2, 0.01, 100, mount=mount)]
+        return [base_camera(self.agent, self.base_camera_eye, self.base_camera_target)]
 
     @property
     def _default_human_render_camera_configs(self):
-        cam = self.camera_spec
-        eye, target = cam.eye, cam.target
-        if self.frame_render_camera:  # on this configuration's robot and table (env 0's)
-            eye, target = self.layout_scene.framing(
-                self.render_camera_back, *self.render_camera_rise
-            )
-        pose = sapien_utils.look_at(eye=eye, target=target)
-        fovy = np.deg2rad(cam.fovy_deg)
-        return CameraConfig("render_camera", pose, cam.width, cam.height, fovy, 0.01, 100)
+        framing = None  # on this configuration's robot and table (env 0's)
+        if self.frame_render_camera:
+            framing = self.layout_scene.framing(self.render_camera_back, *self.render_camera_rise)
+        return render_camera(self.camera_spec, framing)
 
     def _load_agent(self, options: dict):
-        super()._load_agent(options, sapien.Pose(p=[0.0, 0.0, 0.0]))
+        super()._load_agent(options, sapien.Pose(p=[0.0, 0.0, 0.0]))  # placed per episode
 
     def _load_scene(self, options: dict):
         self._num_configurations += 1
@@ -283,27 +206,10 @@ class PickEmbodiedGenEnv(CheckedEnv):
         ls.register_state(self)
         self.ground = build_ground(self.scene, altitude=ls.floor_z)
         self.goal_site = actors.build_sphere(
-            self.scene,
-            radius=pick.GOAL_THRESH,
-            color=[0, 1, 0, 1],
-            name="goal_site",
-            body_type="kinematic",
-            add_collision=False,
-            initial_pose=sapien.Pose(),
-        )
+            self.scene, radius=pick.GOAL_THRESH, color=[0, 1, 0, 1], name="goal_site",
+            body_type="kinematic", add_collision=False, initial_pose=sapien.Pose(),
+        )  # fmt: skip
         self._hidden_objects.append(self.goal_site)
-
-    def _after_reconfigure(self, options: dict):
-        super()._after_reconfigure(options)
-        if self.hybrid is not None:
-            self.hybrid.to(self.device).configure(
-                foreground_ids=stacked_ids(
-                    self.agent.robot.links + list(self.layout_scene.node_actors.values())
-                ),
-                hidden_ids=stacked_ids(self._hidden_objects),
-                background_poses=[x.pose(x.background) for x in self.layouts],
-                rooms=[x.gs_model_path() for x in self.layouts],
-            )
 
     def _set_episode_rng(self, seed, env_idx: torch.Tensor):
         super()._set_episode_rng(seed, env_idx)  # new RNGs: drop starts drawn from the old ones
@@ -324,34 +230,14 @@ class PickEmbodiedGenEnv(CheckedEnv):
             is_pick = (self.task_scene.kinds == KIND_IDS["pick"]).to(self.device)[env_idx]
             goal = torch.where(is_pick[:, None], torch.as_tensor(start.goal), dest[:, 0])
             self.goal_site.set_pose(Pose.create_from_pq(goal))
-        if not self.gpu_sim_enabled:
-            self._restart_sleep_timers()
-
-    def _restart_sleep_timers(self):
-        """Wakes every moving body, as a new scene holds them. PhysX keeps each body's sleep
-        timer across ``set_pose``: without this, when bodies settle and sleep depends on the
-        episodes this process ran before, and one seed gives other states (and other expert
-        actions) after another history, e.g. with another ``collect --workers``. CPU simulation
-        only (one env, a few bodies); not done on the GPU simulation, where all envs share one
-        PhysX scene (untested there)."""
-        px = self.scene.px
-        for body in px.rigid_dynamic_components:
-            if not body.kinematic:
-                body.wake_up()
-        for link in px.articulation_link_components:
-            link.wake_up()
-
-    def reset(self, seed: int | list[int] | None = None, options: dict | None = None):
-        result = super().reset(seed=seed, options=options)
-        if self.hybrid is not None:
-            self.hybrid.prerender(self.scene)  # after a (re)configuration: the new backgrounds
-        return result
+        if not self.gpu_sim_enabled:  # bodies settle as in a new scene, whatever ran before
+            fast_reads.restart_sleep_timers(self.scene)
 
     def _rules(self):
         """The task state now and each present kind's rule results (``envs/tasks``)."""
-        goal = self.goal_site.pose.p if self.task_reader.gpu else np.array(
-            [e.pose.p for e in self.goal_site._objs])  # fmt: skip
-        state = self.task_reader.state(goal)
+        reader = self.task_reader
+        goal = self.goal_site.pose.p if reader.gpu else fast_reads.positions(self.goal_site)
+        state = reader.state(goal)
         return state, {k: RULES[k].evaluate(state) for k in self._kinds}
 
     def _by_kind(self, results: dict, key: str) -> torch.Tensor:
@@ -379,39 +265,8 @@ class PickEmbodiedGenEnv(CheckedEnv):
         return info
 
     def get_state_dict(self):
-        """ManiSkill's state dict (what ``RecordEpisode`` records every step and
-        ``set_state_dict`` takes): on the CPU simulation read from the SAPIEN objects in one
-        pass, as ManiSkill's ``Actor.get_state`` and ``Articulation.get_state`` read them, with
-        the same keys, order, shapes and values (tested at every step of expert episodes);
-        ManiSkill's own on the GPU (its pass over the actors cost 0.12 of 1.7 ms per recorded
-        control step on the CPU)."""
-        if self.gpu_sim_enabled:
-            return super().get_state_dict()
-        zeros = np.zeros(3, dtype=np.float32)
-        actors, articulations = {}, {}
-        for actor in self.scene.state_dict_registry.actors.values():
-            if actor.px_body_type == "static":
-                continue
-            pose, body = actor._objs[0].pose, actor._bodies[0]
-            moving = actor.px_body_type == "dynamic"
-            vel = (body.linear_velocity, body.angular_velocity) if moving else (zeros, zeros)
-            actors[actor.name] = torch.from_numpy(np.concatenate([pose.p, pose.q, *vel])[None])
-        for art in self.scene.state_dict_registry.articulations.values():
-            root, px = art.root, art._objs[0]
-            pose, body = root._objs[0].entity_pose, root._bodies[0]
-            state = [pose.p, pose.q, body.linear_velocity, body.angular_velocity, px.qpos, px.qvel]
-            articulations[art.name] = torch.from_numpy(np.concatenate(state)[None])
-        state = {}
-        if actors:
-            state["actors"] = actors
-        if articulations:
-            state["articulations"] = articulations
-        controller = self.agent.get_controller_state()
-        if isinstance(self.agent.controller, dict):
-            controller = {k: v for k, v in controller.items() if len(v) > 0}
-        if len(controller) > 0:
-            state["controller"] = controller
-        return state
+        """ManiSkill's, read in one pass on the CPU simulation (``envs/fast_reads.py``)."""
+        return super().get_state_dict() if self.gpu_sim_enabled else fast_reads.cpu_state_dict(self)
 
     def _get_obs_extra(self, info: dict):
         obs = dict(
@@ -437,33 +292,9 @@ class PickEmbodiedGenEnv(CheckedEnv):
         return self._by_kind(rewards, "reward").float()
 
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        dense = self.compute_dense_reward(obs=obs, action=action, info=info)
         maxima = {k: {"max": np.full(self.num_envs, RULES[k].MAX_REWARD, np.float32)}
                   for k in self._kinds}  # fmt: skip
-        return dense / self._by_kind(maxima, "max")
-
-    # --- hybrid rendering: HybridRenderer composites; the env only hands it images -----------
-    def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
-        obs = super()._get_obs_sensor_data(apply_texture_transforms)
-        # a policy sees what a person sees: colour, depth, points and segmentation agree
-        if self.hybrid_obs and apply_texture_transforms:
-            self.hybrid.composite_sensors(self.scene, obs)
-        return obs
-
-    def get_obs(self, info: dict | None = None, unflattened: bool = False):
-        obs = super().get_obs(info, unflattened)
-        if self.hybrid_obs and self.obs_mode == "pointcloud":  # splat points at their place
-            self.hybrid.place_splat_points(obs["pointcloud"], obs["sensor_param"])
-        return obs
-
-    def render_rgb_array(self, camera_name: str | None = None):
-        if self.render_hybrid:
-            return self.hybrid.render(self.scene, self._hidden_objects, camera_name)
-        return super().render_rgb_array(camera_name)
-
-    def render_simulated(self, camera_name: str | None = None):
-        """The human render cameras' plain simulator images, without the splat."""
-        return super().render_rgb_array(camera_name)
+        return self.compute_dense_reward(obs, action, info) / self._by_kind(maxima, "max")
 
 
 register(ENV_ID, PickEmbodiedGenEnv, max_episode_steps=MAX_EPISODE_STEPS)

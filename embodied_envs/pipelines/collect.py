@@ -38,11 +38,14 @@ from embodied_envs.workers import report, run, started
 
 SOURCE_DESC = (
     "embodied_envs PickPlaceSolver (embodied_envs/solvers/pick_place.py): antipodal parallel-jaw "
-    "grasps synthesised from the target's collision mesh (embodied_envs/solvers/grasps.py), kept "
-    "when the gripper clears the object, the table and the other objects; the arm takes the one "
-    "it reaches soonest (IK and a collision-free plan, lower ranks costing steps); seeded plans "
-    "(straight joint lines, screw motions, RRT-Connect) approach, grasp, lift, carry to the goal "
-    "and hold still, re-grasping after a miss; pd_joint_pos actions"
+    "grasps synthesised from each mover's collision mesh (embodied_envs/solvers/grasps.py), posed "
+    "where it lies within 65 degrees of straight down (the top-down grasp across its footprint's "
+    "narrow side first) and kept when the gripper clears the object, the table and the other "
+    "objects; the arm takes the one it reaches soonest (IK and a collision-free plan, lower ranks "
+    "costing steps); seeded plans (straight joint lines, screw motions, RRT-Connect) approach, "
+    "grasp, lift and carry it: to the goal and hold still (pick), or over its destination, "
+    "lowered and released (place, move); a missed or slipped grasp is made again; pd_joint_pos "
+    "actions"
 )
 OBS_MODES = ("none", "state", "rgb", "rgbd")
 

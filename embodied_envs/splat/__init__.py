@@ -15,6 +15,7 @@ _EXPORTS = {
     "SplatFileError": "ply",
     "SplatImage": "rasterizer",
     "check_ply": "ply",
+    "mesh_file_to_splat": "mesh",
     "mesh_to_splat": "mesh",
     "pose_splat": "model",
     "rasterize_torch": "rasterizer",

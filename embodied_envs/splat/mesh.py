@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -11,6 +14,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from embodied_envs.splat.model import GaussianSplat
+from embodied_envs.splat.ply import SplatFileError, write_ply
 from embodied_envs.splat.sh import SH_C0
 
 FLAT_SCALE = 1e-3  # m, standard deviation of each Gaussian along the surface normal
@@ -111,3 +115,44 @@ def mesh_to_splat(
         sh=t((colors - 0.5) / SH_C0)[:, None, :],
         normals=t(normals),
     )
+
+
+def mesh_file_to_splat(
+    mesh_path: str | os.PathLike,
+    out: str | os.PathLike,
+    count: int,
+    seed: int = 0,
+    visible_from: Sequence[float] | None = None,
+    normals: bool = False,
+) -> GaussianSplat:
+    """Convert the mesh file ``mesh_path`` (any format trimesh reads) into a splat PLY at
+    ``out`` (written to a temporary name, then renamed), with :func:`mesh_to_splat`'s sampling;
+    ``normals`` also writes nx ny nz (unused by renderers). ``embodied-envs splat from-mesh``.
+
+    Raises:
+        SplatFileError: the mesh file is missing, unreadable, or has no faces to sample.
+    """
+    mesh_path = Path(mesh_path)
+    if not mesh_path.is_file():
+        raise SplatFileError(mesh_path, "this mesh file does not exist", "give a mesh file path")
+    try:
+        mesh = trimesh.load(mesh_path, force="mesh")
+    except Exception as e:  # trimesh raises many types for a bad file: say which file
+        raise SplatFileError(
+            mesh_path, f"trimesh cannot read it as a mesh ({type(e).__name__}: {e})",
+            "give a mesh file trimesh reads (PLY, OBJ, GLB, STL, ...)",
+        ) from e  # fmt: skip
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise SplatFileError(
+            mesh_path, "the file holds no triangle faces", "give a mesh with faces, not points"
+        )
+    try:
+        splat = mesh_to_splat(mesh, count, seed=seed, visible_from=visible_from)
+    except ValueError as e:
+        raise SplatFileError(
+            mesh_path, str(e), "give a positive count, or another --visible-from point"
+        ) from e
+    if not normals:
+        splat = replace(splat, normals=None)
+    write_ply(splat, out)
+    return splat

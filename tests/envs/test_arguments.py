@@ -164,3 +164,34 @@ def test_reset_to_env_states_takes_a_state_dict_or_a_flat_state(env):
     env.reset(seed=6)
     got = env.reset(options=dict(reset_to_env_states=dict(env_states=flat, obs=obs)))[0]
     assert torch.equal(got, obs) and torch.allclose(u.get_state(), flat, atol=1e-6)
+
+
+def test_enable_grasp_is_accepted_and_changes_nothing(env):
+    """EmbodiedGen passes ``enable_grasp``: taken (a flag, checked as such), and the same seeded
+    episode runs to the same observations, rewards, flags and states with it on as off."""
+    other = gym.make(ENV_ID, obs_mode="state", enable_grasp=True)
+    try:
+        runs = []
+        for e in (env, other):
+            obs, _ = e.reset(seed=3)
+            steps = [(obs, None, None, e.unwrapped.get_state_dict())]
+            rng = np.random.default_rng(0)
+            for _ in range(5):
+                obs, reward, terminated, truncated, info = e.step(
+                    rng.uniform(-1, 1, e.action_space.shape).astype(np.float32)
+                )
+                flags = {k: v for k, v in info.items() if isinstance(v, torch.Tensor)}
+                steps.append((obs, reward, flags, e.unwrapped.get_state_dict()))
+            runs.append(steps)
+        for (a, ra, fa, sa), (b, rb, fb, sb) in zip(*runs, strict=True):
+            assert torch.equal(a, b)
+            assert (ra is None and rb is None) or torch.equal(ra, rb)
+            assert fa is None or list(fa) == list(fb)
+            assert fa is None or all(torch.equal(fa[k], fb[k]) for k in fa)
+            for group in sa:
+                assert list(sa[group]) == list(sb[group])
+                for name in sa[group]:
+                    assert torch.equal(sa[group][name], sb[group][name]), (group, name)
+        assert not hasattr(other.unwrapped, "enable_grasp")  # nothing of it is kept
+    finally:
+        other.close()

@@ -243,7 +243,7 @@ def test_missing_background_splat_fails_at_construction(scene_copy):
         make(layout_file)
     msg = str(e.value)
     assert "gs_model.ply" in msg and 'render_mode="hybrid"' in msg and str(layout_file) in msg
-    assert "mesh_to_splat" in msg
+    assert "embodied-envs splat from-mesh MESH --out gs_model.ply" in msg
     assert snapshot(scene_copy) == before
 
 

@@ -1,0 +1,102 @@
+"""The env's cameras and its hybrid-render plumbing.
+
+:func:`base_camera` and :func:`render_camera` build the sensor and the human render camera's
+configs. :class:`HybridRendering` is a mixin for a :class:`~embodied_envs.envs.base.CheckedEnv`
+that loads a layout scene (``self.layouts``, ``self.layout_scene``): it holds
+``render_mode="hybrid"`` and ``hybrid_obs``. ``HybridRenderer`` (``envs/hybrid.py``) does the
+compositing; the mixin only hands it the simulator's images at the points ManiSkill makes them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from mani_skill.sensors.camera import CameraConfig
+from mani_skill.utils import sapien_utils
+
+from embodied_envs.config import CameraSpec
+from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
+
+
+def base_camera(agent, eye, target) -> CameraConfig:
+    """The 128x128 ``base_camera`` sensor, mounted on the robot's base link; ``eye`` and
+    ``target`` in the base frame (m)."""
+    pose = sapien_utils.look_at(eye=eye, target=target)
+    mount = agent.robot.links_map[agent.robot.links[0].name]
+    return CameraConfig("base_camera", pose, 128, 128, np.pi / 2, 0.01, 100, mount=mount)
+
+
+def render_camera(spec: CameraSpec, framing: tuple | None) -> CameraConfig:
+    """The human ``render_camera``: ``spec``'s eye and target, or ``framing``'s (eye, target)
+    when given."""
+    eye, target = framing if framing is not None else (spec.eye, spec.target)
+    pose = sapien_utils.look_at(eye=eye, target=target)
+    fovy = np.deg2rad(spec.fovy_deg)
+    return CameraConfig("render_camera", pose, spec.width, spec.height, fovy, 0.01, 100)
+
+
+class HybridRendering:
+    """``render_mode="hybrid"`` (``render()`` composites the human render cameras over the
+    splat) and ``hybrid_obs`` (sensor observations composited likewise), for an env with
+    ``layouts`` and ``layout_scene``. Set up by :meth:`_set_up_hybrid` before
+    ``BaseEnv.__init__``."""
+
+    hybrid: HybridRenderer | None = None
+
+    def _set_up_hybrid(
+        self, render_mode, hybrid_obs, depth_test, backend, init_3dgs_quat, layouts
+    ) -> str | None:
+        """Sets ``hybrid_obs``, ``render_hybrid`` and ``hybrid`` (the renderer, or None when
+        neither is asked for); returns the render mode to give ManiSkill: a hybrid env is an
+        ``rgb_array`` env to every wrapper, and its ``render()`` composites."""
+        self.hybrid_obs = bool(hybrid_obs)
+        self.render_hybrid = render_mode == "hybrid"
+        self.hybrid = None
+        if self.render_hybrid or self.hybrid_obs:  # moves to the sim's device when known
+            rooms = {x.gs_model_path(): x.source for x in reversed(layouts)}
+            self.hybrid = HybridRenderer(
+                rooms,
+                tuple(float(v) for v in init_3dgs_quat),
+                depth_test=bool(depth_test),
+                backend=backend,
+            )
+        return "rgb_array" if self.render_hybrid else render_mode
+
+    def _after_reconfigure(self, options: dict):
+        super()._after_reconfigure(options)
+        if self.hybrid is not None:
+            self.hybrid.to(self.device).configure(
+                foreground_ids=stacked_ids(
+                    self.agent.robot.links + list(self.layout_scene.node_actors.values())
+                ),
+                hidden_ids=stacked_ids(self._hidden_objects),
+                background_poses=[x.pose(x.background) for x in self.layouts],
+                rooms=[x.gs_model_path() for x in self.layouts],
+            )
+
+    def reset(self, seed: int | list[int] | None = None, options: dict | None = None):
+        result = super().reset(seed=seed, options=options)
+        if self.hybrid is not None:
+            self.hybrid.prerender(self.scene)  # after a (re)configuration: the new backgrounds
+        return result
+
+    def _get_obs_sensor_data(self, apply_texture_transforms: bool = True) -> dict:
+        obs = super()._get_obs_sensor_data(apply_texture_transforms)
+        # a policy sees what a person sees: colour, depth, points and segmentation agree
+        if self.hybrid_obs and apply_texture_transforms:
+            self.hybrid.composite_sensors(self.scene, obs)
+        return obs
+
+    def get_obs(self, info: dict | None = None, unflattened: bool = False):
+        obs = super().get_obs(info, unflattened)
+        if self.hybrid_obs and self.obs_mode == "pointcloud":  # splat points at their place
+            self.hybrid.place_splat_points(obs["pointcloud"], obs["sensor_param"])
+        return obs
+
+    def render_rgb_array(self, camera_name: str | None = None):
+        if self.render_hybrid:
+            return self.hybrid.render(self.scene, self._hidden_objects, camera_name)
+        return super().render_rgb_array(camera_name)
+
+    def render_simulated(self, camera_name: str | None = None):
+        """The human render cameras' plain simulator images, without the splat."""
+        return super().render_rgb_array(camera_name)

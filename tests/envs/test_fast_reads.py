@@ -1,0 +1,119 @@
+"""The ManiSkill and SAPIEN internals ``envs/fast_reads.py`` (and ``envs/contacts.py``,
+``envs/tasks/scene.py``) read on the CPU simulation exist, with the types those reads expect, on
+a real CPU env: a ManiSkill upgrade that renames or retypes one fails here, naming it and the
+installed version, rather than as a wrong value or an AttributeError mid-episode."""
+
+import gymnasium as gym
+import mani_skill
+import numpy as np
+import pytest
+import sapien
+import torch
+from mani_skill.envs.sapien_env import BaseEnv
+from mani_skill.utils.structs import Actor, Articulation, Link
+
+import embodied_envs  # noqa: F401
+from embodied_envs.envs import fast_reads
+
+PHYSX = sapien.physx
+ITEM_TYPES = {  # the names fast_reads.PRIVATE_ATTRIBUTES gives, as classes
+    "sapien.Entity": sapien.Entity,
+    "PhysxRigidBodyComponent": PHYSX.PhysxRigidBodyComponent,
+    "PhysxArticulationLinkComponent": PHYSX.PhysxArticulationLinkComponent,
+    "PhysxArticulation": PHYSX.PhysxArticulation,
+}
+STRUCTS = {"Actor": Actor, "Link": Link, "Articulation": Articulation}
+
+
+def relied_on(what: str) -> str:
+    return (
+        f"{what}: embodied_envs/envs/fast_reads.py relies on it, and ManiSkill "
+        f"{mani_skill.__version__} lacks it or changed its type; update the CPU reads there "
+        "(and in envs/contacts.py, envs/tasks/scene.py) to this version"
+    )
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = gym.make("PickEmbodiedGen-v1", obs_mode="state", sim_backend="physx_cpu")
+    e.reset(seed=0)
+    yield e
+    e.close()
+
+
+def structs(env):
+    """One of each ManiSkill struct the reads meet: the target object, a robot link, the robot."""
+    u = env.unwrapped
+    return {"Actor": u.obj, "Link": u.agent.finger1_link, "Articulation": u.agent.robot}
+
+
+@pytest.mark.parametrize("struct,name,item", fast_reads.PRIVATE_ATTRIBUTES)
+def test_each_private_attribute_exists_with_its_type(env, struct, name, item):
+    obj = structs(env)[struct]
+    assert isinstance(obj, STRUCTS[struct])
+    value = getattr(obj, name, None)
+    assert isinstance(value, list) and len(value) == env.unwrapped.num_envs, relied_on(
+        f"{struct}.{name} (a list, one item per env)"
+    )
+    assert all(isinstance(x, ITEM_TYPES[item]) for x in value), relied_on(
+        f"{struct}.{name} items of type {item}, got {[type(x).__name__ for x in value]}"
+    )
+
+
+def test_what_the_reads_call_on_those_objects_exists(env):
+    u = env.unwrapped
+    checks = {
+        "sapien.Entity.pose": lambda: u.obj._objs[0].pose.p,
+        "PhysxRigidBodyComponent.linear_velocity": lambda: u.obj._bodies[0].linear_velocity,
+        "PhysxRigidBodyComponent.angular_velocity": lambda: u.obj._bodies[0].angular_velocity,
+        "PhysxArticulationLinkComponent.entity_pose": lambda: u.agent.tcp._objs[0].entity_pose.p,
+        "PhysxArticulation.qpos": lambda: u.agent.robot._objs[0].qpos,
+        "PhysxArticulation.qvel": lambda: u.agent.robot._objs[0].qvel,
+        "Articulation.root": lambda: u.agent.robot.root._bodies[0].linear_velocity,
+        "Actor.px_body_type": lambda: np.array([len(u.obj.px_body_type)], float),
+        "ManiSkillScene.state_dict_registry.actors": lambda: np.array(
+            [len(u.scene.state_dict_registry.actors)], float),
+        "ManiSkillScene.state_dict_registry.articulations": lambda: np.array(
+            [len(u.scene.state_dict_registry.articulations)], float),
+    }  # fmt: skip
+    for what, read in checks.items():
+        try:
+            value = np.asarray(read())
+        except AttributeError as err:
+            pytest.fail(relied_on(f"{what} ({err})"))
+        assert value.size > 0 and np.isfinite(value).all(), relied_on(what)
+    assert u.obj.px_body_type == "dynamic", relied_on("Actor.px_body_type ('dynamic')")
+    px = u.scene.px
+    for name in ("rigid_dynamic_components", "articulation_link_components"):
+        bodies = getattr(px, name, None)
+        assert bodies, relied_on(f"PhysxCpuSystem.{name} (a non-empty list)")
+        assert all(callable(getattr(b, "wake_up", None)) for b in bodies), relied_on(
+            f"PhysxCpuSystem.{name}[i].wake_up()"
+        )
+    assert all(isinstance(b.kinematic, bool) for b in px.rigid_dynamic_components), relied_on(
+        "PhysxRigidDynamicComponent.kinematic (a bool)"
+    )
+
+
+def test_the_reads_give_what_maniskill_gives(env):
+    """Each read against the public ManiSkill call it replaces, after some steps."""
+    u = env.unwrapped
+    for _ in range(3):
+        env.step(env.action_space.sample())
+    np.testing.assert_array_equal(fast_reads.positions(u.goal_site), u.goal_site.pose.p.numpy())
+    ours, theirs = fast_reads.cpu_state_dict(u), BaseEnv.get_state_dict(u)
+    assert list(ours) == list(theirs)
+    for group in ("actors", "articulations"):
+        assert list(ours[group]) == list(theirs[group]), relied_on(f"state_dict_registry {group}")
+        for name, value in theirs[group].items():
+            assert torch.equal(ours[group][name], value), relied_on(f"the state of {name}")
+
+
+def test_restart_sleep_timers_wakes_every_moving_body(env):
+    u = env.unwrapped
+    bodies = [b for b in u.scene.px.rigid_dynamic_components if not b.kinematic]
+    for b in bodies:
+        b.put_to_sleep()
+    assert all(b.is_sleeping for b in bodies)
+    fast_reads.restart_sleep_timers(u.scene)
+    assert bodies and not any(b.is_sleeping for b in bodies)
