@@ -287,7 +287,10 @@ def banana() -> Asset:
     return Asset("banana", parts, collision=collision, mass=0.12)
 
 
-ASSETS = [rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana, fruit_bowl, tray, storage_box]
+ASSETS = [
+    rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana, fruit_bowl, tray,
+    storage_box,
+]
 
 
 def room_mesh() -> trimesh.Trimesh:

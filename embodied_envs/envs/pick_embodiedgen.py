@@ -74,7 +74,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     **Rewards:** :meth:`compute_dense_reward`, in [0, its kind's ``MAX_REWARD``]; normalised [0, 1].
 
     **Episode End:** ``terminated`` on ``success`` or ``fail`` (ManiSkill sets it from both);
-    truncation after ``MAX_EPISODE_STEPS`` (300) control steps, 6 s. Both flags are in ``info``.
+    truncation after ``MAX_EPISODE_STEPS`` (500) control steps, 10 s. Both flags are in ``info``.
 
     **Render modes:** ManiSkill's, and ``"hybrid"`` (``envs/rendering.py``): the env then is an
     ``rgb_array`` env (so ManiSkill's ``CPUGymWrapper``, ``RecordEpisode`` and ``FrameStack``
