@@ -184,9 +184,10 @@ def main() -> None:
         f"render() per frame (256x256):      hybrid {hyb * 1e3:6.1f} ms, "
         f"rgb_array {rgb * 1e3:6.1f} ms, ratio {hyb / rgb:.2f}"
     )
+    gaussians = sum(len(s) for s in u.hybrid.splats.values())
     print(
         f"background render:                 {u.hybrid.render_seconds / u.hybrid.renders:.2f} s "
-        f"per (camera, env), once per configuration ({len(u.hybrid.splat):,} Gaussians)"
+        f"per (camera, env), once per configuration ({gaussians:,} Gaussians)"
     )
     for n in args.background_envs:
         one_call = background_seconds(n, batched=True)
