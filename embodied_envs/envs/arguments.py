@@ -10,6 +10,7 @@ import dataclasses
 import math
 import numbers
 import warnings
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -104,6 +105,51 @@ def check_num_envs(num_envs, sim_backend: str) -> None:
             "vector_kwargs=dict(context='forkserver')), with ManiSkill's CPUGymWrapper "
             "(mani_skill.utils.wrappers.gymnasium)"
         )
+
+
+def gpu_sim_requested(num_envs: int, sim_backend: str) -> bool:
+    """Whether ManiSkill will run PhysX on the GPU: a CUDA backend named, or "auto" with
+    several envs (ManiSkill's own rule)."""
+    name = str(sim_backend).split(":")[0]
+    return name in ("physx_cuda", "cuda", "gpu") or (name == "auto" and num_envs > 1)
+
+
+def check_gpu_physics(num_envs: int, sim_backend: str) -> None:
+    """ManiSkill's GPU simulation needs CUDA and PhysX's GPU library, which SAPIEN fetches from
+    GitHub on first use into ``~/.sapien/physx/<version>/``; a machine that cannot reach GitHub
+    would otherwise stop inside ``requests`` with a name-resolution traceback."""
+    if not gpu_sim_requested(num_envs, sim_backend):
+        return
+    if not torch.cuda.is_available():
+        raise ValueError(
+            f"sim_backend={sim_backend!r} runs PhysX on the GPU and this machine has no CUDA "
+            "device. Fix: sim_backend='physx_cpu' with num_envs=1 (one env per process)"
+        )
+    # why here: sapien.physx imports the simulator; arguments.py is imported without it
+    import sapien.physx as physx
+
+    if physx.is_gpu_enabled():
+        return
+    folder = Path.home() / ".sapien" / "physx" / physx.version()
+    url = (
+        "https://github.com/sapien-sim/physx-precompiled/releases/download/"
+        f"{physx.version()}/linux-so.zip"
+    )
+    try:
+        physx.enable_gpu()
+    except Exception as err:  # requests' errors, a truncated zip, a library that fails to load
+        raise RuntimeError(
+            f"sim_backend={sim_backend!r} needs PhysX's GPU library "
+            f"({folder / 'libPhysXGpu_64.so'}), which SAPIEN downloads from {url} on first use, "
+            f"and that failed ({type(err).__name__}: {short(err)}). Fix: "
+            f"download {url} on a machine with internet and unzip it into {folder} on this one"
+        ) from err
+
+
+def short(err: BaseException, limit: int = 120) -> str:
+    """An exception's first line, cut to ``limit`` characters."""
+    line = (str(err).splitlines() or [""])[0]
+    return line if len(line) <= limit else line[: limit - 3] + "..."
 
 
 def check_seed(seed, num_envs: int) -> None:

@@ -29,6 +29,7 @@ from embodied_envs.envs.arguments import (
     check_action,
     check_env_idx,
     check_flag,
+    check_gpu_physics,
     check_num_envs,
     check_reset_options,
     check_seed,
@@ -49,6 +50,7 @@ class CheckedEnv(BaseEnv):
                 f"{list(self.SUPPORTED_RENDER_MODES)} or None"
             )
         check_num_envs(num_envs, kwargs.get("sim_backend", "auto"))
+        check_gpu_physics(num_envs, kwargs.get("sim_backend", "auto"))
         super().__init__(*args, num_envs=num_envs, render_mode=render_mode, **kwargs)
 
     @property

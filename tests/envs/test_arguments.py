@@ -93,6 +93,46 @@ def test_several_envs_without_cuda_point_to_the_async_vector_env():
         gym.make(ENV_ID, num_envs=0)
 
 
+@pytest.mark.skipif(torch.cuda.is_available(), reason="the message is for machines without CUDA")
+def test_one_gpu_env_without_cuda_says_so():
+    for backend in ("physx_cuda", "gpu", "cuda:0"):
+        with pytest.raises(ValueError) as e:
+            gym.make(ENV_ID, sim_backend=backend)
+        msg = str(e.value)
+        assert f"sim_backend={backend!r} runs PhysX on the GPU" in msg and "no CUDA device" in msg
+        assert "sim_backend='physx_cpu'" in msg
+
+
+def test_gpu_sim_without_physx_gpu_library_names_file_url_and_fix(monkeypatch):
+    """A CUDA machine that cannot reach GitHub (SAPIEN fetches PhysX's GPU library there on first
+    use) gets one line naming the library, the URL and the fix, not a requests traceback."""
+    import requests
+    import sapien.physx
+
+    from embodied_envs.envs.arguments import check_gpu_physics, gpu_sim_requested
+
+    def offline():
+        raise requests.exceptions.ConnectionError("Failed to resolve 'github.com'\nmore")
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(sapien.physx, "is_gpu_enabled", lambda: False)
+    monkeypatch.setattr(sapien.physx, "enable_gpu", offline)
+    with pytest.raises(RuntimeError) as e:
+        check_gpu_physics(16, "auto")
+    msg = str(e.value)
+    version = sapien.physx.version()
+    assert f".sapien/physx/{version}/libPhysXGpu_64.so" in msg
+    assert f"physx-precompiled/releases/download/{version}/linux-so.zip" in msg
+    assert "ConnectionError: Failed to resolve 'github.com'" in msg and "more" not in msg
+    assert "on a machine with internet and unzip it into" in msg
+    assert isinstance(e.value.__cause__, requests.exceptions.ConnectionError)
+    # the CPU simulation never asks for the library
+    check_gpu_physics(1, "auto")
+    check_gpu_physics(1, "physx_cpu")
+    assert [gpu_sim_requested(n, b) for n, b in [(1, "auto"), (2, "auto"), (1, "gpu"),
+            (1, "physx_cuda:1"), (4, "physx_cpu")]] == [False, True, True, True, False]  # fmt: skip
+
+
 @pytest.mark.parametrize(
     "kwargs, words",
     [
