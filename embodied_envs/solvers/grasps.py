@@ -23,6 +23,10 @@ gripper can take there. A grasp is a parallel-jaw grasp of the Panda, described 
    distance from the centre of mass (a grip near it holds against gravity), the approach's tilt
    from straight down, and the contact width's distance from the middle of the opening.
 
+5. **Annotations.** Grasps EmbodiedGen's ``affordance-cli`` wrote for the asset
+   (``affordance_annot.json``, read by ``layout/affordance.py``) that pass the checks of 1 and 3
+   rank ahead of the synthesised ones, by their confidence (``solvers/annotated.py``).
+
 The same asset gives the same ranked list (the sampling is seeded by the asset's content).
 """
 
@@ -33,58 +37,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from embodied_envs.layout.affordance import annotation_path
 from embodied_envs.layout.assets import ASSET_FILES, AssetSpec, FileVersion, asset_geometry
+from embodied_envs.solvers.annotated import with_annotations
+from embodied_envs.solvers.gripper import (
+    GripperModel,
+    box_clearance,
+    box_corners,
+    pair_clearance,
+    point_clearance,
+    tcp_axes,
+)
 
 
 class GraspError(RuntimeError):
     """An asset the gripper cannot take anywhere (names the asset and why)."""
-
-
-@dataclass(frozen=True)
-class GripperModel:
-    """The Panda hand as boxes in the ``panda_hand_tcp`` frame (m), fingers open: the
-    bounding boxes of ManiSkill's Panda finger and hand collision meshes.
-
-    ``x``: across the fingers' width; ``y``: the closing direction; ``z``: the approach (the
-    TCP sits between the fingertips; the palm is behind it, at negative z).
-    """
-
-    opening: float = 0.08  # finger gap when open
-    finger_width: float = 0.022  # along x
-    finger_thickness: float = 0.026  # along y, outside the gap
-    finger_tip: float = 0.009  # the fingertips reach this far past the TCP (+z)
-    finger_length: float = 0.054  # from the tips back to the palm
-    palm_size: tuple[float, float] = (0.064, 0.208)  # x, y extents
-    palm_z: tuple[float, float] = (-0.129, -0.037)  # z extent
-
-    def boxes(self, sweep: float = 0.0, opening: np.ndarray | float | None = None) -> np.ndarray:
-        """``(..., 3, 2, 3)`` boxes (min corner, max corner): two fingers and the palm, each
-        stretched back along -z by ``sweep`` (the way in from the pre-grasp), the fingers
-        ``opening`` apart (default: fully open; an array gives one set per opening)."""
-        gap = np.asarray(self.opening if opening is None else opening, dtype=np.float64)
-        half = gap[..., None] / 2
-        t, w = self.finger_thickness, self.finger_width / 2
-        z_top, z_base = self.finger_tip, self.finger_tip - self.finger_length
-        (px, py), (z0, z1) = self.palm_size, self.palm_z
-        one = np.ones_like(half)
-        left = np.stack(
-            [
-                np.concatenate([-w * one, half, (z_base - sweep) * one], -1),
-                np.concatenate([w * one, half + t, z_top * one], -1),
-            ],
-            -2,
-        )
-        right = np.stack(
-            [
-                np.concatenate([-w * one, -half - t, (z_base - sweep) * one], -1),
-                np.concatenate([w * one, -half, z_top * one], -1),
-            ],
-            -2,
-        )
-        palm = np.broadcast_to(
-            np.array([[-px / 2, -py / 2, z0 - sweep], [px / 2, py / 2, z1]]), left.shape
-        )
-        return np.stack([left, right, palm], -3)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -134,6 +101,7 @@ class Grasps:
     com: np.ndarray
     points: np.ndarray
     planes: tuple[np.ndarray, ...]
+    annotated: np.ndarray | None = None  # (n,) bool: from the asset's affordance_annot.json
 
     def __len__(self) -> int:
         return len(self.centre)
@@ -255,92 +223,6 @@ def _frames(closing: np.ndarray, count: int) -> np.ndarray:
     )
 
 
-def to_tcp(points: np.ndarray, centre, closing, approach) -> np.ndarray:
-    """World (or object) points in the TCP frames of grasps: ``(g, p, 3)``."""
-    ortho = np.cross(closing, approach)
-    rot = np.stack([ortho, closing, approach], -1)  # (g, 3, 3): columns x, y, z
-    return np.einsum("gpk,gkj->gpj", points[None] - centre[:, None], rot)
-
-
-def box_clearance(
-    points: np.ndarray,
-    centre: np.ndarray,
-    closing: np.ndarray,
-    approach: np.ndarray,
-    boxes: np.ndarray,
-    bound: float | None = None,
-) -> np.ndarray:
-    """``(g,)``: how far ``points (p, 3)`` stay outside the gripper boxes of each grasp (TCP
-    at ``centre``, axes from ``closing`` and ``approach``, all ``(g, 3)`` in the points' frame;
-    ``boxes (g, b, 2, 3)`` in each TCP frame): the least over points and boxes of the largest
-    per-axis distance outside (a point lies in a box grown by ``m`` exactly when its clearance
-    is at most ``m``; inside, it is negative; no points: infinite).
-
-    With ``bound`` (for points mostly far from the grasps: the other objects), exact up to
-    ``bound`` and some value above it for a grasp whose clearance is larger: a point within
-    ``m`` of a box lies in the box's bounding box (in the points' frame) grown by
-    ``m * sqrt(3)``, so only the (grasp, point) pairs there are measured and a far point costs
-    one comparison. Without, every pair is measured (the object's own points, near them all).
-    """
-    gap = np.full(len(centre), np.inf, dtype=np.float32)
-    if not len(points) or not len(centre):
-        return gap
-    if bound is None:
-        return point_clearance(points, centre, closing, approach, boxes).min(1)
-    rot = _tcp_axes(closing, approach)
-    world = _box_corners(centre, rot, boxes)  # (g, 8 b, 3)
-    grow = max(bound, 0.0) * np.sqrt(3.0)
-    lo, hi = world.min(1) - grow, world.max(1) + grow
-    near = points[((points >= lo.min(0)) & (points <= hi.max(0))).all(1)]
-    g, k = np.nonzero(((near[None] >= lo[:, None]) & (near[None] <= hi[:, None])).all(-1))
-    if len(g):  # g ascends: each grasp's pairs are one run
-        out = _pair_clearance(near, centre, rot, boxes, g, k)
-        starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-        gap[g[starts]] = np.minimum.reduceat(out, starts)
-    return gap
-
-
-def point_clearance(
-    points: np.ndarray,
-    centre: np.ndarray,
-    closing: np.ndarray,
-    approach: np.ndarray,
-    boxes: np.ndarray,
-) -> np.ndarray:
-    """``(g, p)``: how far each point stays outside each grasp's gripper boxes (the least over
-    the boxes; arguments as :func:`box_clearance`'s)."""
-    local = to_tcp(points, centre, closing, approach)
-    return _outside(local[:, :, None], boxes[:, None]).min(2)
-
-
-def _pair_clearance(points, centre, rot, boxes, g, k) -> np.ndarray:
-    """Per pair j, how far point ``k[j]`` stays outside the boxes of grasp ``g[j]`` (``rot``
-    from :func:`_tcp_axes`)."""
-    local = np.einsum("pk,pjk->pj", points[k] - centre[g], rot[g])
-    return _outside(local[:, None], boxes[g]).min(-1)
-
-
-def _tcp_axes(closing: np.ndarray, approach: np.ndarray) -> np.ndarray:
-    """``(g, 3, 3)``: rows the TCP's x, y (closing) and z (approach) axes."""
-    return np.stack([np.cross(closing, approach), closing, approach], 1)
-
-
-def _box_corners(centre: np.ndarray, rot: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """``(g, 8 b, 3)``: the corners of each grasp's boxes ``(g, b, 2, 3)`` (TCP frames) in the
-    frame of ``centre (g, 3)`` and ``rot`` (:func:`_tcp_axes`)."""
-    corners = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), -1).reshape(-1, 3)
-    local = np.where(corners[None, None], boxes[:, :, 1][:, :, None], boxes[:, :, 0][:, :, None])
-    return centre[:, None] + np.einsum("gpk,gkj->gpj", local.reshape(len(boxes), -1, 3), rot)
-
-
-def _outside(x: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """How far points ``x (..., 3)`` lie outside boxes ``(..., 2, 3)`` (broadcast), per axis
-    the largest (negative inside), in float32."""
-    x = x.astype(np.float32)
-    lo, hi = boxes[..., 0, :].astype(np.float32), boxes[..., 1, :].astype(np.float32)
-    return np.maximum(lo - x, x - hi).max(-1)
-
-
 SAMPLE_FRACTIONS = (36, 6, 1)  # grasps are checked against these fractions of the object's
 # points in turn (nested samples)
 LIPSCHITZ_SLACK = 1e-5  # m, float32 rounding allowed for in the bound on a point's clearance
@@ -402,14 +284,14 @@ def _compute(spec: AssetSpec, cfg: GraspConfig, gripper: GripperModel) -> Grasps
         links.append((nearest, apart[np.arange(len(now)), nearest].astype(np.float32)))
     for s in range(0, len(centre), 256):
         part = np.arange(s, min(s + 256, len(centre)))
-        rot = _tcp_axes(closing[part], approach[part])
+        rot = tcp_axes(closing[part], approach[part])
         lower = point_clearance(levels[0], centre[part], closing[part], approach[part], boxes[part])
         for points, (nearest, apart) in zip(levels[1:], links, strict=True):
             keep = lower.min(1) > cfg.margin
             part, rot, lower = part[keep], rot[keep], lower[keep]
             lower = lower[:, nearest] - apart  # lower bounds on each point's clearance
             g, k = np.nonzero(lower <= cfg.wide_margin + LIPSCHITZ_SLACK)
-            lower[g, k] = _pair_clearance(points, centre[part], rot, boxes[part], g, k)
+            lower[g, k] = pair_clearance(points, centre[part], rot, boxes[part], g, k)
         # exact up to wide_margin: a point nearer than that was measured
         gap = lower.min(1)
         free[part], roomy[part] = gap > cfg.margin, gap > cfg.wide_margin
@@ -448,8 +330,12 @@ def asset_grasps(
         GraspError: naming the asset, when no grasp fits the gripper.
     """
     cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
-    key = ("grasps", FileVersion.of(spec.collision.path), spec.collision, cfg, gripper)
-    return ASSET_FILES.get(key, lambda: _compute(spec, cfg, gripper))
+    annot = annotation_path(spec.urdf_path)
+    version = FileVersion.of(annot) if annot else None
+    key = ("grasps", FileVersion.of(spec.collision.path), version, spec.collision, cfg, gripper)
+    return ASSET_FILES.get(
+        key, lambda: with_annotations(_compute(spec, cfg, gripper), annot, cfg, gripper)
+    )
 
 
 def grasp_is_valid(
@@ -524,7 +410,7 @@ def posed_clearance(
     3)``): clear when the swept boxes stay ``clearance`` above the support surface and hold no
     obstacle point (world) within ``obstacle_margin``; roomy when clear and none is within
     ``wide_margin`` either."""
-    world = _box_corners(centre, _tcp_axes(closing, approach), boxes)
+    world = box_corners(centre, tcp_axes(closing, approach), boxes)
     clear = world[..., 2].min(1) >= support_z + cfg.clearance
     if obstacles is None or not len(obstacles) or not clear.any():
         return clear, clear

@@ -12,13 +12,11 @@ from embodied_envs.layout import LayoutPose, asset_geometry, parse_urdf
 from embodied_envs.solvers.grasps import (
     GraspConfig,
     GraspError,
-    GripperModel,
     _compute,
     asset_grasps,
-    box_clearance,
     posed_grasps,
-    to_tcp,
 )
+from embodied_envs.solvers.gripper import GripperModel, box_clearance, to_tcp
 
 ZOO = ROOT / "zoo"
 SHAPES = ["ring", "handled_cup", "t_shape", "shallow_bowl", "bottle"]
