@@ -364,13 +364,15 @@ def posed_grasps(
     cfg: GraspConfig | None = None,
     gripper: GripperModel | None = None,
     limit: int = 8,
-) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
+    with_index: bool = False,
+) -> list[tuple]:
     """The grasps the gripper can take in this episode, best first, as world
     ``(centre, closing, approach, opening)``: approach within ``max_tilt_deg`` of straight down, the
     swept gripper above the support surface and clear of ``obstacles`` (world points) by
     ``obstacle_margin``, ranked by the pre-posing score plus the tilt, those clear of the
     obstacles by ``wide_margin`` first (among the ``posed_scan`` best, or until ``limit`` are
-    clear). At most ``limit``; an empty list when none."""
+    clear). At most ``limit``; an empty list when none. ``with_index``: each tuple ends with
+    the grasp's index in ``grasps``."""
     cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
     rot, t = object_to_world[:3, :3], object_to_world[:3, 3]
     centre = grasps.centre @ rot.T + t
@@ -394,7 +396,8 @@ def posed_grasps(
         if len(roomy) >= limit or (s + 64 >= cfg.posed_scan and len(roomy) + len(tight) >= limit):
             break
     best = (roomy + tight)[:limit]
-    return [(centre[i], closing[i], approach[i], float(grasps.opening[i])) for i in best]
+    tail = (lambda i: (int(i),)) if with_index else (lambda i: ())
+    return [(centre[i], closing[i], approach[i], float(grasps.opening[i]), *tail(i)) for i in best]
 
 
 def posed_clearance(

@@ -503,7 +503,8 @@ class PickPlaceSolver:
         angle), fully open, when it passes the synthesised grasps' checks and clears the
         other objects by the wide margin (the grasp that cans and boxes take); then the
         synthesised grasps the gripper can take here (``grasps.posed_grasps``, pre-shaped);
-        the footprint grasp last when it failed those checks."""
+        the footprint grasp last when it failed those checks, or when the asset's annotated
+        grasps (``affordance_annot.json``) lead the synthesised ones."""
         agent = self.base.agent
         tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
         poses = []
@@ -514,13 +515,17 @@ class PickPlaceSolver:
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             support = float(self.base.layout_scene.top_z[i])
             grasps = asset_grasps(spec, self.grasp_config)
+            taken = posed_grasps(
+                grasps, pose.matrix(), support, self.clouds[i], self.grasp_config,
+                limit=self.cfg.grasp_candidates, with_index=True,
+            )  # fmt: skip
             synthesised = [
                 (agent.build_grasp_pose(approach, closing, centre), opening)
-                for centre, closing, approach, opening in posed_grasps(
-                    grasps, pose.matrix(), support, self.clouds[i], self.grasp_config,
-                    limit=self.cfg.grasp_candidates,
-                )
-            ]  # fmt: skip
+                for centre, closing, approach, opening, _ in taken
+            ]
+            # the asset's own annotated grasps (affordance_annot.json) lead when one is takeable
+            annotated = bool(taken) and grasps.annotated is not None
+            annotated = annotated and bool(grasps.annotated[taken[0][4]])
             verts = pose.transform_points(geom.vertices)
             centre, closing = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
             down = np.array([0, 0, -1.0])
@@ -538,7 +543,7 @@ class PickPlaceSolver:
                 self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
                 self.clouds[i], self.grasp_config,
             )  # fmt: skip
-            first = valid and bool(roomy[0])
+            first = valid and bool(roomy[0]) and not annotated
             poses.append(footprint + synthesised if first else synthesised + footprint)
         return poses
 

@@ -160,3 +160,41 @@ def test_a_malformed_file_names_the_file_and_the_field(mug, payload, words):
     for w in words:
         assert w in msg
     assert path.read_bytes() == before
+
+
+def test_the_expert_tries_the_annotated_grasp_first(scene_copy):
+    """On place_tray the mug's first candidate is otherwise the top-down footprint grasp; with
+    one annotated grasp the gripper can take, the expert tries that one first."""
+    import gymnasium as gym
+
+    from embodied_envs.layout.pose import LayoutPose
+    from embodied_envs.solvers import PickPlaceSolver
+
+    layout = scene_copy / "layouts" / "place_tray.json"
+    mug = scene_copy / "assets" / "mug"
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
+    try:
+        env.reset(seed=1)
+        solver = PickPlaceSolver(env, seed=1)
+        before = solver.grasp_poses()[0]
+        u = env.unwrapped
+        pose = LayoutPose.from_raw(u.env_actors["env0"]["mug"].pose.raw_pose[0].cpu().numpy())
+        plain = asset_grasps(parse_urdf(mug / "mug.urdf"), solver.grasp_config)
+        taken = posed_grasps(plain, pose.matrix(), float(u.layout_scene.top_z[0]),
+                             solver.clouds[0], solver.grasp_config, limit=50)  # fmt: skip
+        centre, closing, approach, _ = taken[-1]  # one the gripper can take, ranked last
+        world_to_object = np.linalg.inv(pose.matrix())
+        rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
+        write_annotation(mug, [{"part_name": "handle", "graspable": True, "id": 0,
+                                "grasp_group": {"grasp_0": graspgen_entry(
+                                    rot @ centre + t, rot @ closing, rot @ approach, 0.9)}}])
+        after = solver.grasp_poses()[0]
+        want = u.agent.build_grasp_pose(approach, closing, centre)
+    finally:
+        env.close()
+    assert not np.allclose(before[0][0].p, want.p, atol=1e-6)
+    np.testing.assert_allclose(after[0][0].p, want.p, atol=1e-6)
+    np.testing.assert_allclose(np.abs(after[0][0].q @ want.q), 1.0, atol=1e-6)
+    # the footprint grasp that led before now follows the posed grasps
+    assert np.allclose(after[-2][0].p, before[0][0].p, atol=1e-6) or np.allclose(
+        after[-1][0].p, before[0][0].p, atol=1e-6)
