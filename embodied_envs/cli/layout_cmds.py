@@ -14,6 +14,7 @@ from tqdm import tqdm
 from embodied_envs.cli.args import image_side, positive_int, seed_int, writable_dir
 from embodied_envs.config import resolve_robot
 from embodied_envs.layout import LayoutError, LayoutInfo, PlacementError, load_layout
+from embodied_envs.layout.affordance import AffordanceError, annotation_path, read_annotation
 from embodied_envs.layout.collision import DECOMPOSED, obj_objects
 from embodied_envs.layout.placement import (
     PlacementLimits,
@@ -116,6 +117,7 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
         resolve_robot(layout.robot, None, str(path))
     except LayoutError as e:
         problems.extend(e.problems)
+    problems += annotation_lines(layout)[1]
     splat = layout.gs_model_path()
     if splat.is_file():  # optional: only hybrid rendering needs it, but it must be readable
         try:
@@ -150,7 +152,7 @@ def cmd_validate(args) -> int:
         else:  # the task as the env grades it (layout/task.py)
             layout = load_layout(path)
             print(f"ok   {path}  task: {layout.task.describe()}")
-            for line in decomposed_meshes(layout):
+            for line in decomposed_meshes(layout) + annotation_lines(layout)[0]:
                 print(f"     {line}")
     return 1 if bad else 0
 
@@ -168,6 +170,28 @@ def decomposed_meshes(layout: LayoutInfo) -> list[str]:
             parts = len(obj_objects(path))
             lines.append(f"{node}: {orig}: {reason}; decomposed into {parts} convex parts ({path})")
     return lines
+
+
+def annotation_lines(layout: LayoutInfo) -> tuple[list[str], list[str]]:
+    """Per asset with EmbodiedGen's grasp annotations (layout/affordance.py): a line saying how
+    many grasps the expert reads, or a problem when the file cannot be read."""
+    lines, problems = [], []
+    for node in layout.assets:
+        if node == layout.background:
+            continue
+        try:
+            path = annotation_path(layout.asset_spec(node).urdf_path)
+            if path is not None:
+                annot = read_annotation(path)
+                parts = len(set(annot.part))
+                plural = "s" if parts != 1 else ""
+                lines.append(f"{node}: {len(annot)} annotated grasps on {parts} graspable "
+                             f"part{plural} ({path})")  # fmt: skip
+        except AffordanceError as e:
+            problems.append(f"{node}: {e}")
+        except LayoutError:
+            continue  # the asset's own problem is reported by the layout's checks
+    return lines, problems
 
 
 def draw_top_down(layout: LayoutInfo, size: int = 640, limits: PlacementLimits | None = None):

@@ -198,3 +198,24 @@ def test_the_expert_tries_the_annotated_grasp_first(scene_copy):
     # the footprint grasp that led before now follows the posed grasps
     assert np.allclose(after[-2][0].p, before[0][0].p, atol=1e-6) or np.allclose(
         after[-1][0].p, before[0][0].p, atol=1e-6)
+
+
+def test_layout_validate_reports_annotations_and_refuses_a_broken_file(scene_copy, capsys):
+    from embodied_envs.cli.main import main
+
+    layout = scene_copy / "layouts" / "place_tray.json"
+    mug = scene_copy / "assets" / "mug"
+    plain = asset_grasps(parse_urdf(mug / "mug.urdf"))
+    entries = {f"grasp_{i}": graspgen_entry(plain.centre[i], plain.closing[i], plain.approach[i],
+                                            0.9) for i in range(3)}  # fmt: skip
+    path = write_annotation(mug, [
+        {"part_name": "handle", "graspable": True, "grasp_group": entries},
+        {"part_name": "body", "graspable": True, "grasp_group": {}},
+    ])
+    assert main(["layout", "validate", "--no-placement", str(layout)]) == 0
+    out = capsys.readouterr().out
+    assert f"mug: 3 annotated grasps on 1 graspable part ({path})" in out
+    path.write_text('{"affordances": 7}')
+    assert main(["layout", "validate", "--no-placement", str(layout)]) == 1
+    out = capsys.readouterr().out
+    assert f"FAIL {layout}" in out and f"mug: {path}: 'affordances' is missing or not a list" in out
