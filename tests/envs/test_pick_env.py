@@ -198,7 +198,7 @@ def test_bad_arguments_fail_before_simulation(tmp_path, scene_copy):
     layout.write_text(layout.read_text().replace('"franka"', '"ur5"'))
     before = snapshot(scene_copy)
     with pytest.raises(
-        LayoutError, match=r'relation\["robot"\] is "ur5", which is not a registered robot'
+        LayoutError, match=r'relation\["robot"\] is "ur5", which has no ManiSkill model here'
     ):
         gym.make(ENV_ID, layout_file=str(layout))
     e = gym.make(ENV_ID, layout_file=str(layout), robot_uids="panda")  # explicit robot works
