@@ -10,6 +10,7 @@ import os
 import mani_skill.agents.robots  # noqa: F401  (registers ManiSkill's agents)
 import numpy as np
 import torch
+from mani_skill.agents.base_agent import BaseAgent
 from mani_skill.agents.registration import REGISTERED_AGENTS
 
 from embodied_envs import robots
@@ -38,10 +39,11 @@ def check_robot(uid) -> None:
         )
     agent = REGISTERED_AGENTS.get(uid)
     if uid not in robots.ROBOTS:
-        if agent is not None and not hasattr(agent.agent_cls, "is_grasping"):
+        # BaseAgent.is_grasping raises NotImplementedError: only arms with a gripper override it
+        if agent is not None and agent.agent_cls.is_grasping is BaseAgent.is_grasping:
             raise ValueError(
                 f"robot_uids={uid!r}: ManiSkill's {uid} has no gripper (its agent class "
-                f"{agent.agent_cls.__name__} has no is_grasping), and every task of "
+                f"{agent.agent_cls.__name__} does not define is_grasping), and every task of "
                 f"PickEmbodiedGen-v1 grasps an object. Fix: use an arm with a gripper, one of "
                 f"{supported}"
             )

@@ -9,9 +9,11 @@ from mani_skill.utils.structs.pose import Pose
 from placement_checks import check_constraints
 
 import embodied_envs  # noqa: F401
-from embodied_envs.envs.pick_embodiedgen import REST_QPOS
 from embodied_envs.layout import LayoutError, LayoutPose
 from embodied_envs.paths import default_layout
+from embodied_envs.robots import PANDA
+
+REST_QPOS = np.array(PANDA.rest_qpos)
 
 ENV_ID = "PickEmbodiedGen-v1"
 
