@@ -139,7 +139,7 @@ ROBOTS: dict[str, Robot] = {
         # its so100 motion planner opens the jaw at 0 rad (0.084 m between the tips) and
         # closes it at -0.8; the default controller steps the jaw by up to 0.2 rad
         Robot(
-            uid="so100", names=("so_100", "so-100", "so101"),
+            uid="so100", names=("so_100", "so-100"),
             rest_qpos=(0.0, 0.0, 0.0, math.pi / 2, math.pi / 2, 0.0),
             noise_joints=tuple(range(5)), reach=(0.10, 0.36), goal_inset=0.05,
             goal_height=(0.05, 0.15),

@@ -208,7 +208,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         self.env_actors, self.obj = ls.env_actors, ls.target_actor
         self.instructions = [layout.instruction for layout in self.layouts]  # one per env
         entry = self.robot_entry
-        span = tuple(float(np.float32(q) * entry.gripper.joints) for q in entry.gripper.span)
+        span = tuple(float(np.float32(q)) for q in entry.gripper.span)  # as PhysX holds it
         spots = ls.robot_poses.cpu().numpy()
         self.task_scene = TaskScene.build(self.layouts, ls.env_actors, spots, span)
         # the base: at each env's robot spot, or by the entry's offsets from it

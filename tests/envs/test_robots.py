@@ -95,6 +95,8 @@ def test_gripper_closes_by_its_entry_and_grasp_is_the_agents(robot_env):
     env.reset(seed=0)
     opened = gripper_sum(env)
     assert opened == pytest.approx(grip.joints * grip.open_qpos, abs=1e-3)
+    # the opening fraction's scale (tasks' "released"): summed joints shut and open
+    assert u.task_scene.finger_span == pytest.approx(grip.span)
     action = torch.zeros(env.action_space.shape)
     action[grip.action_index] = grip.action_closed
     for _ in range(20):  # a "delta" gripper steps by its controller's limit per step
@@ -233,3 +235,17 @@ def test_layout_robot_names(scene_copy):
     assert "'so100'" in line and 'Fix: pass robot_uids="<one of them>"' in line
     problems = validate_problems(path, check_placement=False)
     assert any('relation["robot"] is "ur5"' in p for p in problems), problems
+
+
+def test_the_expert_refuses_an_arm_it_cannot_drive_in_one_line():
+    from embodied_envs.solvers.pick_place import PickPlaceSolver
+
+    env = gym.make(ENV_ID, robot_uids="koch-v1.1", control_mode="pd_joint_pos")
+    try:
+        with pytest.raises(ValueError) as err:
+            PickPlaceSolver(env)
+        line = str(err.value)
+        assert line.startswith("robot_uids='koch-v1.1': the scripted expert drives only ")
+        assert "['panda', 'panda_wristcam']" in line and "\n" not in line
+    finally:
+        env.close()
