@@ -249,3 +249,27 @@ def test_the_expert_refuses_an_arm_it_cannot_drive_in_one_line():
         assert "['panda', 'panda_wristcam']" in line and "\n" not in line
     finally:
         env.close()
+
+
+def test_state_dict_obs_of_a_small_arm():
+    env = gym.make(ENV_ID, robot_uids="koch-v1.1", obs_mode="state_dict")
+    try:
+        obs, _ = env.reset(seed=0)
+        assert tuple(obs["agent"]["qpos"].shape) == (1, 6)
+        tcp = obs["extra"]["tcp_pose"]  # the Koch's gripper_tcp link, its entry's TCP
+        link = env.unwrapped.agent.robot.links_map["gripper_tcp"].pose.raw_pose
+        torch.testing.assert_close(tcp, link)
+    finally:
+        env.close()
+
+
+def test_a_layout_naming_a_small_arm_validates_with_its_reach(scene_copy):
+    path = scene_copy / "layouts" / "default.json"
+    path.write_text(path.read_text().replace('"franka"', '"so100"'))
+    assert validate_problems(path) == []
+    env = gym.make(ENV_ID, layout_file=str(path), obs_mode="state")
+    try:
+        assert env.unwrapped.agent.uid == "so100"
+        assert env.unwrapped.placement_limits.reach_max == robots.ROBOTS["so100"].reach[1]
+    finally:
+        env.close()
