@@ -69,8 +69,9 @@ def resolve_robot(layout_robot: str, robot_uids: str | None, source: str) -> str
         )
         raise LayoutError(
             f'{source}: relation["robot"] is "{layout_robot}", {why}; supported robots: '
-            f"{SUPPORTED_ROBOTS}. Fix: pass robot_uids=\"<one of them>\" to gym.make (it wins "
-            'over the layout), or set relation["robot"] to one of them.'
+            f"{SUPPORTED_ROBOTS} (or their other names {sorted(set(ROBOT_NAMES) - set(ROBOTS))}"
+            "). Fix: pass robot_uids=\"<one of them>\" to gym.make (it wins over the layout), "
+            'or rename the robot node (relation["robot"] and its position) to one.'
         )
     return ROBOT_NAMES[key]
 

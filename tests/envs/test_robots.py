@@ -120,11 +120,11 @@ def test_gripper_closes_by_its_entry_and_grasp_is_the_agents(robot_env):
 
 
 @pytest.mark.parametrize("uid", WHEEL)
-def test_joint_position_control_holds_the_rest_pose(uid):
+def test_joint_position_control_holds_and_brings_the_tcp_over_the_target(uid):
     env = gym.make(ENV_ID, robot_uids=uid, obs_mode="state", control_mode="pd_joint_pos",
                    robot_init_qpos_noise=0.0)  # fmt: skip
     try:
-        u = env.unwrapped
+        u, entry = env.unwrapped, robots.ROBOTS[uid]
         assert "pd_joint_pos" in u.agent.supported_control_modes
         env.reset(seed=1)
         start = u.agent.robot.get_qpos()[0].clone()
@@ -133,14 +133,48 @@ def test_joint_position_control_holds_the_rest_pose(uid):
             env.step(action)
         moved = (u.agent.robot.get_qpos()[0] - start).abs()
         assert float(moved.max()) < 0.05, moved
+        # joints that put the TCP 15 cm over the target (a search on the arm's kinematics),
+        # then commanded: the arm stands where it reaches the table's objects
+        above = u.obj.pose.p[0].cpu().numpy() + np.array([0.0, 0.0, 0.15])
+        goal_q = _joints_reaching(u, entry, above)
+        for _ in range(40):
+            env.step(torch.as_tensor(_hold_action(u, goal_q), dtype=torch.float32))
+        tcp = agents.tcp_pose(u.agent, entry).p[0].cpu().numpy()
+        assert np.linalg.norm(tcp - above) < 0.05, (tcp, above)
     finally:
         env.close()
 
 
-def _hold_action(u) -> np.ndarray:
-    """The pd_joint_pos action that holds the joints where they are: each controller's
-    joints' positions (gripper controllers: their normalised open command)."""
-    qpos = u.agent.robot.get_qpos()[0].cpu().numpy()
+def _joints_reaching(u, entry, point, rounds: int = 6, draws: int = 150) -> np.ndarray:
+    """Joint positions (arm joints searched, the others as now) whose TCP lies nearest
+    ``point``: random draws within the joint limits, narrowed round by round around the best
+    (the robot's joints are put back afterwards)."""
+    robot, rng = u.agent.robot, np.random.default_rng(0)
+    now = robot.get_qpos()[0].cpu().numpy()
+    arm = list(entry.noise_joints)
+    lim = np.clip(robot.get_qlimits()[0].cpu().numpy()[arm], -np.pi, np.pi)
+    best, best_d, width = now.copy(), np.inf, lim[:, 1] - lim[:, 0]
+    for _ in range(rounds):
+        centre = best[arm]
+        for _ in range(draws):
+            q = best.copy()
+            q[arm] = np.clip(centre + rng.uniform(-0.5, 0.5, len(arm)) * width, *lim.T)
+            robot.set_qpos(torch.as_tensor(q[None], dtype=torch.float32))
+            d = np.linalg.norm(agents.tcp_pose(u.agent, entry).p[0].cpu().numpy() - point)
+            if d < best_d:
+                best, best_d = q, d
+        width = width / 3
+    robot.set_qpos(torch.as_tensor(now[None], dtype=torch.float32))
+    assert best_d < 0.02, f"no joints put the TCP within 2 cm of {point} ({best_d:.3f} m)"
+    return best
+
+
+def _hold_action(u, qpos: np.ndarray | None = None) -> np.ndarray:
+    """The pd_joint_pos action that holds the joints at ``qpos`` (default: where they are):
+    each controller's joints' positions (gripper controllers: their normalised open
+    command; delta and velocity controllers: zero)."""
+    if qpos is None:
+        qpos = u.agent.robot.get_qpos()[0].cpu().numpy()
     parts = []
     combined = u.agent.controller  # one controller per body part, or one for every joint
     for name, ctrl in getattr(combined, "controllers", {"arm": combined}).items():
