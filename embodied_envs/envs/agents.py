@@ -32,10 +32,14 @@ def check_robot(uid) -> None:
         ValueError: naming the robot, why, and the fix.
     """
     supported = list(robots.SUPPORTED_ROBOTS)
+    if isinstance(uid, list | tuple) and len(uid) == 2 and all(isinstance(u, str) for u in uid):
+        for one in uid:  # two arms (ManiSkill's multi-agent env), each a supported robot
+            check_robot(one)
+        return
     if not isinstance(uid, str):
         raise ValueError(
-            f"robot_uids={uid!r}: PickEmbodiedGen-v1 loads one robot, named by its ManiSkill "
-            f"uid; use one of {supported}"
+            f"robot_uids={uid!r}: PickEmbodiedGen-v1 loads one robot or two, named by their "
+            f"ManiSkill uids (a string, or a list of two); use {supported}"
         )
     agent = REGISTERED_AGENTS.get(uid)
     if uid not in robots.ROBOTS:
@@ -57,6 +61,30 @@ def check_robot(uid) -> None:
             "(set MS_ASSET_DIR first to choose where it goes), or use one of "
             f"{[r for r in supported if robots.ROBOTS[r].in_wheel]}"
         )
+
+
+def all_agents(env) -> list:
+    """The env's agents: ManiSkill's ``MultiAgent.agents`` for several robots, else the one."""
+    return list(getattr(env.agent, "agents", [env.agent]))
+
+
+def opposite_spots(spots: np.ndarray, normals, offsets, lo, hi, margin: float) -> np.ndarray:
+    """A second arm's spots ``(n, 7)`` across the table from ``spots (n, 7)``: on the ray from
+    each spot through its table top's centre (the middle of ``lo``, ``hi``), ``margin`` inside
+    the far edge of the top (half-planes ``normals @ x >= offsets``), facing the centre."""
+    spots = np.asarray(spots, dtype=np.float64)
+    centre = (np.asarray(lo) + np.asarray(hi)) / 2
+    d = centre - spots[:, :2]
+    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    n, o = np.asarray(normals, np.float64), np.asarray(offsets, np.float64)
+    nd = np.einsum("bej,bj->be", n, d)
+    room = np.einsum("bej,bj->be", n, centre) - o  # >= 0 inside
+    t = np.where(nd < -1e-9, room / np.maximum(-nd, 1e-9), np.inf).min(1)
+    out = spots.copy()
+    out[:, :2] = centre + (t - margin)[:, None] * d
+    yaw = np.arctan2(-d[:, 1], -d[:, 0])  # facing back, toward the centre
+    out[:, 3:] = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], 1)
+    return out.astype(np.float32)
 
 
 def rest_qpos(agent, entry: robots.Robot) -> np.ndarray:

@@ -110,7 +110,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         # configuration); default: the shipped default layout
         layout_file: str | os.PathLike | list | None = None,
         replace_objs: bool = True,
-        robot_uids: str | None = None,
+        robot_uids: str | list | tuple | None = None,  # one uid, or two (two arms)
         robot_init_qpos_noise: float = 0.02,
         init_3dgs_quat: tuple[float, float, float, float] = SPLAT_Y_UP_TO_Z_UP,
         objs_z_offset: float = 0.002,
@@ -135,9 +135,14 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         self.base_layout: LayoutInfo = self.layout_set.layouts[0]
         if robot_uids is not None:  # a gripperless or absent robot named in its own words
             agents.check_robot(robot_uids)
-        robot = keywords.one_robot(self.layout_set, robot_uids)
+        two = isinstance(robot_uids, list | tuple)  # two arms: the first at the layout's spot
+        robot = keywords.one_robot(self.layout_set, robot_uids[0] if two else robot_uids)
         agents.check_robot(robot)  # its model is on this machine
-        self.robot_entry = robots.robot(robot)
+        uids = tuple(robot_uids) if two else (robot,)
+        self.robot_entries = tuple(robots.robot(u) for u in uids)
+        self.robot_entry = self.robot_entries[0]  # the arm the task's TCP and grasp follow
+        if two:  # ManiSkill's multi-agent env takes a tuple (and warns if it is not listed)
+            robot, self.SUPPORTED_ROBOTS = uids, [*SUPPORTED_ROBOTS, uids]
         # reach and goals follow the robot, for each field the user did not set
         limits, goals = keywords.robot_defaults(self.robot_entry)
         self.placement_limits = dataclass_arg(
@@ -183,7 +188,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         if r.base_height == "floor":  # the base stands on the floor under env 0's spot
             drop = float(self.layout_scene.robot_poses[0, 2]) - float(self.layout_scene.floor_z)
         eye, target = (r.in_base_frame(p, drop) for p in (r.camera_eye, r.camera_target))
-        return [base_camera(self.agent, eye, target, r.camera_mount)]
+        return [base_camera(self.main_agent, eye, target, r.camera_mount)]
 
     @property
     def _default_human_render_camera_configs(self):
@@ -193,7 +198,14 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         return render_camera(self.camera_spec, framing)
 
     def _load_agent(self, options: dict):
-        super()._load_agent(options, sapien.Pose(p=[0.0, 0.0, 0.0]))  # placed per episode
+        placed = [sapien.Pose(p=[0.0, 0.0, 0.0]) for _ in self.robot_entries]  # per episode
+        super()._load_agent(options, placed if len(placed) > 1 else placed[0])
+
+    @property
+    def main_agent(self):
+        """The arm the task's TCP, grasp check and expert follow: the one robot, or the first
+        of two (``env.agent.agents[0]``)."""
+        return agents.all_agents(self)[0]
 
     def _load_scene(self, options: dict):
         self._num_configurations += 1
@@ -211,10 +223,18 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         span = tuple(float(np.float32(q)) for q in entry.gripper.span)  # as PhysX holds it
         spots = ls.robot_poses.cpu().numpy()
         self.task_scene = TaskScene.build(self.layouts, ls.env_actors, spots, span)
-        # the base: at each env's robot spot, or by the entry's offsets from it
-        self.robot_bases = torch.as_tensor(
-            entry.base_poses(spots, float(ls.floor_z)), device=ls.robot_poses.device
-        )
+        # each arm's spot: the layout's, and for a second arm the far side of the table
+        self.robot_spots = [spots]
+        if len(self.robot_entries) > 1:
+            top = ls.episodes.top_arrays
+            self.robot_spots.append(agents.opposite_spots(
+                spots, top.normals, top.offsets, top.lo, top.hi, self.placement_limits.hull_margin
+            ))  # fmt: skip
+        # the bases: at each env's robot spot, or by the entry's offsets from it
+        self.robot_bases = [
+            torch.as_tensor(r.base_poses(sp, float(ls.floor_z)), device=ls.robot_poses.device)
+            for r, sp in zip(self.robot_entries, self.robot_spots, strict=True)
+        ]
         self.tasks = self.task_scene.tasks  # one per env (layout/task.py)
         self.task_reader = TaskReader(self, self.task_scene, ls.top_z)
         self._kinds = sorted({t.kind for t in self.tasks}, key=KIND_IDS.get)
@@ -238,12 +258,15 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         ls = self.layout_scene
         start = ls.episodes.draw(env_idx, self._batched_episode_rng)
         with torch.device(self.device):
-            self.agent.robot.set_root_pose(Pose.create(self.robot_bases[env_idx]))
-            rest = agents.rest_qpos(self.agent, self.robot_entry)
-            qpos = torch.as_tensor(rest, dtype=torch.float32).repeat(len(env_idx), 1)
-            noisy = list(self.robot_entry.noise_joints)  # the fingers stay open
-            qpos[:, noisy] += self.robot_init_qpos_noise * start.joint_noise[:, : len(noisy)]
-            self.agent.reset(qpos)
+            for agent, entry, bases in zip(
+                agents.all_agents(self), self.robot_entries, self.robot_bases, strict=True
+            ):
+                agent.robot.set_root_pose(Pose.create(bases[env_idx]))
+                rest = agents.rest_qpos(agent, entry)
+                qpos = torch.as_tensor(rest, dtype=torch.float32).repeat(len(env_idx), 1)
+                noisy = list(entry.noise_joints)  # the fingers stay open
+                qpos[:, noisy] += self.robot_init_qpos_noise * start.joint_noise[:, : len(noisy)]
+                agent.reset(qpos)
             ls.set_episode_poses(env_idx, start.objects if self.replace_objs else {})
             dest = self.task_reader.begin_episode(env_idx, start.goal)
             # the goal marker: the pick goal, or where the first mover goes
@@ -291,7 +314,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     def _get_obs_extra(self, info: dict):
         obs = dict(
             is_grasped=info["is_grasped"],
-            tcp_pose=agents.tcp_pose(self.agent, self.robot_entry).raw_pose,
+            tcp_pose=agents.tcp_pose(self.main_agent, self.robot_entry).raw_pose,
             goal_pos=self.goal_site.pose.p,
             task_kind=torch.nn.functional.one_hot(self.task_scene.kinds, len(RULES)).to(
                 self.device, torch.float32),  # pick, place, move  # fmt: skip
@@ -299,7 +322,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         if "state" in self.obs_mode:
             obs.update(
                 obj_pose=self.obj.pose.raw_pose,
-                tcp_to_obj_pos=self.obj.pose.p - agents.tcp_pose(self.agent, self.robot_entry).p,
+                tcp_to_obj_pos=self.obj.pose.p
+                - agents.tcp_pose(self.main_agent, self.robot_entry).p,
                 obj_to_goal_pos=self.goal_site.pose.p - self.obj.pose.p,
             )
         return obs

@@ -66,7 +66,9 @@ class HybridRendering:
         if self.hybrid is not None:
             self.hybrid.to(self.device).configure(
                 foreground_ids=stacked_ids(
-                    self.agent.robot.links + list(self.layout_scene.node_actors.values())
+                    [link for a in getattr(self.agent, "agents", [self.agent])
+                     for link in a.robot.links]
+                    + list(self.layout_scene.node_actors.values())
                 ),
                 hidden_ids=stacked_ids(self._hidden_objects),
                 background_poses=[x.pose(x.background) for x in self.layouts],

@@ -214,7 +214,12 @@ class PickPlaceSolver:
         self.seed = seed
         self.stages = 0  # _per_env calls so far: part of each plan's random key
         self.num_envs = self.base.num_envs
-        uid = self.base.agent.uid
+        uid = getattr(self.base.agent, "uid", None)
+        if uid is None:  # ManiSkill's MultiAgent
+            raise ValueError(
+                f"robot_uids={self.base.robot_uids!r}: the scripted expert drives one arm; make "
+                "the env with one robot (docs/robots.md)"
+            )
         if not ROBOTS[uid].expert:  # grasps, gripper and plans are the Panda's for now
             drivable = [u for u, r in ROBOTS.items() if r.expert]
             raise ValueError(

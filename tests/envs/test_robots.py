@@ -245,7 +245,8 @@ def test_a_download_arm_is_refused_when_absent_and_passes_when_present(monkeypat
         ("ur_10e", "robot_uids='ur_10e': ManiSkill's ur_10e has no gripper"),
         ("panda_stick", "robot_uids='panda_stick': ManiSkill's panda_stick has no gripper"),
         ("robot9000", "robot_uids='robot9000' is not a ManiSkill robot uid; use one of ['panda'"),
-        (("panda", "panda"), "PickEmbodiedGen-v1 loads one robot"),
+        (("panda", "panda", "panda"), "PickEmbodiedGen-v1 loads one robot or two"),
+        (("panda", "ur_10e"), "robot_uids='ur_10e': ManiSkill's ur_10e has no gripper"),
     ],
 )
 def test_robots_the_env_cannot_take_are_refused_in_one_line(uid, expected):
@@ -305,5 +306,37 @@ def test_a_layout_naming_a_small_arm_validates_with_its_reach(scene_copy):
     try:
         assert env.unwrapped.agent.uid == "so100"
         assert env.unwrapped.placement_limits.reach_max == robots.ROBOTS["so100"].reach[1]
+    finally:
+        env.close()
+
+
+def test_two_arms_stand_across_the_table_and_step_with_a_dict_action():
+    from embodied_envs.solvers.pick_place import PickPlaceSolver
+
+    env = gym.make(ENV_ID, robot_uids=["panda", "so100"], obs_mode="state")
+    try:
+        u = env.unwrapped
+        obs, _ = env.reset(seed=2)
+        assert obs.shape == (1, 2 * 9 + 2 * 6 + EXTRA_STATE) and torch.isfinite(obs).all()
+        first, second = u.agent.agents
+        assert (first.uid, second.uid) == ("panda", "so100")
+        spot = u.layout_scene.robot_poses[0].cpu().numpy()
+        np.testing.assert_allclose(first.robot.pose.raw_pose[0].cpu().numpy(), spot, atol=1e-6)
+        # the second across the table's centre, facing back toward the first
+        other = second.robot.pose.raw_pose[0].cpu().numpy()
+        gap = spot[:2] - other[:2]
+        assert np.linalg.norm(gap) > 0.8 and other[2] == pytest.approx(spot[2], abs=1e-5)
+        facing = yaw(other[3:]) - robots.ROBOTS["so100"].base_yaw
+        assert np.dot([math.cos(facing), math.sin(facing)], gap / np.linalg.norm(gap)) > 0.9
+        action = {k: torch.zeros(s.shape) for k, s in env.action_space.spaces.items()}
+        assert set(action) == {"panda-0", "so100-1"}
+        for _ in range(3):
+            obs, reward, *_, info = env.step(action)
+        assert torch.isfinite(obs).all() and not bool(info["is_grasped"])
+        with pytest.raises(ValueError, match=r"several robots take a dict of actions, one per "
+                           r"agent: keys \['panda-0', 'so100-1'\]"):  # fmt: skip
+            env.step(torch.zeros(14))
+        with pytest.raises(ValueError, match="the scripted expert drives one arm"):
+            PickPlaceSolver(env)
     finally:
         env.close()

@@ -212,7 +212,7 @@ class TaskReader:
         return dest
 
     def _read(self):
-        agent, movers, rec = self.env.agent, self.ts.movers, self.ts.receptacle
+        agent, movers, rec = self.env.main_agent, self.ts.movers, self.ts.receptacle
         entry = self.env.robot_entry
         if self.gpu:
             poses = torch.stack([a.pose.raw_pose for a in movers], 1)
