@@ -34,9 +34,9 @@ import yaml
 from embodied_envs.layout.assets import MAX_IMAGE_SIDE
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.placement.limits import GoalRegion, PlacementLimits
-from embodied_envs.layout.schema import ROBOT_REGISTRY
+from embodied_envs.robots import NO_MODEL_NAMES, ROBOT_NAMES, ROBOTS, name_key
 
-SUPPORTED_ROBOTS = sorted(set(ROBOT_REGISTRY.values()))
+SUPPORTED_ROBOTS = list(ROBOTS)
 
 # init_3dgs_quat's default (x y z w): +90 deg about x, turning a splat stored Y-up (as 3DGS and
 # EmbodiedGen store them) Z-up; applied before the layout's background pose
@@ -45,24 +45,35 @@ MAX_SEED = 2**32 - 1  # ManiSkill seeds NumPy RandomStates, which take seeds in 
 
 
 def resolve_robot(layout_robot: str, robot_uids: str | None, source: str) -> str:
-    """The ManiSkill robot uid to load.
+    """The ManiSkill robot uid to load: ``robot_uids`` when given (it wins over the layout),
+    else the layout's ``relation.robot`` (a uid or another name of a supported robot, e.g.
+    EmbodiedGen's "franka").
 
     Raises:
-        LayoutError: when ``robot_uids`` is not given and the layout's robot is not registered.
+        ValueError: ``robot_uids`` is not a supported robot.
+        LayoutError: without ``robot_uids``, a layout robot name with no supported model,
+            naming the file, the name, the supported robots and the fix.
     """
     if robot_uids is not None:
-        if robot_uids not in SUPPORTED_ROBOTS:
+        if robot_uids not in ROBOTS:
             raise ValueError(
                 f"robot_uids={robot_uids!r} is not supported; use one of {SUPPORTED_ROBOTS}"
             )
         return robot_uids
-    key = layout_robot.lower().replace(" ", "_")
-    if key not in ROBOT_REGISTRY:
-        raise LayoutError(
-            f'{source}: relation["robot"] is "{layout_robot}", which is not a registered robot '
-            f"({sorted(ROBOT_REGISTRY)}). Fix: rename it, or pass robot_uids explicitly."
+    key = name_key(layout_robot)
+    if key not in ROBOT_NAMES:
+        why = (
+            "which has no ManiSkill model here (EmbodiedGen writes it; nothing is substituted)"
+            if key in NO_MODEL_NAMES
+            else "which is not a supported robot name"
         )
-    return ROBOT_REGISTRY[key]
+        raise LayoutError(
+            f'{source}: relation["robot"] is "{layout_robot}", {why}; supported robots: '
+            f"{SUPPORTED_ROBOTS} (or their other names {sorted(set(ROBOT_NAMES) - set(ROBOTS))}"
+            "). Fix: pass robot_uids=\"<one of them>\" to gym.make (it wins over the layout), "
+            'or rename the robot node (relation["robot"] and its position) to one.'
+        )
+    return ROBOT_NAMES[key]
 
 
 @dataclass(frozen=True)

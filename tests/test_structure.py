@@ -22,13 +22,16 @@ ALLOWED = {
     "workers": set(),
     "registration": set(),
     "splat": set(),
-    "layout": {"paths"},
-    "config": {"layout", "paths"},
-    "scene": {"layout", "paths"},
-    "envs": {"layout", "paths", "scene", "splat", "config"},
-    "solvers": {"layout", "paths"},
-    "pipelines": {"layout", "paths", "scene", "splat", "config", "envs", "solvers", "workers"},
-    "cli": {"layout", "paths", "splat", "config", "workers", "pipelines"},
+    "robots": set(),
+    "layout": {"paths", "robots"},
+    "config": {"layout", "paths", "robots"},
+    "scene": {"layout", "paths", "robots"},
+    "envs": {"layout", "paths", "scene", "splat", "config", "robots"},
+    "solvers": {"layout", "paths", "robots"},
+    "pipelines": {
+        "layout", "paths", "scene", "splat", "config", "envs", "solvers", "workers", "robots",
+    },
+    "cli": {"layout", "paths", "splat", "config", "workers", "pipelines", "robots"},
 }
 HEAVY = ("torch", "sapien", "mani_skill")  # the simulator: not for --help or layout commands
 
@@ -51,7 +54,7 @@ def imported_by(part: str) -> tuple[set[str], set[str]]:
 def test_each_part_pulls_in_only_what_is_below_it(part):
     parts, heavy = imported_by(part)
     assert parts <= ALLOWED[part], f"{part} imports {sorted(parts - ALLOWED[part])}"
-    if part in ("paths", "workers", "registration", "splat", "layout", "config"):
+    if part in ("paths", "workers", "registration", "splat", "robots", "layout", "config"):
         assert not heavy, f"{part} imports {sorted(heavy)}"
 
 

@@ -29,6 +29,7 @@ from embodied_envs.layout.placement.rules import rotate
 from embodied_envs.layout.pools import asset_pools
 from embodied_envs.layout.sets import LayoutSet, layout_files
 from embodied_envs.paths import atomic_output
+from embodied_envs.robots import ROBOTS
 from embodied_envs.splat import SplatFileError, check_ply
 from embodied_envs.workers import run
 
@@ -112,9 +113,10 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
         return e.problems
     except OSError as e:  # unreadable file, permission, a folder given as file, ...
         return [f"{path}: {e.strerror or e} ({e.filename or path}). Fix: check the path."]
-    problems = []
-    try:
-        resolve_robot(layout.robot, None, str(path))
+    problems, limits = [], PlacementLimits()
+    try:  # the robot's reach, as the env places objects for it
+        reach = ROBOTS[resolve_robot(layout.robot, None, str(path))].reach
+        limits = PlacementLimits(reach_min=reach[0], reach_max=reach[1])
     except LayoutError as e:
         problems.extend(e.problems)
     problems += annotation_lines(layout)[1]
@@ -127,7 +129,7 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
     if check_placement:  # with every member of each asset pool in its place
         for member in LayoutSet((layout,), (asset_pools(layout),)).members():
             try:
-                place(member, 0)
+                place(member, 0, limits)
             except PlacementError as e:
                 problems.append(f"placement: {e}")
     return list(dict.fromkeys(problems))

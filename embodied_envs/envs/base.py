@@ -176,9 +176,15 @@ class CheckedEnv(BaseEnv):
 
     def step(self, action):
         self._check_open("step")
-        action = check_action(
-            action, tuple(self.single_action_space.shape), self.num_envs, self.control_mode
-        )
+        shape = self.single_action_space.shape
+        if shape is None and not (action is None or isinstance(action, dict)):
+            keys = list(getattr(self.single_action_space, "spaces", {}))
+            raise ValueError(
+                f"several robots take a dict of actions, one per agent: keys {keys} (ManiSkill's "
+                f"multi-agent envs); got {type(action).__name__}"
+            )
+        if shape is not None:
+            action = check_action(action, tuple(shape), self.num_envs, self.control_mode)
         if isinstance(action, torch.Tensor):
             action = action.to(self.device)
         return super().step(action)

@@ -14,6 +14,7 @@ from embodied_envs.layout import GoalRegion, LayoutError, PlacementLimits
 from embodied_envs.layout.errors import check_number
 from embodied_envs.layout.placement import place
 from embodied_envs.layout.sets import LayoutSet
+from embodied_envs.robots import Robot
 from embodied_envs.scene.layout_scene import scene_slots
 
 NUMBER_RANGES = {  # numeric keywords: (low, high)
@@ -39,6 +40,24 @@ def check_value(name: str, value) -> None:
         CameraSpec.from_cfg(value)
     elif name == "init_3dgs_quat":
         check_quaternion(name, value)
+
+
+def robot_defaults(entry: Robot) -> tuple[dict, dict]:
+    """The placement-limit and goal-region fields that follow the robot (its entry's reach,
+    goal inset and heights), as ``placement_limits`` and ``goal_region`` dicts."""
+    limits = dict(reach_min=entry.reach[0], reach_max=entry.reach[1])
+    return limits, dict(inset=entry.goal_inset, height=tuple(entry.goal_height))
+
+
+def with_defaults(value, defaults: dict):
+    """A dataclass keyword's value with ``defaults`` under the fields the user did not set:
+    None -> the defaults, a dict -> the defaults updated by it, a dataclass -> as given (every
+    field set)."""
+    if value is None:
+        return dict(defaults)
+    if isinstance(value, dict):
+        return {**defaults, **value}
+    return value
 
 
 def one_robot(layout_set: LayoutSet, robot_uids: str | None) -> str:

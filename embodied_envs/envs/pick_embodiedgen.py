@@ -8,14 +8,16 @@ from typing import Any
 import numpy as np
 import sapien
 import torch
+from mani_skill.agents.robots.fetch.fetch import FETCH_WHEELS_COLLISION_BIT
 from mani_skill.utils.building import actors
 from mani_skill.utils.building.ground import build_ground
 from mani_skill.utils.registration import register
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
+from embodied_envs import robots
 from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP, SUPPORTED_ROBOTS, CameraSpec
-from embodied_envs.envs import fast_reads, keywords
+from embodied_envs.envs import agents, fast_reads, keywords
 from embodied_envs.envs.arguments import check_quaternion, dataclass_arg
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.rendering import HybridRendering, base_camera, render_camera
@@ -28,16 +30,12 @@ from embodied_envs.registration import CONTROL_FREQ, ENV_ID, MAX_EPISODE_STEPS
 from embodied_envs.scene import load_layout_scene
 from embodied_envs.scene.layout_scene import configuration_layouts
 
-# arm at the Panda's rest pose, fingers open (0.04 m each)
-REST_QPOS = np.array(
-    [0.0, np.pi / 8, 0.0, -3 * np.pi / 8, 0.0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04]
-)
-
 
 class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     """**Task Description:**
     Pick up the layout's target object (the first of ``relation.manipulated_objs``) with the
-    Panda, which stands on the table's edge as the layout places it, and hold it still at a goal
+    robot (``robot_uids``, else the layout's ``relation.robot``; ``embodied_envs/robots.py``),
+    which stands at the table's edge as the layout places it, and hold it still at a goal
     point above the table (a green sphere in human renders, hidden from sensors). Distractors
     and the table are obstacles. The scene comes from an EmbodiedGen layout file. A static
     ground lies at the layout's floor level (the lowest point of its ``FLOOR`` objects; z = 0
@@ -53,7 +51,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
       are rendered then. ``env.unwrapped.layouts`` holds each env's layout,
       ``env.unwrapped.instructions`` its task in words
     - per episode (the reset envs): every object on the table, within the placement limits
-    - arm joints: ``REST_QPOS`` plus N(0, ``robot_init_qpos_noise``); fingers open
+    - arm joints: the robot entry's ``rest_qpos`` plus N(0, ``robot_init_qpos_noise``) on its
+      ``noise_joints``; fingers open
     - goal: uniform over the table top within the robot's reach (``goal_region``)
 
     **Task** (per env, ``env.unwrapped.tasks``; ``layout/task.py`` reads it from the layout:
@@ -64,7 +63,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     **Fail Conditions:** ``fail`` when a mover, or a receptacle object, is off the table: more
     than ``fail_drop`` (0.05 m) below the table's top, or its origin outside the top's footprint.
 
-    **Action Space:** the Panda controller's (default ``pd_joint_delta_pos``).
+    **Action Space:** the robot controller's (default ``pd_joint_delta_pos``).
 
     **Observation Space:** ManiSkill's agent state plus ``extra``: ``tcp_pose``, ``goal_pos``
     (the pick goal, or the first mover's destination), ``is_grasped``, ``task_kind`` (one-hot:
@@ -92,8 +91,6 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     metadata = {"render_modes": SUPPORTED_RENDER_MODES}
 
     fail_drop = 0.05  # m, the object this far below the table's top has fallen off
-    base_camera_eye = (0.95, 0.0, 0.55)  # base_camera eye in the robot base frame, m
-    base_camera_target = (0.30, 0.0, 0.0)  # base_camera target in the robot base frame, m
     # the framed render camera (camera_cfg without an eye or target): past the table's centre,
     # away from the robot, looking back at the robot over the table
     render_camera_back = 0.9  # m from the table's centre, away from the robot
@@ -113,7 +110,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         # configuration); default: the shipped default layout
         layout_file: str | os.PathLike | list | None = None,
         replace_objs: bool = True,
-        robot_uids: str | None = None,
+        robot_uids: str | list | tuple | None = None,  # one uid, or two (two arms)
         robot_init_qpos_noise: float = 0.02,
         init_3dgs_quat: tuple[float, float, float, float] = SPLAT_Y_UP_TO_Z_UP,
         objs_z_offset: float = 0.002,
@@ -136,9 +133,24 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         files = self.layout_set.files  # absolute
         self.layout_file = files[0] if len(files) == 1 else files
         self.base_layout: LayoutInfo = self.layout_set.layouts[0]
-        robot = keywords.one_robot(self.layout_set, robot_uids)
-        self.placement_limits = dataclass_arg(PlacementLimits, placement_limits, "placement_limits")
-        self.goal_region = dataclass_arg(GoalRegion, goal_region, "goal_region")
+        if robot_uids is not None:  # a gripperless or absent robot named in its own words
+            agents.check_robot(robot_uids)
+        two = isinstance(robot_uids, list | tuple)  # two arms: the first at the layout's spot
+        robot = keywords.one_robot(self.layout_set, robot_uids[0] if two else robot_uids)
+        agents.check_robot(robot)  # its model is on this machine
+        uids = tuple(robot_uids) if two else (robot,)
+        self.robot_entries = tuple(robots.robot(u) for u in uids)
+        self.robot_entry = self.robot_entries[0]  # the arm the task's TCP and grasp follow
+        if two:  # ManiSkill's multi-agent env takes a tuple (and warns if it is not listed)
+            robot, self.SUPPORTED_ROBOTS = uids, [*SUPPORTED_ROBOTS, uids]
+        # reach and goals follow the robot, for each field the user did not set
+        limits, goals = keywords.robot_defaults(self.robot_entry)
+        self.placement_limits = dataclass_arg(
+            PlacementLimits, keywords.with_defaults(placement_limits, limits), "placement_limits"
+        )
+        self.goal_region = dataclass_arg(
+            GoalRegion, keywords.with_defaults(goal_region, goals), "goal_region"
+        )
         self.goal_region.check_reach(self.placement_limits)
         for name, value in dict(
             robot_init_qpos_noise=robot_init_qpos_noise, objs_z_offset=objs_z_offset,
@@ -171,7 +183,12 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
 
     @property
     def _default_sensor_configs(self):
-        return [base_camera(self.agent, self.base_camera_eye, self.base_camera_target)]
+        r = self.robot_entry  # eye and target given at the layout's robot spot
+        drop = 0.0
+        if r.base_height == "floor":  # the base stands on the floor under env 0's spot
+            drop = float(self.layout_scene.robot_poses[0, 2]) - float(self.layout_scene.floor_z)
+        eye, target = (r.in_base_frame(p, drop) for p in (r.camera_eye, r.camera_target))
+        return [base_camera(self.main_agent, eye, target, r.camera_mount)]
 
     @property
     def _default_human_render_camera_configs(self):
@@ -181,7 +198,14 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         return render_camera(self.camera_spec, framing)
 
     def _load_agent(self, options: dict):
-        super()._load_agent(options, sapien.Pose(p=[0.0, 0.0, 0.0]))  # placed per episode
+        placed = [sapien.Pose(p=[0.0, 0.0, 0.0]) for _ in self.robot_entries]  # per episode
+        super()._load_agent(options, placed if len(placed) > 1 else placed[0])
+
+    @property
+    def main_agent(self):
+        """The arm the task's TCP, grasp check and expert follow: the one robot, or the first
+        of two (``env.agent.agents[0]``)."""
+        return agents.all_agents(self)[0]
 
     def _load_scene(self, options: dict):
         self._num_configurations += 1
@@ -195,16 +219,30 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         )  # fmt: skip
         self.env_actors, self.obj = ls.env_actors, ls.target_actor
         self.instructions = [layout.instruction for layout in self.layouts]  # one per env
-        limits = self.agent.robot.get_qlimits()[0, -2:].sum(0).tolist()  # fingers shut, open
-        self.task_scene = TaskScene.build(
-            self.layouts, ls.env_actors, ls.robot_poses.cpu().numpy(), tuple(limits)
-        )
+        entry = self.robot_entry
+        span = tuple(float(np.float32(q)) for q in entry.gripper.span)  # as PhysX holds it
+        spots = ls.robot_poses.cpu().numpy()
+        self.task_scene = TaskScene.build(self.layouts, ls.env_actors, spots, span)
+        # each arm's spot: the layout's, and for a second arm the far side of the table
+        self.robot_spots = [spots]
+        if len(self.robot_entries) > 1:
+            top = ls.episodes.top_arrays
+            self.robot_spots.append(agents.opposite_spots(
+                spots, top.normals, top.offsets, top.lo, top.hi, self.placement_limits.hull_margin
+            ))  # fmt: skip
+        # the bases: at each env's robot spot, or by the entry's offsets from it
+        self.robot_bases = [
+            torch.as_tensor(r.base_poses(sp, float(ls.floor_z)), device=ls.robot_poses.device)
+            for r, sp in zip(self.robot_entries, self.robot_spots, strict=True)
+        ]
         self.tasks = self.task_scene.tasks  # one per env (layout/task.py)
         self.task_reader = TaskReader(self, self.task_scene, ls.top_z)
         self._kinds = sorted({t.kind for t in self.tasks}, key=KIND_IDS.get)
         self._kind_masks = {k: self.task_scene.kinds == KIND_IDS[k] for k in self._kinds}
         ls.register_state(self)
         self.ground = build_ground(self.scene, altitude=ls.floor_z)
+        if entry.mobile_base:  # its wheels do not touch the ground (ManiSkill's table scene)
+            self.ground.set_collision_group_bit(group=2, bit_idx=FETCH_WHEELS_COLLISION_BIT, bit=1)
         self.goal_site = actors.build_sphere(
             self.scene, radius=pick.GOAL_THRESH, color=[0, 1, 0, 1], name="goal_site",
             body_type="kinematic", add_collision=False, initial_pose=sapien.Pose(),
@@ -220,10 +258,15 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         ls = self.layout_scene
         start = ls.episodes.draw(env_idx, self._batched_episode_rng)
         with torch.device(self.device):
-            self.agent.robot.set_root_pose(Pose.create(ls.robot_poses[env_idx]))
-            qpos = torch.as_tensor(REST_QPOS, dtype=torch.float32).repeat(len(env_idx), 1)
-            qpos[:, :-2] += self.robot_init_qpos_noise * start.joint_noise  # fingers stay open
-            self.agent.reset(qpos)
+            for agent, entry, bases in zip(
+                agents.all_agents(self), self.robot_entries, self.robot_bases, strict=True
+            ):
+                agent.robot.set_root_pose(Pose.create(bases[env_idx]))
+                rest = agents.rest_qpos(agent, entry)
+                qpos = torch.as_tensor(rest, dtype=torch.float32).repeat(len(env_idx), 1)
+                noisy = list(entry.noise_joints)  # the fingers stay open
+                qpos[:, noisy] += self.robot_init_qpos_noise * start.joint_noise[:, : len(noisy)]
+                agent.reset(qpos)
             ls.set_episode_poses(env_idx, start.objects if self.replace_objs else {})
             dest = self.task_reader.begin_episode(env_idx, start.goal)
             # the goal marker: the pick goal, or where the first mover goes
@@ -271,7 +314,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     def _get_obs_extra(self, info: dict):
         obs = dict(
             is_grasped=info["is_grasped"],
-            tcp_pose=self.agent.tcp_pose.raw_pose,
+            tcp_pose=agents.tcp_pose(self.main_agent, self.robot_entry).raw_pose,
             goal_pos=self.goal_site.pose.p,
             task_kind=torch.nn.functional.one_hot(self.task_scene.kinds, len(RULES)).to(
                 self.device, torch.float32),  # pick, place, move  # fmt: skip
@@ -279,7 +322,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         if "state" in self.obs_mode:
             obs.update(
                 obj_pose=self.obj.pose.raw_pose,
-                tcp_to_obj_pos=self.obj.pose.p - self.agent.tcp_pose.p,
+                tcp_to_obj_pos=self.obj.pose.p
+                - agents.tcp_pose(self.main_agent, self.robot_entry).p,
                 obj_to_goal_pos=self.goal_site.pose.p - self.obj.pose.p,
             )
         return obs

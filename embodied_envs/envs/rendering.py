@@ -17,11 +17,11 @@ from embodied_envs.config import CameraSpec
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
 
 
-def base_camera(agent, eye, target) -> CameraConfig:
-    """The 128x128 ``base_camera`` sensor, mounted on the robot's base link; ``eye`` and
-    ``target`` in the base frame (m)."""
+def base_camera(agent, eye, target, mount: str) -> CameraConfig:
+    """The 128x128 ``base_camera`` sensor, mounted on the robot's link ``mount`` (its robot
+    entry's ``camera_mount``); ``eye`` and ``target`` in that link's frame (m)."""
     pose = sapien_utils.look_at(eye=eye, target=target)
-    mount = agent.robot.links_map[agent.robot.links[0].name]
+    mount = agent.robot.links_map[mount]
     return CameraConfig("base_camera", pose, 128, 128, np.pi / 2, 0.01, 100, mount=mount)
 
 
@@ -66,7 +66,9 @@ class HybridRendering:
         if self.hybrid is not None:
             self.hybrid.to(self.device).configure(
                 foreground_ids=stacked_ids(
-                    self.agent.robot.links + list(self.layout_scene.node_actors.values())
+                    [link for a in getattr(self.agent, "agents", [self.agent])
+                     for link in a.robot.links]
+                    + list(self.layout_scene.node_actors.values())
                 ),
                 hidden_ids=stacked_ids(self._hidden_objects),
                 background_poses=[x.pose(x.background) for x in self.layouts],

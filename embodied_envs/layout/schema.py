@@ -25,6 +25,7 @@ from embodied_envs.layout.folders import resolve_path
 from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE, LayoutPose
 from embodied_envs.layout.task import Task, resolve_task
 from embodied_envs.paths import atomic_output
+from embodied_envs.robots import ROBOT_NAMES, SUPPORTED_ROBOTS
 
 CATEGORIES = ("background", "context", "manipulated_objs", "distractor_objs")
 RELATIONS = ("ON", "IN", "INSIDE", "FLOOR")
@@ -36,14 +37,9 @@ MAX_NODE_NAME = 128  # characters: a node name names its URDF file
 REST_TOLERANCE = 0.05  # m: a file's object rests this close to its parent's top (in height)
 MAX_INTERPENETRATION = 0.01  # m: sibling footprints in a file may overlap at most this deep
 
-# Layout robot names -> ManiSkill robot uids. An unknown name is an error unless the user
-# passes robot_uids explicitly (EmbodiedGen silently fell back to panda).
-ROBOT_REGISTRY = {
-    "franka": "panda",
-    "franka_panda": "panda",
-    "panda": "panda",
-    "panda_wristcam": "panda_wristcam",
-}
+# Layout robot names -> ManiSkill robot uids (embodied_envs/robots.py). An unknown name is an
+# error unless the user passes robot_uids explicitly (EmbodiedGen silently fell back to panda).
+ROBOT_REGISTRY = ROBOT_NAMES
 # Slots of envs that hold different layouts (scene/layout_scene.py): the context, the graded
 # object, and the others as OBJECT_SLOT + 1, 2, ...; the graded objects merged over envs.
 CONTEXT_SLOT, TARGET_SLOT, OBJECT_SLOT, TARGET_ACTOR = "context", "target", "object", "target_obj"
@@ -54,7 +50,7 @@ CONTEXT_SLOT, TARGET_SLOT, OBJECT_SLOT, TARGET_ACTOR = "context", "target", "obj
 # actors are named "env<i>/<node>", which no node can be: a node name holds no "/".
 RESERVED_NAMES = (
     "ground", "goal_site", CONTEXT_SLOT, TARGET_SLOT, TARGET_ACTOR,
-    *sorted(set(ROBOT_REGISTRY.values())), "base_camera", "render_camera",
+    *sorted(SUPPORTED_ROBOTS), "base_camera", "render_camera",
 )  # fmt: skip
 
 

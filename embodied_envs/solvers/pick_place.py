@@ -24,6 +24,7 @@ import torch
 
 from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers.follow import follow_limits, rate_limited, shortened
 from embodied_envs.solvers.grasps import (
     GraspConfig,
@@ -213,6 +214,19 @@ class PickPlaceSolver:
         self.seed = seed
         self.stages = 0  # _per_env calls so far: part of each plan's random key
         self.num_envs = self.base.num_envs
+        uid = getattr(self.base.agent, "uid", None)
+        if uid is None:  # ManiSkill's MultiAgent
+            raise ValueError(
+                f"robot_uids={self.base.robot_uids!r}: the scripted expert drives one arm; make "
+                "the env with one robot (docs/robots.md)"
+            )
+        if not ROBOTS[uid].expert:  # grasps, gripper and plans are the Panda's for now
+            drivable = [u for u, r in ROBOTS.items() if r.expert]
+            raise ValueError(
+                f"robot_uids={uid!r}: the scripted expert drives only {drivable} for now "
+                "(docs/robots.md). Fix: make the env with robot_uids='panda', or drive this "
+                "robot with your own policy"
+            )
         if self.base.control_mode != "pd_joint_pos":
             raise ValueError(
                 f"the solver drives control_mode='pd_joint_pos', got {self.base.control_mode!r}"

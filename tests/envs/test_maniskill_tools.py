@@ -16,8 +16,10 @@ import torch
 from conftest import ROOT
 
 import embodied_envs  # noqa: F401
-from embodied_envs.envs.pick_embodiedgen import REST_QPOS
 from embodied_envs.registration import ENTRY_ID, ENV_ID
+from embodied_envs.robots import PANDA
+
+REST_QPOS = np.array(PANDA.rest_qpos)
 
 
 @pytest.fixture(scope="module")

@@ -9,9 +9,11 @@ from mani_skill.utils.structs.pose import Pose
 from placement_checks import check_constraints
 
 import embodied_envs  # noqa: F401
-from embodied_envs.envs.pick_embodiedgen import REST_QPOS
 from embodied_envs.layout import LayoutError, LayoutPose
 from embodied_envs.paths import default_layout
+from embodied_envs.robots import PANDA
+
+REST_QPOS = np.array(PANDA.rest_qpos)
 
 ENV_ID = "PickEmbodiedGen-v1"
 
@@ -198,7 +200,7 @@ def test_bad_arguments_fail_before_simulation(tmp_path, scene_copy):
     layout.write_text(layout.read_text().replace('"franka"', '"ur5"'))
     before = snapshot(scene_copy)
     with pytest.raises(
-        LayoutError, match=r'relation\["robot"\] is "ur5", which is not a registered robot'
+        LayoutError, match=r'relation\["robot"\] is "ur5", which has no ManiSkill model here'
     ):
         gym.make(ENV_ID, layout_file=str(layout))
     e = gym.make(ENV_ID, layout_file=str(layout), robot_uids="panda")  # explicit robot works

@@ -10,7 +10,7 @@ import torch
 from mani_skill.utils.structs import Actor
 from scipy.spatial import ConvexHull
 
-from embodied_envs.envs.contacts import is_grasping
+from embodied_envs.envs.agents import is_grasping, tcp_pose, tcp_position_cpu
 from embodied_envs.envs.tasks import KIND_IDS
 from embodied_envs.envs.tasks.state import TaskState
 from embodied_envs.layout.assets import asset_geometry
@@ -212,27 +212,28 @@ class TaskReader:
         return dest
 
     def _read(self):
-        agent, movers, rec = self.env.agent, self.ts.movers, self.ts.receptacle
+        agent, movers, rec = self.env.main_agent, self.ts.movers, self.ts.receptacle
+        entry = self.env.robot_entry
         if self.gpu:
             poses = torch.stack([a.pose.raw_pose for a in movers], 1)
             return (
-                agent.tcp.pose.p, agent.robot.get_qpos(), agent.robot.get_qvel(), poses,
+                tcp_pose(agent, entry).p, agent.robot.get_qpos(), agent.robot.get_qvel(), poses,
                 torch.stack([a.linear_velocity for a in movers], 1),
                 torch.stack([a.angular_velocity for a in movers], 1),
                 rec.pose.raw_pose,
-                torch.stack([is_grasping(agent, a) for a in movers], 1),
+                torch.stack([is_grasping(agent, a, entry) for a in movers], 1),
             )  # fmt: skip
         robot = agent.robot._objs[0]
         poses = [a._objs[0].pose for a in movers]
         bodies = [a._bodies[0] for a in movers]
         rp = rec._objs[0].pose
         return (
-            np.array([agent.tcp._objs[0].entity_pose.p]), robot.qpos[None], robot.qvel[None],
+            tcp_position_cpu(agent, entry), robot.qpos[None], robot.qvel[None],
             np.array([[np.concatenate([p.p, p.q]) for p in poses]]),
             np.array([[b.linear_velocity for b in bodies]]),
             np.array([[b.angular_velocity for b in bodies]]),
             np.concatenate([rp.p, rp.q])[None],
-            np.array([[bool(is_grasping(agent, a)[0]) for a in movers]]),
+            np.array([[bool(is_grasping(agent, a, entry)[0]) for a in movers]]),
         )  # fmt: skip
 
     def state(self, goal) -> TaskState:
@@ -245,9 +246,10 @@ class TaskReader:
         rec_rot = quat_matrix(rec[:, 3:])
         local = ((p - rec[:, None, :3])[..., None, :] @ rec_rot[:, None])[..., 0, :]
         lo, hi = self.ts.finger_span
+        j = self.env.robot_entry.gripper.joints  # the trailing gripper joints
         return TaskState(
-            tcp=tcp, goal=goal, arm_qvel=qvel[:, :-2],
-            opening=(qpos[:, -2:].sum(-1) - lo) / (hi - lo),
+            tcp=tcp, goal=goal, arm_qvel=qvel[:, :-j],
+            opening=(qpos[:, -j:].sum(-1) - lo) / (hi - lo),
             movers=p, origins=origin, lin_vel=lin, ang_vel=ang, bottom=bottom, grasped=grasped,
             start=self.start, dest=self.dest, in_receptacle=local, footprint=self.footprint,
             rim=self.rim, rec_top=rec[:, 2] + self.rim, rec_pos=rec[:, :3], is_in=self.is_in,

@@ -70,7 +70,7 @@ class EpisodeStart:
                             fn(self.joint_noise))  # fmt: skip
 
 
-NOISE_DIMS = 7  # arm joints that get start noise (the fingers start exactly open)
+NOISE_DIMS = 7  # at most this many arm joints get start noise (robots.py noise_joints)
 MANY_OBJECTS = 16  # placing more objects every episode is warned about (resets slow down)
 STARTS_PER_DRAW = 32  # episode starts prepared per sampler call at least (then per env)
 FIRST_CHUNK = 8  # candidates per object tested before the rest (most draws need only these)

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from embodied_envs.layout.errors import check_number
+from embodied_envs.robots import PANDA
 
 
 @dataclass(frozen=True)
@@ -19,8 +20,10 @@ class PlacementLimits:
     """Tunable limits of placement (per configuration and per episode); each field's range
     follows its comment and is checked on construction."""
 
-    reach_min: float = 0.20  # m in [0, 2), manipulated object centre to robot base, exclusive
-    reach_max: float = 0.78  # m in (reach_min, 2], exclusive: top-down grasps fail from ~0.80 m
+    # the reach band, m from the layout's robot spot, exclusive: reach_min in [0, 2), reach_max
+    # in (reach_min, 2]; the env's default is its robot's (robots.py), these the Panda's
+    reach_min: float = PANDA.reach[0]
+    reach_max: float = PANDA.reach[1]
     max_heading_deg: float = 60.0  # in (0, 180]: manipulated objects within this of the heading
     hull_margin: float = 0.02  # m in [0, 0.5], the parent's top hull is shrunk by this much
     clearance: float = 0.01  # m in [0, 0.5], minimum gap between footprints
@@ -52,9 +55,11 @@ class PlacementLimits:
 class GoalRegion:
     """Where goals are drawn: above the table top, inside the robot's reach."""
 
-    inset: float = 0.10  # m in [0, 1), kept from both ends of the reach band
+    # inset: m in [0, 1), kept from both ends of the reach band; height: m above the table top,
+    # 0 <= low <= high <= 1. The env's defaults are its robot's (robots.py), these the Panda's
+    inset: float = PANDA.goal_inset
     margin: float = 0.05  # m in [0, 0.5], inside the table top's hull
-    height: tuple[float, float] = (0.05, 0.25)  # m above the table top, 0 <= low <= high <= 1
+    height: tuple[float, float] = PANDA.goal_height
     candidates: int = 64  # in [1, 1e5], per env in each draw (the region fills >= ~20%)
 
     def __post_init__(self):

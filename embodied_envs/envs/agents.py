@@ -1,0 +1,117 @@
+"""What the env asks of a robot through ManiSkill: may it be loaded, where is its TCP, does it
+grasp. The robots' numbers are in ``embodied_envs/robots.py``; this module reads the agent
+classes (their model files, their ``is_grasping``) and the loaded agents.
+"""
+
+from __future__ import annotations
+
+import os
+
+import mani_skill.agents.robots  # noqa: F401  (registers ManiSkill's agents)
+import numpy as np
+import torch
+from mani_skill.agents.base_agent import BaseAgent
+from mani_skill.agents.registration import REGISTERED_AGENTS
+
+from embodied_envs import robots
+from embodied_envs.envs import contacts
+
+
+def model_file(uid: str) -> str | None:
+    """The model file ManiSkill's agent class ``uid`` loads (URDF or MJCF), or None."""
+    cls = REGISTERED_AGENTS[uid].agent_cls
+    return getattr(cls, "urdf_path", None) or getattr(cls, "mjcf_path", None)
+
+
+def check_robot(uid) -> None:
+    """Refuse, in one line, a robot the env cannot load before anything is simulated: not a
+    string, a ManiSkill agent without a gripper's grasp check, one this package has no entry
+    for, or one whose model file is not on this machine (ManiSkill downloads some separately).
+
+    Raises:
+        ValueError: naming the robot, why, and the fix.
+    """
+    supported = list(robots.SUPPORTED_ROBOTS)
+    if isinstance(uid, list | tuple) and len(uid) == 2 and all(isinstance(u, str) for u in uid):
+        for one in uid:  # two arms (ManiSkill's multi-agent env), each a supported robot
+            check_robot(one)
+        return
+    if not isinstance(uid, str):
+        raise ValueError(
+            f"robot_uids={uid!r}: PickEmbodiedGen-v1 loads one robot or two, named by their "
+            f"ManiSkill uids (a string, or a list of two); use {supported}"
+        )
+    agent = REGISTERED_AGENTS.get(uid)
+    if uid not in robots.ROBOTS:
+        # BaseAgent.is_grasping raises NotImplementedError: only arms with a gripper override it
+        if agent is not None and agent.agent_cls.is_grasping is BaseAgent.is_grasping:
+            raise ValueError(
+                f"robot_uids={uid!r}: ManiSkill's {uid} has no gripper (its agent class "
+                f"{agent.agent_cls.__name__} does not define is_grasping), and every task of "
+                f"PickEmbodiedGen-v1 grasps an object. Fix: use an arm with a gripper, one of "
+                f"{supported}"
+            )
+        what = "is not supported" if agent is not None else "is not a ManiSkill robot uid"
+        raise ValueError(f"robot_uids={uid!r} {what}; use one of {supported}")
+    path = model_file(uid) if agent is not None else None
+    if path is None or not os.path.exists(path):
+        raise ValueError(
+            f"robot_uids={uid!r}: its model ({path}) is not on this machine; ManiSkill "
+            f"downloads it separately. Fix: `{robots.DOWNLOAD_COMMAND.format(uid=uid)}` "
+            "(set MS_ASSET_DIR first to choose where it goes), or use one of "
+            f"{[r for r in supported if robots.ROBOTS[r].in_wheel]}"
+        )
+
+
+def all_agents(env) -> list:
+    """The env's agents: ManiSkill's ``MultiAgent.agents`` for several robots, else the one."""
+    return list(getattr(env.agent, "agents", [env.agent]))
+
+
+def opposite_spots(spots: np.ndarray, normals, offsets, lo, hi, margin: float) -> np.ndarray:
+    """A second arm's spots ``(n, 7)`` across the table from ``spots (n, 7)``: on the ray from
+    each spot through its table top's centre (the middle of ``lo``, ``hi``), ``margin`` inside
+    the far edge of the top (half-planes ``normals @ x >= offsets``), facing the centre."""
+    spots = np.asarray(spots, dtype=np.float64)
+    centre = (np.asarray(lo) + np.asarray(hi)) / 2
+    d = centre - spots[:, :2]
+    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    n, o = np.asarray(normals, np.float64), np.asarray(offsets, np.float64)
+    nd = np.einsum("bej,bj->be", n, d)
+    room = np.einsum("bej,bj->be", n, centre) - o  # >= 0 inside
+    t = np.where(nd < -1e-9, room / np.maximum(-nd, 1e-9), np.inf).min(1)
+    out = spots.copy()
+    out[:, :2] = centre + (t - margin)[:, None] * d
+    yaw = np.arctan2(-d[:, 1], -d[:, 0])  # facing back, toward the centre
+    out[:, 3:] = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], 1)
+    return out.astype(np.float32)
+
+
+def rest_qpos(agent, entry: robots.Robot) -> np.ndarray:
+    """The entry's rest joint positions, or the agent's first keyframe's."""
+    if entry.rest_qpos is not None:
+        return np.asarray(entry.rest_qpos, dtype=np.float64)
+    return np.asarray(next(iter(type(agent).keyframes.values())).qpos, dtype=np.float64)
+
+
+def tcp_pose(agent, entry: robots.Robot):
+    """The TCP's ManiSkill ``Pose`` (batched): the entry's link, or the agent's ``tcp_pose``."""
+    if entry.tcp_link is None:
+        return agent.tcp_pose
+    return agent.robot.links_map[entry.tcp_link].pose
+
+
+def tcp_position_cpu(agent, entry: robots.Robot) -> np.ndarray:
+    """``(1, 3)``: the TCP position of the CPU simulation's one env, read from SAPIEN."""
+    if entry.tcp_link is None:
+        return agent.tcp_pose.p.cpu().numpy()
+    link = agent.robot.links_map[entry.tcp_link]
+    return np.array([link._objs[0].entity_pose.p])
+
+
+def is_grasping(agent, obj, entry: robots.Robot) -> torch.Tensor:
+    """Per env (bool tensor): the agent grasps ``obj``, by the agent's own ``is_grasping``
+    (its defaults); the Panda's in one CPU pass (``envs/contacts.py``, the same rule)."""
+    if entry.grasp_check == "panda_fingers":
+        return contacts.is_grasping(agent, obj)
+    return agent.is_grasping(obj)
