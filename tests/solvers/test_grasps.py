@@ -20,7 +20,7 @@ from embodied_envs.solvers.grasps import (
     to_tcp,
 )
 
-ZOO = ROOT / "zoo"
+ZOO = ROOT / "tests" / "data" / "zoo"
 SHAPES = ["ring", "handled_cup", "t_shape", "shallow_bowl", "bottle"]
 
 
