@@ -20,7 +20,7 @@ MAX_LINE = 200  # characters, in the README and every docs page
 # a link to one of them is allowed only while the page does not exist
 PENDING: set = set()  # pages linked before they are written
 # repository folders whose paths, named whole in `backticks`, must exist
-REPO_ROOTS = ("embodied_envs/", "tools/", "tests/", "zoo/", "layouts/", "assets/", ".ci/")
+REPO_ROOTS = ("embodied_envs/", "tools/", "tests/", "layouts/", "assets/", ".ci/")
 
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 CODE_SPAN = re.compile(r"`([^`\n]+)`")

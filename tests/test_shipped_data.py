@@ -13,7 +13,7 @@ TOOLS = ROOT / "tools"
 SHIPPED = {
     "assets": DATA / "assets",
     "layouts": DATA / "layouts",
-    "zoo": ROOT / "zoo",
+    "zoo": ROOT / "tests" / "data" / "zoo",
     "bad_inputs": ROOT / "tests" / "data" / "bad_inputs",
 }
 

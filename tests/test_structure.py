@@ -16,7 +16,7 @@ PACKAGE = ROOT / "embodied_envs"
 # importing embodied_envs registers the env id: every import pulls in registration
 ALWAYS = {"registration"}
 # what importing each part may pull in (the README's "Where things are": layout -> scene ->
-# envs -> solvers -> pipelines -> cli; splat, paths, workers stand alone)
+# envs -> solvers -> pipelines -> cli, datasets beside solvers; splat, paths, workers stand alone)
 ALLOWED = {
     "paths": set(),
     "workers": set(),
@@ -28,10 +28,12 @@ ALLOWED = {
     "scene": {"layout", "paths", "robots"},
     "envs": {"layout", "paths", "scene", "splat", "config", "robots"},
     "solvers": {"layout", "paths", "robots"},
+    "datasets": {"layout", "paths", "config", "robots"},
     "pipelines": {
         "layout", "paths", "scene", "splat", "config", "envs", "solvers", "workers", "robots",
+        "datasets",
     },
-    "cli": {"layout", "paths", "splat", "config", "workers", "pipelines", "robots"},
+    "cli": {"layout", "paths", "splat", "config", "workers", "pipelines", "robots", "datasets"},
 }
 HEAVY = ("torch", "sapien", "mani_skill")  # the simulator: not for --help or layout commands
 
@@ -54,7 +56,8 @@ def imported_by(part: str) -> tuple[set[str], set[str]]:
 def test_each_part_pulls_in_only_what_is_below_it(part):
     parts, heavy = imported_by(part)
     assert parts <= ALLOWED[part], f"{part} imports {sorted(parts - ALLOWED[part])}"
-    if part in ("paths", "workers", "registration", "splat", "robots", "layout", "config"):
+    if part in ("paths", "workers", "registration", "splat", "robots", "layout", "config",
+                "datasets"):
         assert not heavy, f"{part} imports {sorted(heavy)}"
 
 

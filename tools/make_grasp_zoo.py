@@ -8,7 +8,7 @@ turned Z-up by the URDF's ``<origin rpy="1.5708 0 0">``. Each layout is the ship
 scene (table, room, distractors) with the shape as its target. Sizes fit the Panda's 8 cm
 opening somewhere on every shape.
 
-Usage: python tools/make_grasp_zoo.py [--out zoo]
+Usage: python tools/make_grasp_zoo.py [--out tests/data/zoo]
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from make_assets import urdf_text, write_obj  # tools/: one object per part, Y-u
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "embodied_envs" / "data"
+ZOO = ROOT / "tests" / "data" / "zoo"  # the shipped zoo: the tests' and benchmarks' data
 SEGMENTS = 24  # sides of a cylinder part
 TABLE_TOP = 0.760  # m, the default layout's table top (every shape's lowest point is z = 0)
 
@@ -132,7 +134,8 @@ def write_layout(path: Path, name: str, desc: str, assets: Path) -> None:
         data[key] = {(name if k == "can" else k): v for k, v in data[key].items()}
     data["objs_desc"][name] = desc
     data["tree"]["table"] = [[name if c == "can" else c, r] for c, r in data["tree"]["table"]]
-    shipped = Path("..", "..", "embodied_envs", "data", "assets")
+    # the shipped assets as seen from the shipped zoo's layouts (the same text under any --out)
+    shipped = Path(os.path.relpath(DATA / "assets", ZOO / "layouts"))
     data["assets"] = {
         (name if k == "can" else k): str(shipped / Path(v).name) for k, v in data["assets"].items()
     }
@@ -144,7 +147,7 @@ def write_layout(path: Path, name: str, desc: str, assets: Path) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--out", type=Path, default=ROOT / "zoo")
+    ap.add_argument("--out", type=Path, default=ZOO)
     args = ap.parse_args(argv)
     assets, layouts = args.out / "assets", args.out / "layouts"
     for folder in (assets, layouts):

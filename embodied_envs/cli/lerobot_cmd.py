@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from embodied_envs.pipelines.datasets import (
+from embodied_envs.datasets import (
     check_replayable,
     lerobot_settings,
     relabel_lerobot_tasks,

@@ -16,8 +16,8 @@ from embodied_envs.cli import (
     splat_cmds,
 )
 from embodied_envs.config import ConfigError
+from embodied_envs.datasets.records import DatasetError
 from embodied_envs.layout import LayoutError, PlacementError
-from embodied_envs.pipelines.datasets import DatasetError
 from embodied_envs.splat import SplatFileError
 from embodied_envs.workers import WorkerError, start_up, started
 

@@ -4,16 +4,16 @@ Every option is ManiSkill's (``--traj-path``, ``-o``, ``-c``, ``--use-env-states
 ``--save-traj``, ``--save-video``, ``-n``, ...). Observations with ``hybrid_obs`` are composited
 over the splat whatever ``--render-mode`` says: ``hybrid_obs`` is recorded in ``env_kwargs``.
 Conversions from ``pd_joint_pos`` to end-effector control modes (``-c pd_ee_delta_pose`` ...)
-use :func:`embodied_envs.solvers.ee_actions.joint_pos_to_ee`, which works in the robot's root
-frame (ManiSkill's own converter assumes an unrotated robot base).
+use :func:`embodied_envs.datasets.ee_actions.joint_pos_to_ee`, which works in the robot's root
+frame (ManiSkill's own converter assumes an unrotated robot base): see
+:func:`embodied_envs.datasets.replay.replay`.
 """
 
 from __future__ import annotations
 
 import argparse
-from unittest import mock
 
-from embodied_envs.pipelines.datasets import check_replayable
+from embodied_envs.datasets.replay import replay
 
 
 def add_parser(sub) -> None:
@@ -29,15 +29,6 @@ def add_parser(sub) -> None:
 def cmd_replay(args) -> int:
     # ManiSkill's replay tool imports the simulator: only when the command runs
     from mani_skill.trajectory import replay_trajectory
-    from mani_skill.trajectory.utils.actions import conversion
 
-    from embodied_envs.solvers.ee_actions import joint_pos_to_ee  # torch, as ManiSkill's tool
-
-    options = replay_trajectory.parse_args(args.options or ["--help"])
-    for note in check_replayable(options.traj_path):  # a dataset that cannot replay: one line
-        print(note)
-    # ManiSkill's replay_trajectory takes no converter argument and looks its end-effector
-    # converter up as a module global: ours (root-frame actions) is set for this call only
-    with mock.patch.object(conversion, "from_pd_joint_pos_to_ee", joint_pos_to_ee):
-        replay_trajectory.main(options)
+    replay(replay_trajectory.parse_args(args.options or ["--help"]))
     return 0

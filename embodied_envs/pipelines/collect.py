@@ -30,10 +30,10 @@ import gymnasium as gym
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
 from mani_skill.utils.wrappers.record import RecordEpisode
 
+from embodied_envs.datasets.records import RECORD_KEY, scene_record
 from embodied_envs.paths import atomic_output
-from embodied_envs.pipelines.datasets import RECORD_KEY, has_splat, scene_record
+from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode
 from embodied_envs.registration import ENTRY_ID, ENV_ID
-from embodied_envs.solvers.pick_place import PickPlaceSolver
 from embodied_envs.workers import report, run, started
 
 SOURCE_DESC = (
@@ -111,18 +111,6 @@ class CollectPlan:
 
 
 @dataclass
-class EpisodeRecord:
-    seed: int
-    success: bool
-    kept: bool
-    steps: int
-    failure: str | None  # the stage that failed first ("execution" when all plans ran)
-    wall_time_s: float
-    layout_file: str = ""  # the layout the episode was drawn in
-    instruction: str = ""  # its task in words
-
-
-@dataclass
 class LayoutSummary:
     layout: str | list[str]
     env_id: str
@@ -149,7 +137,7 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         obs_mode=plan.obs_mode,
         hybrid_obs=plan.hybrid_obs,
         control_mode="pd_joint_pos",
-        render_mode=("hybrid" if has_splat(plan.files) else "rgb_array") if plan.video else None,
+        render_mode=film_mode(plan.files) if plan.video else None,
         sim_backend="physx_cpu",
     )
     env = RecordEpisode(
@@ -165,28 +153,16 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
     )
     started()
     kept, records = 0, []
-    # over a set, each episode's seed draws its layout: a reconfiguration, recorded as such
-    options = dict(reconfigure=True) if env.unwrapped.layout_set.varies else None
     try:
         for seed in seeds:
-            t0 = time.perf_counter()
-            env.reset(seed=seed, options=options)
-            drawn = env.unwrapped.layouts[0]
-            result = PickPlaceSolver(env, seed=seed).solve()
-            success = bool(env.unwrapped.evaluate()["success"][0])
-            keep = success or not plan.only_success
-            env.flush_trajectory(save=keep)
+            episode = run_episode(env, seed, expert)
+            episode.kept = episode.success or not plan.only_success
+            env.flush_trajectory(save=episode.kept)
             if plan.video:
-                env.flush_video(name=f"seed_{seed:06d}", save=keep)
-            kept += keep
-            failures = result.reports[0].plan_failures
-            failure = None if success else (failures[0].split(":")[0] if failures else "execution")
-            record = EpisodeRecord(
-                seed, success, keep, result.steps, failure, time.perf_counter() - t0,
-                str(drawn.source), env.unwrapped.instructions[0],
-            )  # fmt: skip
-            records.append(record)
-            report(asdict(record))
+                env.flush_video(name=f"seed_{seed:06d}", save=episode.kept)
+            kept += episode.kept
+            records.append(episode)
+            report(asdict(episode))
             if kept >= quota:
                 break
     finally:
@@ -298,7 +274,7 @@ def _collect_into(plan: CollectPlan, out: Path, target: Path, progress):
             _worker,
             tasks,
             len(tasks) if plan.workers > 1 else 1,
-            on_progress=None if progress is None else lambda rec: progress(EpisodeRecord(**rec)),
+            on_progress=None if progress is None else lambda rec: progress(Episode(**rec)),
         )
         records = [r for part in parts for r in part]
         records.sort(key=lambda r: r.seed)
@@ -322,7 +298,7 @@ def _collect_into(plan: CollectPlan, out: Path, target: Path, progress):
         drawn = {r.seed: r for r in kept}
         for episode in meta["episodes"]:  # what each episode was asked, and where
             r = drawn[episode["episode_seed"]]
-            episode.update(instruction=r.instruction, layout_file=r.layout_file)
+            episode.update(instruction=r.instruction, layout_file=r.layout)
         with atomic_output(meta_path) as tmp:
             tmp.write_text(json.dumps(meta, indent=2))
         steps = [r.steps for r in kept] or [0]

@@ -12,19 +12,18 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import gymnasium as gym
-import imageio.v2 as imageio
 import numpy as np
 
 from embodied_envs.layout.placement import derive_seed, place
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import atomic_output
+from embodied_envs.pipelines.episodes import Episode, expert, run_episode, write_video
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
-from embodied_envs.solvers import PickPlaceSolver
 from embodied_envs.workers import run, started
 
 
@@ -53,20 +52,7 @@ class DemoPlan:
     workers: int | None = None
 
 
-@dataclass
-class EnvEpisode:
-    episode: int
-    env: int
-    seed: int
-    layout: str
-    success: bool
-    steps: int
-    plan_failures: list[str]
-    wall_time_s: float
-    frames: list = field(default_factory=list, repr=False)
-
-
-def _run_env(job: dict) -> list[EnvEpisode]:
+def _run_env(job: dict) -> list[Episode]:
     """All episodes of one env (a process of its own when there are several)."""
     env = gym.make(
         ENV_ID,
@@ -77,54 +63,13 @@ def _run_env(job: dict) -> list[EnvEpisode]:
         control_mode="pd_joint_pos",
     )
     started()
-    out = []
-    every = job["frame_every"]
     try:
-        for e, seed in enumerate(job["seeds"]):
-            t0 = time.perf_counter()
-            env.reset(seed=seed)
-            frames = [_frame(env)]
-            recorder = _Recorder(env, frames, every)
-            result = PickPlaceSolver(recorder, seed=seed).solve()
-            frames.append(_frame(env))
-            out.append(
-                EnvEpisode(
-                    episode=e,
-                    env=job["env"],
-                    seed=seed,
-                    layout=job["layout"],
-                    success=bool(result.success[0]),
-                    steps=result.steps,
-                    plan_failures=result.reports[0].plan_failures,
-                    wall_time_s=round(time.perf_counter() - t0, 3),
-                    frames=frames,
-                )
-            )
+        return [
+            run_episode(env, seed, expert, film_every=job["frame_every"], closing_frame=True)
+            for seed in job["seeds"]
+        ]
     finally:
         env.close()
-    return out
-
-
-def _frame(env) -> np.ndarray:
-    img = env.render()
-    img = img.cpu().numpy() if hasattr(img, "cpu") else np.asarray(img)
-    return img[0] if img.ndim == 4 else img
-
-
-class _Recorder:
-    """Passes steps through to the env and keeps every k-th rendered frame."""
-
-    def __init__(self, env, frames: list, every: int):
-        self.env, self.frames, self.every, self.t = env, frames, every, 0
-        self.unwrapped = env.unwrapped
-        self.action_space = env.action_space
-
-    def step(self, action):
-        res = self.env.step(action)
-        self.t += 1
-        if self.t % self.every == 0:
-            self.frames.append(_frame(self.env))
-        return res
 
 
 def tile(frames: list[np.ndarray]) -> np.ndarray:
@@ -140,16 +85,10 @@ def tile(frames: list[np.ndarray]) -> np.ndarray:
     return grid
 
 
-def write_video(path: Path, per_env_frames: list[list[np.ndarray]], fps: int) -> int:
-    """Tile the envs' frames over time (shorter episodes hold their last frame); returns #frames."""
-    n = max(len(f) for f in per_env_frames)
-    with (
-        atomic_output(path) as tmp,
-        imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7, macro_block_size=1) as w,
-    ):
-        for t in range(n):
-            w.append_data(tile([f[min(t, len(f) - 1)] for f in per_env_frames]))
-    return n
+def tiled(per_env_frames: list[list[np.ndarray]]) -> Iterator[np.ndarray]:
+    """The envs' frames tiled over time (shorter episodes hold their last frame)."""
+    for t in range(max(len(f) for f in per_env_frames)):
+        yield tile([f[min(t, len(f) - 1)] for f in per_env_frames])
 
 
 def env_layouts(layout: str | tuple[str, ...], num_envs: int, seed: int, out: Path) -> list[str]:
@@ -177,7 +116,6 @@ def run_demo(plan: DemoPlan, out: Path, progress: Callable[[int], None] | None =
     layouts = env_layouts(plan.layout, plan.num_envs, plan.seed, out)
     jobs = [
         dict(
-            env=k,
             layout=layouts[k],
             render_mode=plan.render_mode,
             env_kwargs=plan.env_kwargs,
@@ -207,8 +145,13 @@ def run_demo(plan: DemoPlan, out: Path, progress: Callable[[int], None] | None =
     for e in range(plan.episodes):
         eps = [results[k][e] for k in range(plan.num_envs)]
         video = out / f"episode_{e:03d}.mp4"
-        n_frames = write_video(video, [ep.frames for ep in eps], fps)
-        envs = [{k: v for k, v in asdict(ep).items() if k != "frames"} for ep in eps]
+        n_frames = write_video(video, tiled([ep.frames for ep in eps]), fps, quality=7)
+        envs = [
+            dict(episode=e, env=k, seed=ep.seed, layout=layouts[k], success=ep.success,
+                 steps=ep.steps, plan_failures=ep.plan_failures,
+                 wall_time_s=round(ep.wall_time_s, 3))
+            for k, ep in enumerate(eps)
+        ]  # fmt: skip
         summary["episodes"].append(
             dict(
                 episode=e,

@@ -32,23 +32,14 @@ import math
 import statistics
 import warnings
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import gymnasium as gym
-import imageio.v2 as imageio
-import numpy as np
 
 from embodied_envs.paths import atomic_output
-from embodied_envs.pipelines.datasets import has_splat
-from embodied_envs.pipelines.policies import (
-    EvalError,
-    Policy,
-    at_step,
-    checked_action,
-    load_policy,
-    policy_raised,
-)
+from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode, write_video
+from embodied_envs.pipelines.policies import EvalError, Policy, load_policy, policy_driver
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 from embodied_envs.workers import WorkerError, run, started
 
@@ -95,7 +86,7 @@ class EvalPlan:
         if control is not None:
             kwargs["control_mode"] = control
         if render:
-            kwargs["render_mode"] = "hybrid" if has_splat(layout) else "rgb_array"
+            kwargs["render_mode"] = film_mode(layout)
         return kwargs | dict(sim_backend="physx_cpu")
 
     @property
@@ -119,22 +110,6 @@ def _entry_files(entry: str | tuple[str, ...]) -> tuple[str, ...]:
     return (entry,) if isinstance(entry, str) else tuple(entry)
 
 
-@dataclass
-class EpisodeResult:
-    layout: str  # the layout file the episode ran in (over a set: the one its seed drew)
-    seed: int
-    success: bool
-    fail: bool  # the target fell off the table at some step
-    steps: int
-    episode_return: float
-    video: str | None = None
-
-    def to_json(self) -> dict:
-        d = asdict(self)
-        d["return"] = d.pop("episode_return")
-        return d
-
-
 def wilson_interval(successes: int, n: int, z: float = WILSON_Z) -> tuple[float, float]:
     """The Wilson score interval of a binomial proportion (95% by default); (0, 1) for n = 0.
 
@@ -147,6 +122,13 @@ def wilson_interval(successes: int, n: int, z: float = WILSON_Z) -> tuple[float,
     centre = (p + z * z / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
     return (min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half)))
+
+
+def episode_json(episode: Episode) -> dict:
+    """An episode as ``episodes.json`` holds it."""
+    return dict(layout=episode.layout, seed=episode.seed, success=episode.success,
+                fail=episode.fail, steps=episode.steps, video=episode.video,
+                **{"return": episode.episode_return})  # fmt: skip
 
 
 # --- episodes -----------------------------------------------------------------------------
@@ -166,89 +148,24 @@ class EpisodeRunner:
             started()
         return self.envs[layout]
 
-    def run(
-        self, layout: str | tuple[str, ...], seed: int, video_dir: Path | None
-    ) -> EpisodeResult:
-        import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
-
+    def run(self, layout: str | tuple[str, ...], seed: int, video_dir: Path | None) -> Episode:
         env = self.env(layout)
         policy = self.policies[layout]
-        u = env.unwrapped
-        record = self.plan.filmed(seed)
-        frames: list[np.ndarray] = []
-
-        def frame():
-            if record:
-                frames.append(torch.as_tensor(env.render())[0].cpu().numpy())
-
-        # over a set, the seed draws the episode's layout: a reconfiguration
-        options = dict(reconfigure=True) if u.layout_set.varies else None
-        obs, _ = env.reset(seed=seed, options=options)
-        drawn = str(u.layouts[0].source)
-        frame()
-        tally = _Tally(env, frame)  # steps, return and fail of either kind of policy
-        if policy is None:  # the expert: the scripted solver steps the env itself
-            # the solver (torch, SAPIEN, mplib) only where the expert runs, not for --help
-            from embodied_envs.solvers.pick_place import PickPlaceSolver
-
-            PickPlaceSolver(tally, seed=seed).solve()
-        else:
-            spec, shape = self.plan.policy, tuple(env.action_space.shape)
-            try:
-                policy.reset(seed)
-            except Exception as e:  # the user's code: one line, naming the call
-                raise policy_raised(spec, "reset(seed)", e, at_step(0, seed, drawn)) from e
-            limit = env.spec.max_episode_steps if env.spec is not None else None
-            while limit is None or tally.steps < limit:
-                try:
-                    raw = policy.act(obs)
-                except Exception as e:  # the user's code: one line, naming the step
-                    where = at_step(tally.steps, seed, drawn)
-                    raise policy_raised(spec, "the policy", e, where) from e
-                action = checked_action(raw, shape, spec, tally.steps, seed, drawn)
-                obs, _, terminated, truncated, _ = tally.step(action)
-                if bool(torch.as_tensor(terminated | truncated).reshape(-1)[0]):
-                    break
-        success = bool(u.evaluate()["success"][0])
-        result = EpisodeResult(drawn, seed, success, tally.fail, tally.steps, round(tally.ret, 6))
-        keep = self.plan.video == "all" or not success  # filmed: "all" or "fail"
-        if record and keep and video_dir is not None:
-            result.video = write_video(frames, video_dir / f"{Path(drawn).stem}_seed{seed}.mp4")
-        return result
+        filmed = self.plan.filmed(seed)
+        drive = expert if policy is None else policy_driver(policy, self.plan.policy)
+        episode = run_episode(env, seed, drive, film_every=1 if filmed else 0)
+        keep = self.plan.video == "all" or not episode.success  # filmed: "all" or "fail"
+        if filmed and keep and video_dir is not None:
+            path = video_dir / f"{Path(episode.layout).stem}_seed{seed}.mp4"
+            write_video(path, episode.frames, CONTROL_FREQ)
+            episode.video = path.name
+        episode.frames = []  # written: not sent back from a worker
+        return episode
 
     def close(self) -> None:
         for env in self.envs.values():
             env.close()
         self.envs.clear()
-
-
-class _Tally:
-    """Counts an episode's steps, return and fail (a pass-through of ``env``'s interface, so
-    the expert's solver steps through it too), and calls ``on_step`` after each step."""
-
-    def __init__(self, env, on_step: Callable[[], None]):
-        self.env, self.on_step = env, on_step
-        self.steps, self.ret, self.fail = 0, 0.0, False
-
-    def __getattr__(self, name):
-        return getattr(self.env, name)
-
-    def step(self, action):
-        import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
-
-        out = self.env.step(action)
-        self.steps += 1
-        self.ret += float(torch.as_tensor(out[1]).reshape(-1)[0])
-        self.fail |= bool(torch.as_tensor(out[4]["fail"]).reshape(-1)[0])
-        self.on_step()
-        return out
-
-
-def write_video(frames: list[np.ndarray], path: Path) -> str:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_output(path) as tmp:
-        imageio.mimwrite(tmp, frames, fps=CONTROL_FREQ, macro_block_size=1)
-    return str(path.name)
 
 
 # --- worker processes ----------------------------------------------------------------------
@@ -260,15 +177,15 @@ def _init_runner(plan: EvalPlan) -> None:
     _RUNNER = EpisodeRunner(plan)
 
 
-def _run_episode(layout: str | tuple[str, ...], seed: int, video_dir: str) -> EpisodeResult:
+def _run_episode(layout: str | tuple[str, ...], seed: int, video_dir: str) -> Episode:
     return _RUNNER.run(layout, seed, Path(video_dir))
 
 
 # --- the whole evaluation ------------------------------------------------------------------
-def summarize(plan: EvalPlan, results: list[EpisodeResult]) -> dict:
+def summarize(plan: EvalPlan, results: list[Episode]) -> dict:
     """Success rate with its 95% Wilson interval, overall and per layout, and lengths."""
 
-    def block(rs: list[EpisodeResult]) -> dict:
+    def block(rs: list[Episode]) -> dict:
         n, k = len(rs), sum(r.success for r in rs)
         steps = [r.steps for r in rs] or [0]
         return {
@@ -297,7 +214,7 @@ def summarize(plan: EvalPlan, results: list[EpisodeResult]) -> dict:
     }
 
 
-def plot_summary(summary: dict, results: list[EpisodeResult], path: Path) -> None:
+def plot_summary(summary: dict, results: list[Episode], path: Path) -> None:
     """Success per layout with its interval, and the histogram of episode lengths."""
     # matplotlib (0.2 s to import) only where a summary is plotted, not for `--help`
     import matplotlib
@@ -363,7 +280,7 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
     results.sort(key=lambda r: (order[r.layout], r.seed))
     summary = summarize(plan, results)
     with atomic_output(out / "episodes.json") as tmp:
-        tmp.write_text(json.dumps([r.to_json() for r in results], indent=2))
+        tmp.write_text(json.dumps([episode_json(r) for r in results], indent=2))
     with atomic_output(out / "summary.json") as tmp:  # its presence marks a complete run
         tmp.write_text(json.dumps(summary, indent=2))
     try:  # the summary is written: a plot that cannot be drawn must not lose it

@@ -193,3 +193,34 @@ def policy_raised(spec: str, call: str, error: Exception, where: str) -> EvalErr
     """The one-line error for a policy whose ``call`` raised ``error`` (its own message kept)."""
     text = " ".join(str(error).split())
     return EvalError(f"--policy {spec}: {call} raised {type(error).__name__}: {text} {where}")
+
+
+def policy_driver(policy: Policy, spec: str):
+    """The episode driver (``pipelines.episodes.Driver``) of ``policy`` (named ``spec``): its
+    ``reset(seed)``, then an action per step until ManiSkill's ``terminated`` or ``truncated``
+    or the env's episode limit; each action checked (:func:`checked_action`), and the user's
+    code raising is one line naming the call, the step and the seed."""
+
+    def drive(tally, obs, seed: int) -> list:
+        import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
+
+        env = tally.env
+        drawn = str(env.unwrapped.layouts[0].source)
+        shape = tuple(env.action_space.shape)
+        try:
+            policy.reset(seed)
+        except Exception as e:  # the user's code: one line, naming the call
+            raise policy_raised(spec, "reset(seed)", e, at_step(0, seed, drawn)) from e
+        limit = env.spec.max_episode_steps if env.spec is not None else None
+        while limit is None or tally.steps < limit:
+            try:
+                raw = policy.act(obs)
+            except Exception as e:  # the user's code: one line, naming the step
+                raise policy_raised(spec, "the policy", e, at_step(tally.steps, seed, drawn)) from e
+            action = checked_action(raw, shape, spec, tally.steps, seed, drawn)
+            obs, _, terminated, truncated, _ = tally.step(action)
+            if bool(torch.as_tensor(terminated | truncated).reshape(-1)[0]):
+                break
+        return []
+
+    return drive

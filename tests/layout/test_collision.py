@@ -15,7 +15,7 @@ from embodied_envs.layout import asset_geometry, parse_urdf
 from embodied_envs.layout import collision as col
 
 ROOT = Path(__file__).resolve().parents[2]
-ZOO = ROOT / "zoo"
+ZOO = ROOT / "tests" / "data" / "zoo"
 
 
 def revolved_cup() -> trimesh.Trimesh:

@@ -8,7 +8,7 @@ from conftest import DEFAULT_LAYOUT, LAYOUTS
 from embodied_envs.cli.main import main
 from embodied_envs.pipelines import evaluate as evaluate_module
 from embodied_envs.pipelines.evaluate import (
-    EpisodeResult,
+    Episode,
     EvalError,
     EvalPlan,
     evaluate,
@@ -206,7 +206,7 @@ def test_every_count_of_successes_gives_a_summary_and_a_plot(tmp_path, n):
     the interval holds the rate exactly and the plot's error bars are not negative."""
     p = plan("zero", episodes=n)
     for k in (0, n // 2, n):
-        results = [EpisodeResult(p.layouts[0], s, s < k, False, 5 + s, 0.5) for s in range(n)]
+        results = [Episode(p.layouts[0], s, s < k, False, 5 + s, 0.5) for s in range(n)]
         summary = summarize(p, results)
         lo, hi = summary["success_ci95"]
         assert summary["successes"] == k and summary["success_rate"] == k / n

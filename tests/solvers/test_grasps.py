@@ -18,7 +18,7 @@ from embodied_envs.solvers.grasps import (
 )
 from embodied_envs.solvers.gripper import GripperModel, box_clearance, to_tcp
 
-ZOO = ROOT / "zoo"
+ZOO = ROOT / "tests" / "data" / "zoo"
 SHAPES = ["ring", "handled_cup", "t_shape", "shallow_bowl", "bottle"]
 
 

@@ -1,4 +1,4 @@
-"""Conversion of ``pd_joint_pos`` demos to end-effector control (``solvers/ee_actions.py``): a
+"""Conversion of ``pd_joint_pos`` demos to end-effector control (``datasets/ee_actions.py``): a
 demo that ends at the first step its task succeeds, the arm still slowing down (as ManiSkill's
 ``RecordEpisode`` datasets of other experts, and this expert's time-optimal ones, do); the
 converted arm lags a little, so it holds the last target until the task succeeds too."""
@@ -9,9 +9,9 @@ import pytest
 import torch
 
 import embodied_envs  # noqa: F401
+from embodied_envs.datasets.ee_actions import SETTLE_STEPS, joint_pos_to_ee
 from embodied_envs.paths import default_layout
 from embodied_envs.solvers import PickPlaceSolver
-from embodied_envs.solvers.ee_actions import SETTLE_STEPS, joint_pos_to_ee
 from embodied_envs.solvers.pick_place import SolverConfig
 
 ENV_ID = "PickEmbodiedGen-v1"
