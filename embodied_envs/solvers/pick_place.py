@@ -542,27 +542,32 @@ class PickPlaceSolver:
                 (agent.build_grasp_pose(down, c, centre), self.gripper_model.opening)
                 for c in (closing, -closing)
             ]
-            world_to_object = np.linalg.inv(pose.matrix())
-            rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
-            # the footprint grasp's palm stops just above a can's lid: checked without margin
-            exact = dataclasses.replace(self.grasp_config, margin=0.0)
-
-            def fits(c):  # a top-down grasp closing along c at centre passes both checks
-                valid = grasp_is_valid(grasps, rot @ centre + t, rot @ c, rot @ down, exact)
-                _, roomy = posed_clearance(
-                    centre[None], c[None], down[None],
-                    self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
-                    self.clouds[i], self.grasp_config,
-                )  # fmt: skip
-                return valid and bool(roomy[0])
-
+            checked = (i, grasps, pose, centre)
             turned = self._turned_closing(i, tcp[i], centre)
-            if turned is not None and fits(turned):  # no wrist turn: first
+            if turned is not None and self._footprint_fits(*checked, turned, support):
+                # the wrist needs no turn: first
                 footprint.insert(0, (agent.build_grasp_pose(down, turned, centre),
                                      self.gripper_model.opening))  # fmt: skip
-            first = fits(closing)
+            first = self._footprint_fits(*checked, closing, support)
             poses.append(footprint + synthesised if first else synthesised + footprint)
         return poses
+
+    def _footprint_fits(self, i, grasps, pose, centre, closing, support) -> bool:
+        """Whether env i's top-down grasp at ``centre`` closing along ``closing`` passes the
+        synthesised grasps' checks on the object (``pose``) and clears the other objects by the
+        wide margin."""
+        down = np.array([0, 0, -1.0])
+        world_to_object = np.linalg.inv(pose.matrix())
+        rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
+        # the footprint grasp's palm stops just above a can's lid: checked without margin
+        exact = dataclasses.replace(self.grasp_config, margin=0.0)
+        valid = grasp_is_valid(grasps, rot @ centre + t, rot @ closing, rot @ down, exact)
+        _, roomy = posed_clearance(
+            centre[None], closing[None], down[None],
+            self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
+            self.clouds[i], self.grasp_config,
+        )  # fmt: skip
+        return valid and bool(roomy[0])
 
     def _turned_closing(self, i: int, tcp: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
         """The hand's closing direction now (``tcp (4, 4)``) turned about the vertical as the
