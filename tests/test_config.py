@@ -171,7 +171,7 @@ def test_gym_make_config_keyword(tmp_path):
 
 def test_goals_follow_the_configured_reach_and_inset(tmp_path):
     cfg = write(
-        tmp_path / "g.yaml", "goal_region: {inset: 0.2}\nplacement_limits: {reach_max: 0.8}\n"
+        tmp_path / "g.yaml", "goal_region: {inset: 0.15}\nplacement_limits: {reach_max: 0.8}\n"
     )
     env = gym.make("PickEmbodiedGen-v1", config=str(cfg), layout_file=str(DEFAULT_LAYOUT))
     try:
@@ -181,8 +181,8 @@ def test_goals_follow_the_configured_reach_and_inset(tmp_path):
         for seed in range(40):
             env.reset(seed=seed)
             dists.append(float((u.goal_site.pose.p[0, :2] - robot).norm()))
-        near, far = GoalRegion(inset=0.2).distance_band(PlacementLimits(reach_max=0.8))
-        assert (near, far) == (PlacementLimits().reach_min + 0.2, 0.8 - 0.2)
+        near, far = GoalRegion(inset=0.15).distance_band(PlacementLimits(reach_max=0.8))
+        assert (near, far) == (PlacementLimits().reach_min + 0.15, 0.8 - 0.15)
         assert min(dists) >= near - 1e-5 and max(dists) <= far + 1e-5
         assert max(dists) - min(dists) > 0.1  # spread over the band, not one point
     finally:

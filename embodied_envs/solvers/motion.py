@@ -216,8 +216,10 @@ class SeededPlanner:
         # joint-limited CLIK; the other joints (the fingers) stay where they are
         q_min, q_max = qpos.copy(), qpos.copy()
         q_min[self.idx], q_max[self.idx] = self.lo, self.hi
-        for k in range(cfg.ik_restarts + 1):
-            if k:
+        for k in range(cfg.ik_restarts + 2):
+            if k == 1:  # the base joint turned toward the goal, the arm as it is
+                start = self._turned_start(goal_base, qpos)
+            elif k:
                 start = qpos.copy()
                 start[self.idx] = rng.uniform(self.lo, self.hi)
             q = mp.pinocchio_model.compute_IK_CLIK_JL(
@@ -240,6 +242,22 @@ class SeededPlanner:
         here = qpos[self.idx]
         solutions.sort(key=lambda s: float(np.linalg.norm(s - here)))
         return solutions, best
+
+    def _turned_start(self, goal_base: np.ndarray, qpos: np.ndarray) -> np.ndarray:
+        """``qpos`` with the first arm joint (the base's vertical axis) turned by the angle
+        between the hand and ``goal_base`` about the base, within its limits: a start near the
+        solution the arm reaches by turning, where the CLIK from ``qpos`` itself converged to
+        none or to a far configuration (an elbow flipped: 2 rad and 140 steps of joint travel
+        on place_two)."""
+        model = self.mp.pinocchio_model
+        model.compute_forward_kinematics(qpos)
+        hand = model.get_link_pose(self.link)[:2]
+        turn = np.arctan2(goal_base[1], goal_base[0]) - np.arctan2(hand[1], hand[0])
+        turn = (turn + np.pi) % (2 * np.pi) - np.pi
+        start = qpos.copy()
+        j = self.idx[0]
+        start[j] = np.clip(qpos[j] + turn, self.lo[0], self.hi[0])
+        return start
 
     # --- paths ---------------------------------------------------------------------------
     def _steer(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:

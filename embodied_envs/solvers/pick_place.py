@@ -21,6 +21,7 @@ import mplib
 import numpy as np
 import sapien
 import torch
+from scipy.spatial import cKDTree
 
 from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
@@ -67,6 +68,8 @@ class SolverConfig:
     gripper_steps: int = 8  # control steps to open the gripper, and at most to close it
     finger_rest: float = 1e-4  # m per step: fingers moving less are at rest (closed on the
     # object: 3 steps on the shipped layouts)
+    rest_steps: int = 40  # control steps at most, after the last release, for the movers to
+    # come to rest (a banana rocks in a bowl; success ends the episode earlier)
     hold_steps: int = 10  # control steps holding still at the goal; a demo goes on for this
     # many steps after its task succeeds (the env terminates there), so that an arm replayed in
     # another controller, which lags the recorded one, comes to rest in success too
@@ -102,6 +105,15 @@ class SolverConfig:
     release_gap: float = 0.01  # m, its lowest point above the surface when the hand opens
     carry_yaws: tuple[float, ...] = (0.0, np.pi / 2, -np.pi / 2, np.pi)  # rad, hand turns at
     # the goal about the vertical, tried in order
+    release_carry_methods: tuple[str, ...] = ("rrt", "screw")  # a carry to a release: the
+    # shortest straight joint line over every hand turn first (a screw path, straight in
+    # space, turned the can's carry into 150-180 steps of joint travel on place_two)
+    release_carry_option_steps: int | None = 10  # and the shortest of the turns wins
+    release_surround: float = 0.08  # m, obstacles this far around the mover over its
+    # destination are cleared too when it is carried there (``_carry_goal``)
+    carry_clearance: float = 0.01  # m, the held object's collision points at least this far
+    # from every obstacle point along a carry to a release (place, move; the planner sees the
+    # arm, not what it holds)
 
 
 @dataclass
@@ -251,6 +263,7 @@ class PickPlaceSolver:
         self._batched_actions = len(self.env.action_space.shape) == 2
         self.gripper = np.full(self.num_envs, GRIPPER_OPEN)
         self.clouds: list[np.ndarray] = []  # per env, the obstacle surface points (world)
+        self.cloud_trees: list[cKDTree] = []  # and their KD-trees
         self.slot = 0  # the mover slot being taken (``env.task_scene.movers``)
         self.command = self._qpos()[:, :7]  # per env, the arm's last joint targets
         self._set_obstacles()
@@ -269,7 +282,7 @@ class PickPlaceSolver:
 
     def _set_obstacles(self) -> None:
         """Every object but the mover being taken, where it stands now, is an obstacle."""
-        self.clouds = []
+        self.clouds, self.cloud_trees = [], []
         for i, layout in enumerate(self.base.layouts):
             actors = self.base.env_actors[f"env{i}"]
             clouds = []
@@ -281,6 +294,7 @@ class PickPlaceSolver:
                 clouds.append(pose.transform_points(points))
             cloud = np.concatenate(clouds)
             self.clouds.append(cloud)
+            self.cloud_trees.append(cKDTree(cloud))
             base = self.base.layout_scene.robot_poses[i, :3].cpu().numpy()
             near_base = (
                 np.linalg.norm(cloud[:, :2] - base[:2], axis=1) < self.cfg.base_clearance
@@ -547,19 +561,48 @@ class PickPlaceSolver:
                 (agent.build_grasp_pose(down, c, centre), self.gripper_model.opening)
                 for c in (closing, -closing)
             ]
-            world_to_object = np.linalg.inv(pose.matrix())
-            rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
-            # the footprint grasp's palm stops just above a can's lid: checked without margin
-            exact = dataclasses.replace(self.grasp_config, margin=0.0)
-            valid = grasp_is_valid(grasps, rot @ centre + t, rot @ closing, rot @ down, exact)
-            _, roomy = posed_clearance(
-                centre[None], closing[None], down[None],
-                self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
-                self.clouds[i], self.grasp_config,
-            )  # fmt: skip
-            first = valid and bool(roomy[0]) and not annotated
+            checked = (i, grasps, pose, centre)
+            turned = self._turned_closing(i, tcp[i], centre)
+            if turned is not None and self._footprint_fits(*checked, turned, support):
+                # the wrist needs no turn: first
+                footprint.insert(0, (agent.build_grasp_pose(down, turned, centre),
+                                     self.gripper_model.opening))  # fmt: skip
+            first = self._footprint_fits(*checked, closing, support) and not annotated
             poses.append(footprint + synthesised if first else synthesised + footprint)
         return poses
+
+    def _footprint_fits(self, i, grasps, pose, centre, closing, support) -> bool:
+        """Whether env i's top-down grasp at ``centre`` closing along ``closing`` passes the
+        synthesised grasps' checks on the object (``pose``) and clears the other objects by the
+        wide margin."""
+        down = np.array([0, 0, -1.0])
+        world_to_object = np.linalg.inv(pose.matrix())
+        rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
+        # the footprint grasp's palm stops just above a can's lid: checked without margin
+        exact = dataclasses.replace(self.grasp_config, margin=0.0)
+        valid = grasp_is_valid(grasps, rot @ centre + t, rot @ closing, rot @ down, exact)
+        _, roomy = posed_clearance(
+            centre[None], closing[None], down[None],
+            self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
+            self.clouds[i], self.grasp_config,
+        )  # fmt: skip
+        return valid and bool(roomy[0])
+
+    def _turned_closing(self, i: int, tcp: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
+        """The hand's closing direction now (``tcp (4, 4)``) turned about the vertical as the
+        arm's base joint turns from the hand to ``centre``: the top-down grasp there the wrist
+        reaches without turning (a can's footprint has no narrow side, and a turn of the last
+        joint by up to 90 degrees took 2 s at the convertible speeds); None where the hand's
+        closing direction is vertical."""
+        base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
+        y = tcp[:2, 1]
+        if np.linalg.norm(y) < 0.5:
+            return None
+        a, b = centre[:2] - base, tcp[:2, 3] - base
+        turn = np.arctan2(a[1], a[0]) - np.arctan2(b[1], b[0])
+        c, s = np.cos(turn), np.sin(turn)
+        xy = np.array([c * y[0] - s * y[1], s * y[0] + c * y[1]])
+        return np.array([*(xy / np.linalg.norm(xy)), 0.0])
 
     @property
     def grasp_config(self) -> GraspConfig:
@@ -584,10 +627,12 @@ class PickPlaceSolver:
         limit = getattr(getattr(self.env, "spec", None), "max_episode_steps", None) or 10**9
         return limit - self.steps
 
-    def _set_gripper(self, envs: np.ndarray, value: float) -> None:
+    def _set_gripper(self, envs: np.ndarray, value: float, release: bool = False) -> None:
         """Open or close the gripper of ``envs`` (the others keep theirs), the arms held
         still: ``gripper_steps`` steps; closing ends as soon as every env of ``envs`` grasps
-        the target (the env's ``is_grasped``) with its fingers at rest."""
+        the target (the env's ``is_grasped``) with its fingers at rest; opening to ``release``
+        a placed mover as soon as the fingers of ``envs`` are open as the release rule counts it
+        (``task_scene.open_fraction``)."""
         self.gripper[envs] = value
         fingers = [self._qpos()[:, 7:]]
 
@@ -597,9 +642,17 @@ class PickPlaceSolver:
             fingers[0] = now
             return bool(np.all((self._grasping() & still)[envs]))
 
+        def opened() -> bool:  # open as the env's release rule counts it: nothing more to wait
+            ts = self.base.task_scene
+            lo, hi = ts.finger_span
+            open_ = (self._qpos()[:, 7:].sum(1) - lo) / (hi - lo) >= ts.open_fraction
+            return bool(np.all((open_ & ~self._grasping())[envs]))
+
         closing = value == GRIPPER_CLOSED
         self._execute(
-            [None] * self.num_envs, self.cfg.gripper_steps, until=gripped if closing else None
+            [None] * self.num_envs,
+            self.cfg.gripper_steps,
+            until=gripped if closing else (opened if release else None),
         )
 
     def _grasp(self, todo: np.ndarray, attempt: int) -> np.ndarray:
@@ -675,7 +728,8 @@ class PickPlaceSolver:
             if slot:
                 self._set_obstacles()
             self._take(todo)
-        self._execute([None] * self.num_envs, extra_steps=self.cfg.hold_steps)
+        wait = self.cfg.rest_steps if self.releases.any() else self.cfg.hold_steps
+        self._execute([None] * self.num_envs, extra_steps=wait)
         return SolveResult(self.reports, self.steps, self.last_info)
 
     def _take(self, envs: np.ndarray) -> None:
@@ -718,12 +772,21 @@ class PickPlaceSolver:
 
     def _carry_goal(self) -> np.ndarray:
         """Per env, where the current mover's centre is carried: the pick goal; or over its
-        destination, high enough that its lowest point clears the receptacle's top by
-        ``release_clearance``."""
+        destination, high enough that its lowest point clears by ``release_clearance`` the
+        receptacle's top and every obstacle point around it there (within its widest reach
+        from its centre plus ``release_surround``: a mover placed before, standing taller than
+        the tray the next one is carried to, is passed over, not swept against)."""
         st, k = self._task_state(), self.slot
         goal = self.base.goal_site.pose.p.cpu().numpy().astype(np.float64)
         above = self._release_height(st)
-        top = np.where(st["rec_is_table"], st["table_z"], st["rec_top"])
+        top = np.where(st["rec_is_table"], st["table_z"], st["rec_top"]).astype(np.float64)
+        ts = self.base.task_scene
+        reach = np.linalg.norm(ts.hulls[:, k, :, :2] - ts.centres[:, k, None, :2], axis=-1).max(1)
+        for i, cloud in enumerate(self.clouds):
+            near = np.linalg.norm(cloud[:, :2] - st["dest"][i, k, :2], axis=1)
+            under = cloud[near <= reach[i] + self.cfg.release_surround, 2]
+            if self.releases[i] and len(under):
+                top[i] = max(top[i], under.max())
         low = st["movers"][:, k, 2] - st["bottom"][:, k]  # centre above the lowest point now
         lift = np.maximum(top + low - above, 0.0) + self.cfg.release_clearance
         over = np.concatenate([st["dest"][:, k, :2], (above + lift)[:, None]], 1)
@@ -751,7 +814,7 @@ class PickPlaceSolver:
 
         self._per_env("lower", shifted(-np.maximum(drop, 0.0)), obstacles=False,
                       settle=self.cfg.settle_steps)  # fmt: skip
-        self._set_gripper(envs, GRIPPER_OPEN)
+        self._set_gripper(envs, GRIPPER_OPEN, release=True)
         tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
         self._per_env("withdraw", shifted(np.full(self.num_envs, self.cfg.approach_offset)),
                       obstacles=False)  # fmt: skip
@@ -766,18 +829,32 @@ class PickPlaceSolver:
         obstacle point and carries from there."""
         goal = self._carry_goal()
         hand = self._in_hand()
-        over = lambda i, path: self._over_table(i, path, hand[i])  # noqa: E731
+        # the held object kept off the obstacles where it is to be put down (a pick goal may
+        # lie next to an obstacle: the object is held there, and the check would refuse it)
+        held = [h if r else None for h, r in zip(self._held_points(), self.releases, strict=True)]
+        over = lambda i, path: self._over_table(i, path, hand[i], held[i])  # noqa: E731
+
+        base = self.base.agent.robot.pose.raw_pose[:, :2].cpu().numpy()
 
         def targets(yaws, todo):
             tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
             st = self._task_state()  # the point the goal is for: centre, or origin (pick)
             obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
-            return [
-                [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in yaws] if todo[i] else None
-                for i in range(self.num_envs)
-            ]
+            out = []
+            for i in range(self.num_envs):
+                turns = list(yaws)
+                if self.releases[i] and len(yaws) > 1:  # first the turn of the base joint
+                    a, b = goal[i, :2] - base[i], obj[i, :2] - base[i]
+                    turns.insert(0, np.arctan2(a[1], a[0]) - np.arctan2(b[1], b[0]))
+                poses = [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in turns]
+                out.append(poses if todo[i] else None)
+            return out
 
-        chosen = self._per_env("carry", targets(self.cfg.carry_yaws, envs), path_ok=over)
+        how = {}
+        if self.releases.any():
+            how = dict(methods=self.cfg.release_carry_methods,
+                       option_steps=self.cfg.release_carry_option_steps)  # fmt: skip
+        chosen = self._per_env("carry", targets(self.cfg.carry_yaws, envs), path_ok=over, **how)
         high = envs & np.array([c is None for c in chosen])
         if high.any():  # over the obstacles: straight up, then the carry from there
             for i in np.flatnonzero(high):  # the carry from above may still plan
@@ -796,21 +873,37 @@ class PickPlaceSolver:
                 for i in range(self.num_envs)
             ]
             self._per_env("rise", up, obstacles=False)
-            self._per_env("carry", targets(self.cfg.carry_yaws, high), path_ok=over)
+            self._per_env("carry", targets(self.cfg.carry_yaws, high), path_ok=over, **how)
         self._per_env("settle", targets((0.0,), envs), obstacles=False)
 
-    def _over_table(self, i: int, path: np.ndarray, in_hand: np.ndarray) -> str:
+    def _held_points(self) -> np.ndarray:
+        """Per env, the current mover's collision points ``(V, 3)`` in the TCP's frame now."""
+        tcp = self.base.agent.tcp.pose.to_transformation_matrix().cpu().numpy()
+        obj = self.target.pose.to_transformation_matrix().cpu().numpy()
+        rel = np.linalg.inv(tcp) @ obj  # (n, 4, 4) the object in the TCP frame
+        hull = self.base.task_scene.hulls[:, self.slot].astype(np.float64)  # (n, V, 3)
+        return np.einsum("nij,nvj->nvi", rel[:, :3, :3], hull) + rel[:, None, :3, 3]
+
+    def _over_table(
+        self, i: int, path: np.ndarray, in_hand: np.ndarray, held: np.ndarray | None = None
+    ) -> str:
         """Why env i's path is refused: the held object (``in_hand``: its position in the TCP
-        frame) leaves the table top's footprint at a waypoint; "" when it stays over it."""
+        frame) leaves the table top's footprint at a waypoint, or its collision points
+        (``held (V, 3)``, TCP frame) come within ``carry_clearance`` of an obstacle point;
+        "" when neither."""
         model = self.planners[i].pinocchio_model
         fingers = self._qpos()[i, 7:]
         base = sapien.Pose(*np.split(self.base.agent.robot.pose.raw_pose[i].cpu().numpy(), [3]))
         points = []
-        for q in path:
+        for k, q in enumerate(path):
             model.compute_forward_kinematics(np.concatenate([q[:7], fingers]))
             p = model.get_link_pose(self.motion[i].link)
-            tcp = base * sapien.Pose(p[:3], p[3:])
-            points.append(tcp.to_transformation_matrix()[:3] @ np.append(in_hand, 1.0))
+            tcp = (base * sapien.Pose(p[:3], p[3:])).to_transformation_matrix()
+            points.append(tcp[:3] @ np.append(in_hand, 1.0))
+            if held is not None and self.cloud_trees:
+                near, _ = self.cloud_trees[i].query(held @ tcp[:3, :3].T + tcp[:3, 3])
+                if near.min() < self.cfg.carry_clearance:
+                    return f"the held object meets an obstacle at waypoint {k}"
         top = self.base.layout_scene.episodes.top.rows(torch.tensor([i], device=self.base.device))
         xy = torch.as_tensor(np.array(points)[None, :, :2], dtype=torch.float32)
         inside = top.contains(xy.to(self.base.device))[0].cpu().numpy()

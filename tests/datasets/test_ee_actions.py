@@ -56,7 +56,8 @@ def convert(actions: np.ndarray, seed: int, **kwargs):
 
 # seeds whose demos the converted arm finishes short of success (found among seeds 200-220:
 # 4 of the 19 that converted at all needed 1-7 more steps)
-@pytest.mark.parametrize("seed", [216, 217])
+# (217 was one until the reach's minimum moved to 0.30 m: 203 is, found among 200-203)
+@pytest.mark.parametrize("seed", [216, 203])
 def test_the_converted_arm_holds_the_last_target_until_success(seed):
     actions = demo(seed)
     cut, cut_steps = convert(actions, seed, settle=0)

@@ -12,7 +12,7 @@ from scipy.spatial import ConvexHull
 
 from embodied_envs.envs.agents import is_grasping, tcp_pose, tcp_position_cpu
 from embodied_envs.envs.tasks import KIND_IDS
-from embodied_envs.envs.tasks.state import TaskState
+from embodied_envs.envs.tasks.state import OPEN_FRACTION, TaskState
 from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.layout.placement.rules import half_planes, pad_polygons
 from embodied_envs.layout.task import DIRECTION_XY, MOVE_SHIFT, Task
@@ -79,6 +79,7 @@ class TaskScene:
     rec_is_table: np.ndarray  # (n,) bool
     direction: np.ndarray  # (n, 2) world XY unit vector of a move
     finger_span: tuple[float, float]  # the fingers' summed joint positions closed and open
+    open_fraction: float = OPEN_FRACTION  # fingers opened this part of the span are open
 
     @classmethod
     def build(cls, layouts, env_actors, robot_poses: np.ndarray, finger_span) -> TaskScene:
@@ -103,7 +104,9 @@ class TaskScene:
             poly = rec.top_hull(0.02) if rec_nodes[i] == layout.context else rec.footprint()
             polys.append(poly)
             rims.append(rec.max_z)
-            dests.append(_destinations(rec, poly, [g.min_z for g in geoms], centres[-1]))
+            widths = [2 * np.linalg.norm(h[:, :2] - c[:2], axis=1).max()
+                      for h, c in zip(hulls[-1], centres[-1], strict=True)]  # fmt: skip
+            dests.append(_destinations(rec, poly, [g.min_z for g in geoms], centres[-1], widths))
         size = max(len(h) for hs in hulls for h in hs)
         hulls = np.array([[np.concatenate([h, np.repeat(h[:1], size - len(h), 0)]) for h in hs]
                           for hs in hulls], np.float32)  # fmt: skip
@@ -161,16 +164,27 @@ def _yaws(robot_poses: np.ndarray) -> np.ndarray:
     return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 
-def _destinations(rec, poly: np.ndarray, mover_min_z: list[float], centres) -> np.ndarray:
+def _destinations(
+    rec, poly: np.ndarray, mover_min_z: list[float], centres, widths: list[float]
+) -> np.ndarray:
     """``(m, 3)`` in the receptacle's frame: each mover's centre resting upright on the
-    receptacle's top surface, spread along its footprint's longer side."""
+    receptacle's top surface, spread along its footprint's longer side. Along ``SPREAD`` of
+    that side, the movers (``widths``: each one's largest width, whatever its turn) leave equal
+    gaps between each other and the ends: room for the fingers around the mover put down next
+    to one placed before (two cans on a tray: 3.4 cm gaps instead of 1.2 at equal spacing of
+    their centres); where they do not fit, their centres are spaced equally."""
     centre = poly.mean(0)
     extent = poly.max(0) - poly.min(0)
     axis = np.eye(2)[int(np.argmax(extent))]
-    m = len(mover_min_z)
+    m, length = len(mover_min_z), SPREAD * extent.max()
+    gap = (length - sum(widths)) / (m + 1)
     out = []
     for k, min_z in enumerate(mover_min_z):
-        xy = centre + ((k + 1) / (m + 1) - 0.5) * SPREAD * extent.max() * axis
+        if gap > 0:
+            at = -length / 2 + (k + 1) * gap + sum(widths[:k]) + widths[k] / 2
+        else:
+            at = ((k + 1) / (m + 1) - 0.5) * length
+        xy = centre + at * axis
         out.append([*xy, support_height(rec.parts, xy, rec.max_z) - min_z + centres[k][2]])
     return np.array(out)
 
