@@ -45,7 +45,7 @@ def test_a_spheres_best_grasps_close_through_its_centre():
         assert offset(grasps.centre[k], grasps.closing[k]) < 0.001, k
     posed = posed_grasps(grasps, np.eye(4), support_z=0.0, limit=8)
     assert len(posed) == 8
-    for c, closing, approach, _ in posed:
+    for c, closing, _, _ in posed:
         assert offset(c, closing) < 0.001
     assert abs(posed[0][1][2]) < np.sin(np.radians(10))  # near level: through the equator
 
