@@ -100,8 +100,9 @@ class SolverConfig:
     settle_tolerance: float = 0.01  # rad
     lift_check: float = 0.5  # the object held rises at least this part of the lift
     slip_tolerance: float = 0.03  # m, the object moving this far in the hand may be dropped
-    moved_tolerance: float = 0.01  # m, a target moved this far since its grasps were planned
-    # (knocked, rolling) is not grasped there: the next attempt plans from where it lies
+    moved_tolerance: float = 0.02  # m, a target moved this far since its grasps were planned
+    # (knocked, rolling) is not grasped there: the next attempt plans from where it lies (at 1 cm
+    # a smooth ball still rolling from its placement was given up 3 times in 6 seeds, at 2 cm 0)
     rise_clearance: float = 0.12  # m, above the highest obstacle point before a carry from above
     release_clearance: float = 0.04  # m, a carried mover's lowest point above the
     # receptacle's top (or the table) over its destination, before it is lowered
@@ -699,7 +700,8 @@ class PickPlaceSolver:
         # the descent ranked with the approach, from its end (the arm settled there); the arm
         # reaches the grasp before the fingers close
         self._per_env("grasp", grasps, obstacles=False, settle=cfg.settle_steps, planned=taken.get)
-        moved |= self._moved(planned_at) & todo  # and again before closing
+        # not again before closing: the descending fingers nudge a rolling body, and closing
+        # on it still holds it (a smooth ball: 6/6 closing anyway, 3/6 backing off instead)
         self._set_gripper(todo & ~moved, GRIPPER_CLOSED)
         z0 = self.target.pose.p[:, 2].cpu().numpy()
         lifts = [
