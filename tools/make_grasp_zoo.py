@@ -111,6 +111,10 @@ def shapes() -> dict[str, tuple[list[trimesh.Trimesh], float, str]]:
     h["side_can"] = ([cylinder(0.028, 0.11, (0, 0, 0.028), axis="y")], 0.15,
                      "a can lying on its side")  # fmt: skip
     h["small_cube"] = ([box((0.028, 0.028, 0.028), (0, 0, 0.014))], 0.04, "a small cube")
+    h["big_ball"] = ([trimesh.creation.icosphere(subdivisions=2, radius=0.03)], 0.1, "a big ball")
+    h["big_ball"][0][0].apply_translation((0, 0, 0.03))
+    h["wheel"] = ([cylinder(0.04, 0.015, (0, 0, 0.04), axis="y")], 0.1,
+                  "a wheel standing on its edge")  # fmt: skip
     return h
 
 

@@ -338,6 +338,40 @@ def asset_grasps(
     )
 
 
+ROUND_BULGE = 0.002  # m: a body this much narrower at its top than at its widest section
+# above the footprint grasp's height is round there (a ball, a cylinder on its side)
+WIDEST_BAND = 0.0005  # m: sections this close to the widest are as wide (facets)
+
+
+def widest_height(vertices: np.ndarray, closing: np.ndarray, z: float, top: float) -> float:
+    """Where between heights ``z`` and ``top`` a top-down grasp closing along ``closing``
+    (world, horizontal) should close: for a body that narrows towards ``top`` by
+    ``ROUND_BULGE`` (the vertices' convex hull, sliced every millimetre from its bottom), the
+    middle of its widest band of sections when that lies above ``z`` (fingers closing below
+    the equator of a ball or of a cylinder on its side squeeze it up and out); else ``z`` (a
+    box, a can, a bottle's neck, a round body widest at ``z`` or below)."""
+    import trimesh  # only where grasps are posed
+
+    if top <= z:
+        return z
+    hull = trimesh.convex.convex_hull(vertices)
+    a, b = hull.vertices[hull.edges_unique].transpose(1, 0, 2)  # (e, 3) each
+    bottom = hull.vertices[:, 2].min()
+    heights = np.linspace(bottom, top, max(2, int(np.ceil((top - bottom) / 0.001)) + 1))
+    lo, hi = np.minimum(a[:, 2], b[:, 2]), np.maximum(a[:, 2], b[:, 2])
+    widths = np.zeros(len(heights))
+    for k, h in enumerate(heights):  # the slice's corners: where edges cross the plane
+        cross = (lo <= h) & (hi >= h) & (hi > lo)
+        t = (h - a[cross, 2]) / (b[cross, 2] - a[cross, 2])
+        along = (a[cross] + t[:, None] * (b[cross] - a[cross])) @ closing
+        widths[k] = np.ptp(along) if len(along) else 0.0
+    if widths[-1] >= widths.max() - ROUND_BULGE:
+        return z  # as wide at the top: no bulge
+    band = heights[widths >= widths.max() - WIDEST_BAND]  # contiguous: a convex body's
+    middle = float((band.min() + band.max()) / 2)  # section widths are concave in height
+    return min(middle, top) if middle > z else z
+
+
 def grasp_is_valid(
     grasps: Grasps,
     centre: np.ndarray,

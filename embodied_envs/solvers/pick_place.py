@@ -35,6 +35,7 @@ from embodied_envs.solvers.grasps import (
     hull_points,
     posed_clearance,
     posed_grasps,
+    widest_height,
 )
 from embodied_envs.solvers.motion import (
     STRAIGHT_BLOCKED,
@@ -99,6 +100,9 @@ class SolverConfig:
     settle_tolerance: float = 0.01  # rad
     lift_check: float = 0.5  # the object held rises at least this part of the lift
     slip_tolerance: float = 0.03  # m, the object moving this far in the hand may be dropped
+    moved_tolerance: float = 0.02  # m, a target moved this far since its grasps were planned
+    # (knocked, rolling) is not grasped there: the next attempt plans from where it lies (at 1 cm
+    # a smooth ball still rolling from its placement was given up 3 times in 6 seeds, at 2 cm 0)
     rise_clearance: float = 0.12  # m, above the highest obstacle point before a carry from above
     release_clearance: float = 0.04  # m, a carried mover's lowest point above the
     # receptacle's top (or the table) over its destination, before it is lowered
@@ -146,7 +150,9 @@ def grasp_frame(
     """Grasp centre and closing direction for a top-down grasp.
 
     The closing direction is the narrow side of the minimum-area rectangle around the object's
-    XY footprint; its sign is the one closest to the gripper's current closing axis.
+    XY footprint; its sign is the one closest to the gripper's current closing axis. Its height
+    is ``grasp_depth`` below the top, or a round body's widest section above that
+    (``grasps.widest_height``).
     """
     hull = convex_hull_2d(vertices_world[:, :2])
     best = None
@@ -168,6 +174,7 @@ def grasp_frame(
     top = vertices_world[:, 2].max()
     z = max(top - cfg.grasp_depth, support_z + cfg.min_tcp_height)
     z = min(z, top - 0.005)
+    z = widest_height(vertices_world, closing, z, top - 0.005)  # a round body: its equator
     return np.array([centre2[0], centre2[1], z]), closing
 
 
@@ -618,6 +625,11 @@ class PickPlaceSolver:
         obj = self.target.pose.p.cpu().numpy()
         return np.einsum("nij,ni->nj", tcp[:, :3, :3], obj - tcp[:, :3, 3])
 
+    def _moved(self, since: np.ndarray) -> np.ndarray:
+        """Per env: the target lies more than ``moved_tolerance`` from ``since`` (positions)."""
+        now = self.target.pose.p.cpu().numpy()
+        return np.linalg.norm(now - since, axis=1) > self.cfg.moved_tolerance
+
     def _grasping(self) -> np.ndarray:
         """Per env: both fingers press on the target now (the env's ``is_grasped`` after the
         last step)."""
@@ -662,6 +674,7 @@ class PickPlaceSolver:
         cfg = self.cfg
         up = sapien.Pose([0, 0, -cfg.approach_offset])
         candidates = self.grasp_poses()
+        planned_at = self.target.pose.p.cpu().numpy().copy()  # where the grasps were planned
         targets = [
             [g * up for g, _ in candidates[i]] if todo[i] else None for i in range(self.num_envs)
         ]
@@ -682,11 +695,14 @@ class PickPlaceSolver:
             then=lambda i, k, q: None if (p := descent(i, k, q)) is None else len(p),
             on_choice=take,
         )  # fmt: skip
-        grasps = [None if p is None else p * up.inv() for p in pre]
+        moved = self._moved(planned_at) & todo  # re-observed: no descent onto where it was
+        grasps = [None if p is None or moved[i] else p * up.inv() for i, p in enumerate(pre)]
         # the descent ranked with the approach, from its end (the arm settled there); the arm
         # reaches the grasp before the fingers close
         self._per_env("grasp", grasps, obstacles=False, settle=cfg.settle_steps, planned=taken.get)
-        self._set_gripper(todo, GRIPPER_CLOSED)
+        # not again before closing: the descending fingers nudge a rolling body, and closing
+        # on it still holds it (a smooth ball: 6/6 closing anyway, 3/6 backing off instead)
+        self._set_gripper(todo & ~moved, GRIPPER_CLOSED)
         z0 = self.target.pose.p[:, 2].cpu().numpy()
         lifts = [
             None
@@ -698,11 +714,11 @@ class PickPlaceSolver:
         # held: the object came up with the hand (a physical check, not a contact threshold)
         rose = self.target.pose.p[:, 2].cpu().numpy() - z0
         held = (rose > cfg.lift_check * min(cfg.lift_heights)) & todo
-        held &= np.array([p is not None for p in pre])
+        held &= np.array([p is not None for p in pre]) & ~moved
         self.hand = self._in_hand()  # where the object sits in the hand after the lift
         missed = todo & ~held & np.array([not r.plan_failures for r in self.reports])
         for i in np.flatnonzero(missed):
-            self.reports[i].misses.append(f"grasp (attempt {attempt})")
+            self.reports[i].misses.append(f"{'moved' if moved[i] else 'grasp'} (attempt {attempt})")
         if missed.any():  # open and back off upwards, for the next attempt
             self._set_gripper(missed, GRIPPER_OPEN)
             tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()

@@ -1,0 +1,85 @@
+"""Round and rolling objects (issue 36): the footprint grasp closes at a round body's widest
+section, a sphere's grasps close through its centre, and a target that moved while the hand
+approached is not grasped where it was but re-planned from where it lies."""
+
+import numpy as np
+import pytest
+import sapien
+from test_grasps import solve, spec_of
+
+from embodied_envs.layout import asset_geometry
+from embodied_envs.solvers.grasps import asset_grasps, posed_grasps
+from embodied_envs.solvers.pick_place import GRIPPER_CLOSED, SolverConfig, grasp_frame
+
+
+@pytest.mark.parametrize(
+    ("name", "height"),
+    [
+        ("big_ball", 0.030),  # r 3 cm: its equator (was 2.5 cm: grasp_depth below the top)
+        ("side_can", 0.028),  # r 2.8 cm on its side: its axis (was 2.1 cm)
+        ("ball", 0.022),  # r 2.2 cm (was 1.5 cm: min_tcp_height)
+        ("small_cube", 0.015),  # 2.8 cm box: no bulge, min_tcp_height as before
+        ("bottle", 0.185),  # a neck: grasp_depth below the top as before
+        ("wheel", 0.045),  # on its edge, closing across its flat faces: as before
+    ],
+)
+def test_the_footprint_grasp_closes_at_a_round_bodys_widest_section(name, height):
+    verts = asset_geometry(spec_of(name)).vertices
+    centre, closing = grasp_frame(verts, 0.0, SolverConfig(), np.array([0.0, 1.0, 0.0]))
+    assert abs(centre[2] - height) < 0.0015, (name, centre[2])
+    assert abs(closing[2]) < 1e-9
+
+
+def test_a_spheres_best_grasps_close_through_its_centre():
+    """Each of the 8 best grasps of the big ball closes on a line within 1 mm of its centre of
+    mass, the 8 posed on a table within 2 mm (the best within 1), the best level (its
+    equator)."""
+    grasps = asset_grasps(spec_of("big_ball"))
+    centre = np.array([0.0, 0.0, 0.03])
+    assert np.linalg.norm(grasps.com - centre) < 5e-4
+
+    def offset(c, closing):  # the closing line's distance from the centre
+        d = c - centre
+        return np.linalg.norm(d - (d @ closing) * closing)
+
+    for k in range(8):
+        assert offset(grasps.centre[k], grasps.closing[k]) < 0.001, k
+    posed = posed_grasps(grasps, np.eye(4), support_z=0.0, limit=8)
+    assert len(posed) == 8
+    for c, closing, _, _ in posed:  # within 2 mm: contacts under 4 degrees off the line
+        assert offset(c, closing) < 0.002
+    assert offset(posed[0][0], posed[0][1]) < 0.001
+    assert abs(posed[0][1][2]) < np.sin(np.radians(10))  # near level: through the equator
+
+
+def test_a_target_that_moved_during_the_approach_is_grasped_where_it_lies():
+    """The big ball is pushed 4 cm aside once the hand has reached its pre-grasp (as a ball
+    rolls or a cylinder is knocked): the solver does not descend nor close where it was
+    (miss ``moved (attempt 0)``), and grasps it from where it lies on the next attempt."""
+    pushed, closed = [], []
+
+    def patch(solver):
+        per_env, set_gripper = solver._per_env, solver._set_gripper
+
+        def pushing(stage, targets, *args, **kwargs):
+            out = per_env(stage, targets, *args, **kwargs)
+            if stage == "approach" and not pushed:
+                pose = solver.base.obj.pose
+                p, q = pose.p[0].cpu().numpy(), pose.q[0].cpu().numpy()
+                solver.base.obj.set_pose(sapien.Pose(p + np.array([0.0, 0.04, 0.0]), q))
+                pushed.append(p.tolist())
+            return out
+
+        def recorded(envs, value):
+            if value == GRIPPER_CLOSED:
+                closed.append((len(solver.reports[0].misses), bool(envs[0])))
+            set_gripper(envs, value)
+
+        solver._per_env, solver._set_gripper = pushing, recorded
+
+    success, result, _ = solve("big_ball", 0, patch)
+    assert pushed, "the approach ran"
+    assert result.reports[0].misses[:1] == ["moved (attempt 0)"], result.reports[0]
+    assert closed[0] == (0, False), closed  # attempt 0: no env closed its fingers
+    assert success, result.reports[0]
+
