@@ -9,11 +9,14 @@ solver checks the grasp (the object rose with the hand), and on a miss opens, ba
 tries the next grasp; after the carry, an object that left its place in the hand (and is not
 held) is grasped again from where it lies, while the episode has steps left. A failed plan is
 recorded per env and stage; that env then holds still while the others go on.
+
+The solver is cut in rooms: the grasp choice (``grasp_choice.py``), planning and execution
+(``driver.py``), the place and move flows (``place_flow.py``); this file holds the state, the
+grasp attempt and the episode.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import weakref
 from dataclasses import dataclass, field
 
@@ -23,37 +26,27 @@ import sapien
 import torch
 from scipy.spatial import cKDTree
 
-from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.robots import ROBOTS
-from embodied_envs.solvers.follow import follow_limits, rate_limited, shortened
+from embodied_envs.solvers.driver import (
+    GRIPPER_CLOSED,
+    GRIPPER_OPEN,
+    ArmDriver,
+    gripper_action,
+)
+from embodied_envs.solvers.follow import follow_limits
+from embodied_envs.solvers.grasp_choice import GraspChoice
 from embodied_envs.solvers.grasps import (
     GraspConfig,
     GripperModel,
-    asset_grasps,
-    grasp_is_valid,
     hull_points,
-    posed_clearance,
-    posed_grasps,
-    widest_height,
 )
 from embodied_envs.solvers.motion import (
-    STRAIGHT_BLOCKED,
     MotionConfig,
     SeededPlanner,
     joint_levers,
 )
-
-GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
-GRIPPER_CLOSED = -1.0  # and for closed fingers
-# the Panda's pd_joint_pos gripper maps actions [-1, 1] to finger positions [-0.01, 0.04] m
-FINGER_RANGE = (-0.01, 0.04)
-
-
-def gripper_action(opening: float) -> float:
-    """The gripper action that opens the fingers ``opening`` m apart."""
-    lo, hi = FINGER_RANGE
-    return float(np.clip(2 * (opening / 2 - lo) / (hi - lo) - 1, -1.0, 1.0))
+from embodied_envs.solvers.place_flow import PlaceFlow
 
 
 @dataclass(frozen=True)
@@ -144,40 +137,6 @@ class SolveResult:
         return np.asarray(torch.as_tensor(self.info["success"]).cpu().numpy()).reshape(-1)
 
 
-def grasp_frame(
-    vertices_world: np.ndarray, support_z: float, cfg: SolverConfig, current_y: np.ndarray
-):
-    """Grasp centre and closing direction for a top-down grasp.
-
-    The closing direction is the narrow side of the minimum-area rectangle around the object's
-    XY footprint; its sign is the one closest to the gripper's current closing axis. Its height
-    is ``grasp_depth`` below the top, or a round body's widest section above that
-    (``grasps.widest_height``).
-    """
-    hull = convex_hull_2d(vertices_world[:, :2])
-    best = None
-    for i in range(len(hull)):
-        e = hull[(i + 1) % len(hull)] - hull[i]
-        u = e / (np.linalg.norm(e) + 1e-12)
-        v = np.array([-u[1], u[0]])
-        pu, pv = hull @ u, hull @ v
-        area = (pu.max() - pu.min()) * (pv.max() - pv.min())
-        if best is None or area < best[0]:
-            best = (area, u, v, pu, pv)
-    _, u, v, pu, pv = best
-    wu, wv = pu.max() - pu.min(), pv.max() - pv.min()
-    closing2 = u if wu < wv else v
-    centre2 = u * (pu.max() + pu.min()) / 2 + v * (pv.max() + pv.min()) / 2
-    closing = np.array([closing2[0], closing2[1], 0.0])
-    if np.dot(closing, current_y) < 0:
-        closing = -closing
-    top = vertices_world[:, 2].max()
-    z = max(top - cfg.grasp_depth, support_z + cfg.min_tcp_height)
-    z = min(z, top - 0.005)
-    z = widest_height(vertices_world, closing, z, top - 0.005)  # a round body: its equator
-    return np.array([centre2[0], centre2[1], z]), closing
-
-
 # per env (the unwrapped env object), its mplib planners, one per parallel env: building one
 # parses the URDF and its collision meshes (5 ms, an episode's 2%). Solvers of one env run one
 # after another; each sets everything a plan reads (base pose, joint limits, obstacle cloud,
@@ -213,7 +172,7 @@ def _planners(base) -> list[mplib.Planner]:
     return _PLANNERS[base]
 
 
-class PickPlaceSolver:
+class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
     """Plans and executes pick-and-place in every env of a ``PickEmbodiedGen-v1`` env.
 
     Args:
@@ -308,309 +267,7 @@ class PickPlaceSolver:
             ) & (cloud[:, 2] < base[2] + self.cfg.base_clearance_height)
             self.planners[i].update_point_cloud(cloud[~near_base], radius=self.cfg.obstacle_radius)
 
-    # --- planning ------------------------------------------------------------------------
-    def _plan(
-        self, i, pose: sapien.Pose, qpos: np.ndarray, how: str, obstacles: bool,
-        key: tuple = (), within: int | None = None, detour: bool = True,
-    ):  # fmt: skip
-        """A joint path to ``pose`` for env i by ``how`` ("screw": mplib's straight screw
-        motion; "rrt": the seeded planner), and a status ("" on success).
-
-        ``obstacles=False`` is for the short straight moves next to the support surface (the
-        final descent from the pre-grasp and the lift), which the surface's cloud would block.
-        ``key`` names the plan within the episode: its random draws come from the solver's
-        seed and this key alone, so skipping one plan changes no other. ``within``: a path of
-        this many steps or more is not wanted (a better option is known; "rrt" only).
-        ``detour=False`` ("rrt" only): the straight joint line or nothing (status
-        ``STRAIGHT_BLOCKED``).
-        """
-        target = np.concatenate([pose.p, pose.q])
-        dt = self.base.control_timestep
-        if how == "screw":
-            res = self.planners[i].plan_screw(
-                target, qpos.copy(), time_step=dt, use_point_cloud=obstacles
-            )
-        else:
-            rng = np.random.default_rng([self.seed, i, *key])
-            res = self.motion[i].plan_to_pose(target, qpos, rng, dt, obstacles, within, detour)
-        if res["status"] != "Success" or not len(res["position"]):
-            return None, res["status"]
-        if len(res["position"]) > self.cfg.max_path_steps:
-            return None, f"{len(res['position'])} steps, over max_path_steps"
-        return res["position"], ""
-
-    def _execute(self, paths: list[np.ndarray | None], extra_steps: int = 0, until=None) -> None:
-        """Step all envs along their paths in lockstep; envs without a path hold still.
-        ``until()``: checked after every step; True ends the steps early."""
-        paths = [None if p is None or not len(p) else self._commands(p, i)
-                 for i, p in enumerate(paths)]  # fmt: skip
-        lengths = [len(p) if p is not None else 0 for p in paths]
-        n = max(lengths, default=0) + extra_steps
-        for t in range(n):
-            if self.ended:  # no step past the end of the episode
-                return
-            action = np.zeros((self.num_envs, 8), np.float32)
-            for i, path in enumerate(paths):
-                if path is not None:
-                    action[i, :7] = path[min(t, len(path) - 1)]
-                else:  # holds its last targets
-                    action[i, :7] = self.command[i]
-                action[i, 7] = self.gripper[i]
-            if self.cfg.convertible:
-                action[:, :7] = self._bounded(action[:, :7])
-            self.command = action[:, :7].astype(np.float64)
-            self._step(action)
-            if until is not None and until():
-                return
-
-    def _commands(self, path: np.ndarray, i: int) -> np.ndarray:
-        """Env i's arm joint targets that follow ``path`` (a waypoint per control step).
-
-        ``pd_joint_pos`` drives each joint with ``stiffness * (target - q) - damping * qvel``,
-        so a joint lags a moving target by ``damping / stiffness`` (0.1 s for the Panda, 5
-        control steps) times its velocity: each target leads its waypoint by that much of the
-        path's velocity, within the joint limits; the last target is the path's end. On a
-        0.5 rad line at the solver's limits the arm stays within 0.022 rad of the path at
-        every step instead of 0.16 (``test_joint_targets_lead_the_path...``).
-        With ``convertible``, the targets move from the last ones at most ``follow.step`` a
-        step (``follow.rate_limited``; the path's speed is within ``follow.speed``).
-        """
-        q = np.asarray(path, dtype=np.float64)[:, :7]
-        lead = q.copy()
-        if len(q) >= 3:
-            arm = self.base.agent.controller.controllers["arm"].config
-            dt = self.base.control_timestep
-            lead = q + arm.damping / arm.stiffness * np.gradient(q, dt, axis=0)
-            lead[-1] = q[-1]  # the path ends at rest there
-            space = self.base.single_action_space
-            lead = np.clip(lead, space.low[:7], space.high[:7])
-        if not self.cfg.convertible:
-            return lead
-        return rate_limited(lead, self.command[i], self.follow.step)
-
-    def _bounded(self, arm: np.ndarray) -> np.ndarray:
-        """The arm targets ``arm`` (per env) moved at most ``follow.step`` from the last ones
-        and leading the measured joints by at most ``follow.lead`` (a joint lagging its target
-        more than planned, e.g. the lag building up as it starts, slows the targets down)."""
-        arm = self.command + shortened(arm - self.command, self.follow.step)
-        q = self._qpos()[:, :7]
-        return q + shortened(arm - q, self.follow.lead)
-
-    def _step(self, action: np.ndarray) -> None:
-        a = action if self._batched_actions else action[0]
-        _, _, terminated, truncated, info = self.env.step(a)
-        self.last_info = info
-        self.steps += 1
-        flag = lambda x: np.asarray(torch.as_tensor(x).cpu()).reshape(-1)  # noqa: E731
-        success = flag(info["success"])
-        self.succeeded = np.where(success, self.succeeded + 1, 0)
-        over = flag(truncated) | (flag(terminated) & ~success)
-        self.ended = bool(np.all(over | (self.succeeded >= self.cfg.hold_steps)))
-
-    def _per_env(
-        self,
-        stage: str,
-        targets: list,
-        methods: tuple[str, ...] = ("screw", "rrt"),
-        obstacles: bool = True,
-        settle: int = 0,
-        option_steps: int | None = None,
-        then=None,
-        path_ok=None,
-        on_choice=None,
-        planned=None,
-    ) -> list[sapien.Pose | None]:
-        """Plan and execute one stage in every env that has not failed yet.
-
-        Args:
-            stage: named in failure reports.
-            targets: per env a pose, a list of poses (options, best first), or None (hold
-                still).
-            methods: tried in order, each on every option before the next (a straight screw
-                move to a later option before a planned detour to the first).
-            option_steps: None: the first option a method plans to. Else every option is
-                planned and the one with the fewest steps, plus this many per rank below the
-                first, wins (a grasp ranked a little lower that the arm reaches directly
-                before one behind a wrist turn).
-            then: with ``option_steps``, ``then(i, k, qpos)``: the steps of the move that
-                follows from where option k's path ends (None: it cannot be planned), added
-                to the option's cost.
-            path_ok: ``path_ok(i, path)``: why env i's planned path is refused ("" when not).
-            on_choice: ``on_choice(i, k)``: env i will run option k (before any env moves).
-            planned: ``planned(i)``: env i's path, planned already (from where the last stage
-                ended), or None to plan it here.
-
-        Returns:
-            Per env the pose that was planned to (None where none could be).
-        """
-        qpos = self._qpos()
-        paths, chosen = [], []
-        self.stages += 1
-        for i, target in enumerate(targets):
-            options = target if isinstance(target, list) else [target]
-            best = None
-            ready = None if planned is None or target is None else planned(i)
-            if ready is not None and not self.reports[i].plan_failures:
-                best = (len(ready), ready, target, 0)
-            elif target is not None and not self.reports[i].plan_failures:
-                best, failures = self._choose(
-                    i, options, qpos[i], methods, obstacles, option_steps, then, path_ok
-                )
-                if best is None:
-                    self.reports[i].plan_failures.append(f"{stage}: " + "; ".join(failures))
-                elif on_choice is not None:
-                    on_choice(i, best[3])
-            paths.append(None if best is None else best[1])
-            chosen.append(None if best is None else best[2])
-        # settle: steps holding the last waypoints, until the arms are there
-        ends = qpos[:, :7].copy()
-        for i, path in enumerate(paths):
-            if path is not None:
-                ends[i] = path[-1][:7]
-        start, moving = self.steps, max((len(p) for p in paths if p is not None), default=0)
-
-        def arrived() -> bool:
-            if self.steps < start + moving:
-                return False
-            return np.abs(self._qpos()[:, :7] - ends).max() < self.cfg.settle_tolerance
-
-        self._execute(paths, extra_steps=settle, until=arrived if settle else None)
-        return chosen
-
-    def _choose(self, i, options, qpos, methods, obstacles, option_steps, then, path_ok):
-        """``_per_env``'s choice for env i: ``(cost, path, pose, k)`` of the option that wins
-        (None when none plans) and the failures.
-
-        With ``option_steps``, the winner is the least (cost, rank) over every option, found by
-        branch and bound: an option whose rank alone, or whose shortest possible path
-        (``SeededPlanner.min_steps``), cannot beat the best so far is not planned. The seeded
-        planner's straight joint lines come first for every option, then the detours
-        (RRT-Connect) where a line is blocked: a direct option found first bounds the detours.
-        """
-        best, failures = None, []
-        for m, how in enumerate(methods):
-            passes = (False, True) if how == "rrt" and option_steps is not None else (True,)
-            todo = list(range(len(options)))
-            for detour in passes:
-                blocked = []  # options whose straight line is blocked: for the detour pass
-                for k in todo:
-                    within = None
-                    if best is not None and option_steps is not None:
-                        # a path of `within` steps or more cannot beat the best (ties: rank)
-                        within = best[0] - option_steps * k + (k < best[3])
-                        if within <= 0:
-                            break  # later options rank lower still
-                    key = (self.stages, m, k)
-                    path, status = self._plan(
-                        i, options[k], qpos, how, obstacles, key, within, detour
-                    )
-                    if status == STRAIGHT_BLOCKED:
-                        blocked.append(k)
-                        continue
-                    if path is not None and path_ok is not None:
-                        status = path_ok(i, path)
-                        path = None if status else path
-                    label = "" if len(options) == 1 else f"option {k}: "
-                    if path is None:
-                        failures.append(f"{label}{how}: {status}")
-                        continue
-                    cost = len(path) + (option_steps or 0) * k
-                    if best is not None and (cost, k) > (best[0], best[3]):
-                        continue  # what follows only adds steps
-                    if then is not None:
-                        end = np.concatenate([path[-1][:7], qpos[7:]])
-                        more = then(i, k, end)
-                        cost += self.cfg.max_path_steps if more is None else more
-                    if best is None or (cost, k) < (best[0], best[3]):
-                        best = (cost, path, options[k], k)
-                    if option_steps is None:
-                        return best, failures
-                todo = blocked
-            if best is not None:
-                break
-        return best, failures
-
     # --- the policy ----------------------------------------------------------------------
-    def grasp_poses(self) -> list[list[tuple[sapien.Pose, float]]]:
-        """Per env, the grasps to try where its target lies now, best first, each with the
-        finger opening to approach with. First the top-down grasp across the footprint's
-        narrow side and its 180-degree turn (a parallel gripper's same grasp at another wrist
-        angle), fully open, when it passes the synthesised grasps' checks and clears the
-        other objects by the wide margin (the grasp that cans and boxes take); then the
-        synthesised grasps the gripper can take here (``grasps.posed_grasps``, pre-shaped);
-        the footprint grasp last when it failed those checks, or when the asset's annotated
-        grasps (``affordance_annot.json``) lead the synthesised ones."""
-        agent = self.base.agent
-        tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
-        poses = []
-        for i, layout in enumerate(self.base.layouts):
-            actor = self.base.env_actors[f"env{i}"][self._node(i)]
-            spec = layout.asset_spec(self._node(i))
-            geom = asset_geometry(spec)
-            pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
-            support = float(self.base.layout_scene.top_z[i])
-            grasps = asset_grasps(spec, self.grasp_config)
-            taken = posed_grasps(
-                grasps, pose.matrix(), support, self.clouds[i], self.grasp_config,
-                limit=self.cfg.grasp_candidates, with_index=True,
-            )  # fmt: skip
-            synthesised = [
-                (agent.build_grasp_pose(approach, closing, centre), opening)
-                for centre, closing, approach, opening, _ in taken
-            ]
-            # the asset's own annotated grasps (affordance_annot.json) lead when one is takeable
-            annotated = bool(taken) and grasps.annotated is not None
-            annotated = annotated and bool(grasps.annotated[taken[0][4]])
-            verts = pose.transform_points(geom.vertices)
-            centre, closing = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
-            down = np.array([0, 0, -1.0])
-            footprint = [
-                (agent.build_grasp_pose(down, c, centre), self.gripper_model.opening)
-                for c in (closing, -closing)
-            ]
-            checked = (i, grasps, pose, centre)
-            turned = self._turned_closing(i, tcp[i], centre)
-            if turned is not None and self._footprint_fits(*checked, turned, support):
-                # the wrist needs no turn: first
-                footprint.insert(0, (agent.build_grasp_pose(down, turned, centre),
-                                     self.gripper_model.opening))  # fmt: skip
-            first = self._footprint_fits(*checked, closing, support) and not annotated
-            poses.append(footprint + synthesised if first else synthesised + footprint)
-        return poses
-
-    def _footprint_fits(self, i, grasps, pose, centre, closing, support) -> bool:
-        """Whether env i's top-down grasp at ``centre`` closing along ``closing`` passes the
-        synthesised grasps' checks on the object (``pose``) and clears the other objects by the
-        wide margin."""
-        down = np.array([0, 0, -1.0])
-        world_to_object = np.linalg.inv(pose.matrix())
-        rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
-        # the footprint grasp's palm stops just above a can's lid: checked without margin
-        exact = dataclasses.replace(self.grasp_config, margin=0.0)
-        valid = grasp_is_valid(grasps, rot @ centre + t, rot @ closing, rot @ down, exact)
-        _, roomy = posed_clearance(
-            centre[None], closing[None], down[None],
-            self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
-            self.clouds[i], self.grasp_config,
-        )  # fmt: skip
-        return valid and bool(roomy[0])
-
-    def _turned_closing(self, i: int, tcp: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
-        """The hand's closing direction now (``tcp (4, 4)``) turned about the vertical as the
-        arm's base joint turns from the hand to ``centre``: the top-down grasp there the wrist
-        reaches without turning (a can's footprint has no narrow side, and a turn of the last
-        joint by up to 90 degrees took 2 s at the convertible speeds); None where the hand's
-        closing direction is vertical."""
-        base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
-        y = tcp[:2, 1]
-        if np.linalg.norm(y) < 0.5:
-            return None
-        a, b = centre[:2] - base, tcp[:2, 3] - base
-        turn = np.arctan2(a[1], a[0]) - np.arctan2(b[1], b[0])
-        c, s = np.cos(turn), np.sin(turn)
-        xy = np.array([c * y[0] - s * y[1], s * y[0] + c * y[1]])
-        return np.array([*(xy / np.linalg.norm(xy)), 0.0])
-
     @property
     def grasp_config(self) -> GraspConfig:
         return GraspConfig(sweep=self.cfg.approach_offset)
@@ -778,161 +435,3 @@ class PickPlaceSolver:
                 self._set_gripper(dropped, GRIPPER_OPEN)
             if placed.all():
                 break
-
-    def _task_state(self):
-        """The env's task state now, as numpy arrays (``envs/tasks/state.py``)."""
-        goal = self.base.goal_site.pose.p
-        state = self.base.task_reader.state(goal if self.base.gpu_sim_enabled else goal.numpy())
-        keys = ("movers", "origins", "bottom", "dest", "rec_top", "rec_is_table", "table_z")
-        return {k: np.asarray(torch.as_tensor(getattr(state, k)).cpu()) for k in keys}
-
-    def _carry_goal(self) -> np.ndarray:
-        """Per env, where the current mover's centre is carried: the pick goal; or over its
-        destination, high enough that its lowest point clears by ``release_clearance`` the
-        receptacle's top and every obstacle point around it there (within its widest reach
-        from its centre plus ``release_surround``: a mover placed before, standing taller than
-        the tray the next one is carried to, is passed over, not swept against)."""
-        st, k = self._task_state(), self.slot
-        goal = self.base.goal_site.pose.p.cpu().numpy().astype(np.float64)
-        above = self._release_height(st)
-        top = np.where(st["rec_is_table"], st["table_z"], st["rec_top"]).astype(np.float64)
-        ts = self.base.task_scene
-        reach = np.linalg.norm(ts.hulls[:, k, :, :2] - ts.centres[:, k, None, :2], axis=-1).max(1)
-        for i, cloud in enumerate(self.clouds):
-            near = np.linalg.norm(cloud[:, :2] - st["dest"][i, k, :2], axis=1)
-            under = cloud[near <= reach[i] + self.cfg.release_surround, 2]
-            if self.releases[i] and len(under):
-                top[i] = max(top[i], under.max())
-        low = st["movers"][:, k, 2] - st["bottom"][:, k]  # centre above the lowest point now
-        lift = np.maximum(top + low - above, 0.0) + self.cfg.release_clearance
-        over = np.concatenate([st["dest"][:, k, :2], (above + lift)[:, None]], 1)
-        return np.where(self.releases[:, None], over, goal)
-
-    def _release_height(self, st) -> np.ndarray:
-        """Per env, the height of the current mover's centre at release: held as it is now,
-        its lowest point ``release_gap`` above the surface under its destination."""
-        k = self.slot
-        half = self.base.task_scene.centres[:, k, 2] - self.base.task_scene.hulls[:, k, :, 2].min(1)
-        surface = st["dest"][:, k, 2] - half  # the destination's support surface
-        low = st["movers"][:, k, 2] - st["bottom"][:, k]
-        return surface + low + self.cfg.release_gap
-
-    def _release(self, envs: np.ndarray) -> None:
-        """Lower the held mover of ``envs`` straight down to its release height, open, and
-        withdraw the hand straight up."""
-        st = self._task_state()
-        drop = st["movers"][:, self.slot, 2] - self._release_height(st)
-        tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
-
-        def shifted(dz):
-            return [sapien.Pose(tcp[i, :3] + [0, 0, dz[i]], tcp[i, 3:]) if envs[i] else None
-                    for i in range(self.num_envs)]  # fmt: skip
-
-        self._per_env("lower", shifted(-np.maximum(drop, 0.0)), obstacles=False,
-                      settle=self.cfg.settle_steps)  # fmt: skip
-        self._set_gripper(envs, GRIPPER_OPEN, release=True)
-        tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
-        self._per_env("withdraw", shifted(np.full(self.num_envs, self.cfg.approach_offset)),
-                      obstacles=False)  # fmt: skip
-
-    def _carry(self, envs: np.ndarray) -> None:
-        """Carry the held target of ``envs`` to the goal (keeping its offset from the TCP as
-        it is in the hand now), then correct the last millimetres. The goal is a position, so
-        the hand may arrive turned about the vertical (``carry_yaws``, tried in order): a wrist
-        near its joint limit would otherwise flip over on the way. A path that takes the
-        object out over the table's edge is refused (the episode would end in ``fail``);
-        where no carry plans, the hand first rises ``rise_clearance`` above the highest
-        obstacle point and carries from there."""
-        goal = self._carry_goal()
-        hand = self._in_hand()
-        # the held object kept off the obstacles where it is to be put down (a pick goal may
-        # lie next to an obstacle: the object is held there, and the check would refuse it)
-        held = [h if r else None for h, r in zip(self._held_points(), self.releases, strict=True)]
-        over = lambda i, path: self._over_table(i, path, hand[i], held[i])  # noqa: E731
-
-        base = self.base.agent.robot.pose.raw_pose[:, :2].cpu().numpy()
-
-        def targets(yaws, todo):
-            tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
-            st = self._task_state()  # the point the goal is for: centre, or origin (pick)
-            obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
-            out = []
-            for i in range(self.num_envs):
-                turns = list(yaws)
-                if self.releases[i] and len(yaws) > 1:  # first the turn of the base joint
-                    a, b = goal[i, :2] - base[i], obj[i, :2] - base[i]
-                    turns.insert(0, np.arctan2(a[1], a[0]) - np.arctan2(b[1], b[0]))
-                poses = [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in turns]
-                out.append(poses if todo[i] else None)
-            return out
-
-        how = {}
-        if self.releases.any():
-            how = dict(methods=self.cfg.release_carry_methods,
-                       option_steps=self.cfg.release_carry_option_steps)  # fmt: skip
-        chosen = self._per_env("carry", targets(self.cfg.carry_yaws, envs), path_ok=over, **how)
-        high = envs & np.array([c is None for c in chosen])
-        if high.any():  # over the obstacles: straight up, then the carry from there
-            for i in np.flatnonzero(high):  # the carry from above may still plan
-                self.reports[i].plan_failures.clear()
-            tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
-            up = [
-                sapien.Pose(
-                    [
-                        *tcp[i, :2],
-                        max(tcp[i, 2], self.clouds[i][:, 2].max() + self.cfg.rise_clearance),
-                    ],
-                    tcp[i, 3:],
-                )
-                if high[i]
-                else None
-                for i in range(self.num_envs)
-            ]
-            self._per_env("rise", up, obstacles=False)
-            self._per_env("carry", targets(self.cfg.carry_yaws, high), path_ok=over, **how)
-        self._per_env("settle", targets((0.0,), envs), obstacles=False)
-
-    def _held_points(self) -> np.ndarray:
-        """Per env, the current mover's collision points ``(V, 3)`` in the TCP's frame now."""
-        tcp = self.base.agent.tcp.pose.to_transformation_matrix().cpu().numpy()
-        obj = self.target.pose.to_transformation_matrix().cpu().numpy()
-        rel = np.linalg.inv(tcp) @ obj  # (n, 4, 4) the object in the TCP frame
-        hull = self.base.task_scene.hulls[:, self.slot].astype(np.float64)  # (n, V, 3)
-        return np.einsum("nij,nvj->nvi", rel[:, :3, :3], hull) + rel[:, None, :3, 3]
-
-    def _over_table(
-        self, i: int, path: np.ndarray, in_hand: np.ndarray, held: np.ndarray | None = None
-    ) -> str:
-        """Why env i's path is refused: the held object (``in_hand``: its position in the TCP
-        frame) leaves the table top's footprint at a waypoint, or its collision points
-        (``held (V, 3)``, TCP frame) come within ``carry_clearance`` of an obstacle point;
-        "" when neither."""
-        model = self.planners[i].pinocchio_model
-        fingers = self._qpos()[i, 7:]
-        base = sapien.Pose(*np.split(self.base.agent.robot.pose.raw_pose[i].cpu().numpy(), [3]))
-        points = []
-        for k, q in enumerate(path):
-            model.compute_forward_kinematics(np.concatenate([q[:7], fingers]))
-            p = model.get_link_pose(self.motion[i].link)
-            tcp = (base * sapien.Pose(p[:3], p[3:])).to_transformation_matrix()
-            points.append(tcp[:3] @ np.append(in_hand, 1.0))
-            if held is not None and self.cloud_trees:
-                near, _ = self.cloud_trees[i].query(held @ tcp[:3, :3].T + tcp[:3, 3])
-                if near.min() < self.cfg.carry_clearance:
-                    return f"the held object meets an obstacle at waypoint {k}"
-        top = self.base.layout_scene.episodes.top.rows(torch.tensor([i], device=self.base.device))
-        xy = torch.as_tensor(np.array(points)[None, :, :2], dtype=torch.float32)
-        inside = top.contains(xy.to(self.base.device))[0].cpu().numpy()
-        return (
-            ""
-            if inside.all()
-            else f"the object leaves the table at waypoint {int(np.argmin(inside))}"
-        )
-
-    @staticmethod
-    def _turned(goal: np.ndarray, tcp: np.ndarray, obj: np.ndarray, yaw: float) -> sapien.Pose:
-        """The TCP pose that puts the object at ``goal`` with the hand turned ``yaw`` about the
-        world's vertical from its pose ``tcp`` now (the object turning with it)."""
-        turn = sapien.Pose(q=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
-        hand = turn * sapien.Pose(tcp[:3] - obj, tcp[3:])
-        return sapien.Pose(goal + hand.p, hand.q)

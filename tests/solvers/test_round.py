@@ -8,8 +8,9 @@ import sapien
 from test_grasps import solve, spec_of
 
 from embodied_envs.layout import asset_geometry
+from embodied_envs.solvers.grasp_choice import grasp_frame
 from embodied_envs.solvers.grasps import asset_grasps, posed_grasps
-from embodied_envs.solvers.pick_place import GRIPPER_CLOSED, SolverConfig, grasp_frame
+from embodied_envs.solvers.pick_place import GRIPPER_CLOSED, SolverConfig
 
 
 @pytest.mark.parametrize(

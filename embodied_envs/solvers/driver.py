@@ -1,0 +1,253 @@
+"""The expert's arm driver: plans per env, executed at rates every controller follows.
+
+``ArmDriver`` is the machinery under :class:`~embodied_envs.solvers.pick_place.PickPlaceSolver`:
+plan a move for each env that needs one (seeded planners, ``solvers/motion.py``), execute the
+joint paths together with the per-step bounds of ``solvers/follow.py``, and choose among options
+(grasps, turns) by the steps they cost. The gripper's action values are defined here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import sapien
+import torch
+
+from embodied_envs.solvers.follow import rate_limited, shortened
+from embodied_envs.solvers.motion import STRAIGHT_BLOCKED
+
+GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
+GRIPPER_CLOSED = -1.0  # and for closed fingers
+# the Panda's pd_joint_pos gripper maps actions [-1, 1] to finger positions [-0.01, 0.04] m
+FINGER_RANGE = (-0.01, 0.04)
+
+
+def gripper_action(opening: float) -> float:
+    """The gripper action that opens the fingers ``opening`` m apart."""
+    lo, hi = FINGER_RANGE
+    return float(np.clip(2 * (opening / 2 - lo) / (hi - lo) - 1, -1.0, 1.0))
+
+
+class ArmDriver:
+    """Planning and execution for every env of the solver (a mixin: the solver holds the env,
+    its planners, the config and the per-env reports)."""
+
+    def _plan(
+        self, i, pose: sapien.Pose, qpos: np.ndarray, how: str, obstacles: bool,
+        key: tuple = (), within: int | None = None, detour: bool = True,
+    ):  # fmt: skip
+        """A joint path to ``pose`` for env i by ``how`` ("screw": mplib's straight screw
+        motion; "rrt": the seeded planner), and a status ("" on success).
+
+        ``obstacles=False`` is for the short straight moves next to the support surface (the
+        final descent from the pre-grasp and the lift), which the surface's cloud would block.
+        ``key`` names the plan within the episode: its random draws come from the solver's
+        seed and this key alone, so skipping one plan changes no other. ``within``: a path of
+        this many steps or more is not wanted (a better option is known; "rrt" only).
+        ``detour=False`` ("rrt" only): the straight joint line or nothing (status
+        ``STRAIGHT_BLOCKED``).
+        """
+        target = np.concatenate([pose.p, pose.q])
+        dt = self.base.control_timestep
+        if how == "screw":
+            res = self.planners[i].plan_screw(
+                target, qpos.copy(), time_step=dt, use_point_cloud=obstacles
+            )
+        else:
+            rng = np.random.default_rng([self.seed, i, *key])
+            res = self.motion[i].plan_to_pose(target, qpos, rng, dt, obstacles, within, detour)
+        if res["status"] != "Success" or not len(res["position"]):
+            return None, res["status"]
+        if len(res["position"]) > self.cfg.max_path_steps:
+            return None, f"{len(res['position'])} steps, over max_path_steps"
+        return res["position"], ""
+
+    def _execute(self, paths: list[np.ndarray | None], extra_steps: int = 0, until=None) -> None:
+        """Step all envs along their paths in lockstep; envs without a path hold still.
+        ``until()``: checked after every step; True ends the steps early."""
+        paths = [None if p is None or not len(p) else self._commands(p, i)
+                 for i, p in enumerate(paths)]  # fmt: skip
+        lengths = [len(p) if p is not None else 0 for p in paths]
+        n = max(lengths, default=0) + extra_steps
+        for t in range(n):
+            if self.ended:  # no step past the end of the episode
+                return
+            action = np.zeros((self.num_envs, 8), np.float32)
+            for i, path in enumerate(paths):
+                if path is not None:
+                    action[i, :7] = path[min(t, len(path) - 1)]
+                else:  # holds its last targets
+                    action[i, :7] = self.command[i]
+                action[i, 7] = self.gripper[i]
+            if self.cfg.convertible:
+                action[:, :7] = self._bounded(action[:, :7])
+            self.command = action[:, :7].astype(np.float64)
+            self._step(action)
+            if until is not None and until():
+                return
+
+    def _commands(self, path: np.ndarray, i: int) -> np.ndarray:
+        """Env i's arm joint targets that follow ``path`` (a waypoint per control step).
+
+        ``pd_joint_pos`` drives each joint with ``stiffness * (target - q) - damping * qvel``,
+        so a joint lags a moving target by ``damping / stiffness`` (0.1 s for the Panda, 5
+        control steps) times its velocity: each target leads its waypoint by that much of the
+        path's velocity, within the joint limits; the last target is the path's end. On a
+        0.5 rad line at the solver's limits the arm stays within 0.022 rad of the path at
+        every step instead of 0.16 (``test_joint_targets_lead_the_path...``).
+        With ``convertible``, the targets move from the last ones at most ``follow.step`` a
+        step (``follow.rate_limited``; the path's speed is within ``follow.speed``).
+        """
+        q = np.asarray(path, dtype=np.float64)[:, :7]
+        lead = q.copy()
+        if len(q) >= 3:
+            arm = self.base.agent.controller.controllers["arm"].config
+            dt = self.base.control_timestep
+            lead = q + arm.damping / arm.stiffness * np.gradient(q, dt, axis=0)
+            lead[-1] = q[-1]  # the path ends at rest there
+            space = self.base.single_action_space
+            lead = np.clip(lead, space.low[:7], space.high[:7])
+        if not self.cfg.convertible:
+            return lead
+        return rate_limited(lead, self.command[i], self.follow.step)
+
+    def _bounded(self, arm: np.ndarray) -> np.ndarray:
+        """The arm targets ``arm`` (per env) moved at most ``follow.step`` from the last ones
+        and leading the measured joints by at most ``follow.lead`` (a joint lagging its target
+        more than planned, e.g. the lag building up as it starts, slows the targets down)."""
+        arm = self.command + shortened(arm - self.command, self.follow.step)
+        q = self._qpos()[:, :7]
+        return q + shortened(arm - q, self.follow.lead)
+
+    def _step(self, action: np.ndarray) -> None:
+        a = action if self._batched_actions else action[0]
+        _, _, terminated, truncated, info = self.env.step(a)
+        self.last_info = info
+        self.steps += 1
+        flag = lambda x: np.asarray(torch.as_tensor(x).cpu()).reshape(-1)  # noqa: E731
+        success = flag(info["success"])
+        self.succeeded = np.where(success, self.succeeded + 1, 0)
+        over = flag(truncated) | (flag(terminated) & ~success)
+        self.ended = bool(np.all(over | (self.succeeded >= self.cfg.hold_steps)))
+
+    def _per_env(
+        self,
+        stage: str,
+        targets: list,
+        methods: tuple[str, ...] = ("screw", "rrt"),
+        obstacles: bool = True,
+        settle: int = 0,
+        option_steps: int | None = None,
+        then=None,
+        path_ok=None,
+        on_choice=None,
+        planned=None,
+    ) -> list[sapien.Pose | None]:
+        """Plan and execute one stage in every env that has not failed yet.
+
+        Args:
+            stage: named in failure reports.
+            targets: per env a pose, a list of poses (options, best first), or None (hold
+                still).
+            methods: tried in order, each on every option before the next (a straight screw
+                move to a later option before a planned detour to the first).
+            option_steps: None: the first option a method plans to. Else every option is
+                planned and the one with the fewest steps, plus this many per rank below the
+                first, wins (a grasp ranked a little lower that the arm reaches directly
+                before one behind a wrist turn).
+            then: with ``option_steps``, ``then(i, k, qpos)``: the steps of the move that
+                follows from where option k's path ends (None: it cannot be planned), added
+                to the option's cost.
+            path_ok: ``path_ok(i, path)``: why env i's planned path is refused ("" when not).
+            on_choice: ``on_choice(i, k)``: env i will run option k (before any env moves).
+            planned: ``planned(i)``: env i's path, planned already (from where the last stage
+                ended), or None to plan it here.
+
+        Returns:
+            Per env the pose that was planned to (None where none could be).
+        """
+        qpos = self._qpos()
+        paths, chosen = [], []
+        self.stages += 1
+        for i, target in enumerate(targets):
+            options = target if isinstance(target, list) else [target]
+            best = None
+            ready = None if planned is None or target is None else planned(i)
+            if ready is not None and not self.reports[i].plan_failures:
+                best = (len(ready), ready, target, 0)
+            elif target is not None and not self.reports[i].plan_failures:
+                best, failures = self._choose(
+                    i, options, qpos[i], methods, obstacles, option_steps, then, path_ok
+                )
+                if best is None:
+                    self.reports[i].plan_failures.append(f"{stage}: " + "; ".join(failures))
+                elif on_choice is not None:
+                    on_choice(i, best[3])
+            paths.append(None if best is None else best[1])
+            chosen.append(None if best is None else best[2])
+        # settle: steps holding the last waypoints, until the arms are there
+        ends = qpos[:, :7].copy()
+        for i, path in enumerate(paths):
+            if path is not None:
+                ends[i] = path[-1][:7]
+        start, moving = self.steps, max((len(p) for p in paths if p is not None), default=0)
+
+        def arrived() -> bool:
+            if self.steps < start + moving:
+                return False
+            return np.abs(self._qpos()[:, :7] - ends).max() < self.cfg.settle_tolerance
+
+        self._execute(paths, extra_steps=settle, until=arrived if settle else None)
+        return chosen
+
+    def _choose(self, i, options, qpos, methods, obstacles, option_steps, then, path_ok):
+        """``_per_env``'s choice for env i: ``(cost, path, pose, k)`` of the option that wins
+        (None when none plans) and the failures.
+
+        With ``option_steps``, the winner is the least (cost, rank) over every option, found by
+        branch and bound: an option whose rank alone, or whose shortest possible path
+        (``SeededPlanner.min_steps``), cannot beat the best so far is not planned. The seeded
+        planner's straight joint lines come first for every option, then the detours
+        (RRT-Connect) where a line is blocked: a direct option found first bounds the detours.
+        """
+        best, failures = None, []
+        for m, how in enumerate(methods):
+            passes = (False, True) if how == "rrt" and option_steps is not None else (True,)
+            todo = list(range(len(options)))
+            for detour in passes:
+                blocked = []  # options whose straight line is blocked: for the detour pass
+                for k in todo:
+                    within = None
+                    if best is not None and option_steps is not None:
+                        # a path of `within` steps or more cannot beat the best (ties: rank)
+                        within = best[0] - option_steps * k + (k < best[3])
+                        if within <= 0:
+                            break  # later options rank lower still
+                    key = (self.stages, m, k)
+                    path, status = self._plan(
+                        i, options[k], qpos, how, obstacles, key, within, detour
+                    )
+                    if status == STRAIGHT_BLOCKED:
+                        blocked.append(k)
+                        continue
+                    if path is not None and path_ok is not None:
+                        status = path_ok(i, path)
+                        path = None if status else path
+                    label = "" if len(options) == 1 else f"option {k}: "
+                    if path is None:
+                        failures.append(f"{label}{how}: {status}")
+                        continue
+                    cost = len(path) + (option_steps or 0) * k
+                    if best is not None and (cost, k) > (best[0], best[3]):
+                        continue  # what follows only adds steps
+                    if then is not None:
+                        end = np.concatenate([path[-1][:7], qpos[7:]])
+                        more = then(i, k, end)
+                        cost += self.cfg.max_path_steps if more is None else more
+                    if best is None or (cost, k) < (best[0], best[3]):
+                        best = (cost, path, options[k], k)
+                    if option_steps is None:
+                        return best, failures
+                todo = blocked
+            if best is not None:
+                break
+        return best, failures

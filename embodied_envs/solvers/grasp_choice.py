@@ -1,0 +1,147 @@
+"""The expert's grasp choice: which grasps to try where the target lies now, best first.
+
+The top-down grasp across the footprint's narrow side (``grasp_frame``; a round body's widest
+section) and its turns, the asset's annotated grasps (``affordance_annot.json``) and the
+synthesised grasps the gripper can take here (``solvers/grasps.py``), in the order the solver
+tries them. ``GraspChoice`` is a mixin of
+:class:`~embodied_envs.solvers.pick_place.PickPlaceSolver`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING
+
+import numpy as np
+import sapien
+
+from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
+from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.solvers.grasps import (
+    asset_grasps,
+    grasp_is_valid,
+    posed_clearance,
+    posed_grasps,
+    widest_height,
+)
+
+if TYPE_CHECKING:
+    from embodied_envs.solvers.pick_place import SolverConfig
+
+
+def grasp_frame(
+    vertices_world: np.ndarray, support_z: float, cfg: SolverConfig, current_y: np.ndarray
+):
+    """Grasp centre and closing direction for a top-down grasp.
+
+    The closing direction is the narrow side of the minimum-area rectangle around the object's
+    XY footprint; its sign is the one closest to the gripper's current closing axis. Its height
+    is ``grasp_depth`` below the top, or a round body's widest section above that
+    (``grasps.widest_height``).
+    """
+    hull = convex_hull_2d(vertices_world[:, :2])
+    best = None
+    for i in range(len(hull)):
+        e = hull[(i + 1) % len(hull)] - hull[i]
+        u = e / (np.linalg.norm(e) + 1e-12)
+        v = np.array([-u[1], u[0]])
+        pu, pv = hull @ u, hull @ v
+        area = (pu.max() - pu.min()) * (pv.max() - pv.min())
+        if best is None or area < best[0]:
+            best = (area, u, v, pu, pv)
+    _, u, v, pu, pv = best
+    wu, wv = pu.max() - pu.min(), pv.max() - pv.min()
+    closing2 = u if wu < wv else v
+    centre2 = u * (pu.max() + pu.min()) / 2 + v * (pv.max() + pv.min()) / 2
+    closing = np.array([closing2[0], closing2[1], 0.0])
+    if np.dot(closing, current_y) < 0:
+        closing = -closing
+    top = vertices_world[:, 2].max()
+    z = max(top - cfg.grasp_depth, support_z + cfg.min_tcp_height)
+    z = min(z, top - 0.005)
+    z = widest_height(vertices_world, closing, z, top - 0.005)  # a round body: its equator
+    return np.array([centre2[0], centre2[1], z]), closing
+
+
+class GraspChoice:
+    """The grasps to try per env (a mixin of the solver)."""
+
+    def grasp_poses(self) -> list[list[tuple[sapien.Pose, float]]]:
+        """Per env, the grasps to try where its target lies now, best first, each with the
+        finger opening to approach with. First the top-down grasp across the footprint's
+        narrow side and its 180-degree turn (a parallel gripper's same grasp at another wrist
+        angle), fully open, when it passes the synthesised grasps' checks and clears the
+        other objects by the wide margin (the grasp that cans and boxes take); then the
+        synthesised grasps the gripper can take here (``grasps.posed_grasps``, pre-shaped);
+        the footprint grasp last when it failed those checks, or when the asset's annotated
+        grasps (``affordance_annot.json``) lead the synthesised ones."""
+        agent = self.base.agent
+        tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
+        poses = []
+        for i, layout in enumerate(self.base.layouts):
+            actor = self.base.env_actors[f"env{i}"][self._node(i)]
+            spec = layout.asset_spec(self._node(i))
+            geom = asset_geometry(spec)
+            pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
+            support = float(self.base.layout_scene.top_z[i])
+            grasps = asset_grasps(spec, self.grasp_config)
+            taken = posed_grasps(
+                grasps, pose.matrix(), support, self.clouds[i], self.grasp_config,
+                limit=self.cfg.grasp_candidates, with_index=True,
+            )  # fmt: skip
+            synthesised = [
+                (agent.build_grasp_pose(approach, closing, centre), opening)
+                for centre, closing, approach, opening, _ in taken
+            ]
+            # the asset's own annotated grasps (affordance_annot.json) lead when one is takeable
+            annotated = bool(taken) and grasps.annotated is not None
+            annotated = annotated and bool(grasps.annotated[taken[0][4]])
+            verts = pose.transform_points(geom.vertices)
+            centre, closing = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
+            down = np.array([0, 0, -1.0])
+            footprint = [
+                (agent.build_grasp_pose(down, c, centre), self.gripper_model.opening)
+                for c in (closing, -closing)
+            ]
+            checked = (i, grasps, pose, centre)
+            turned = self._turned_closing(i, tcp[i], centre)
+            if turned is not None and self._footprint_fits(*checked, turned, support):
+                # the wrist needs no turn: first
+                footprint.insert(0, (agent.build_grasp_pose(down, turned, centre),
+                                     self.gripper_model.opening))  # fmt: skip
+            first = self._footprint_fits(*checked, closing, support) and not annotated
+            poses.append(footprint + synthesised if first else synthesised + footprint)
+        return poses
+
+    def _footprint_fits(self, i, grasps, pose, centre, closing, support) -> bool:
+        """Whether env i's top-down grasp at ``centre`` closing along ``closing`` passes the
+        synthesised grasps' checks on the object (``pose``) and clears the other objects by the
+        wide margin."""
+        down = np.array([0, 0, -1.0])
+        world_to_object = np.linalg.inv(pose.matrix())
+        rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
+        # the footprint grasp's palm stops just above a can's lid: checked without margin
+        exact = dataclasses.replace(self.grasp_config, margin=0.0)
+        valid = grasp_is_valid(grasps, rot @ centre + t, rot @ closing, rot @ down, exact)
+        _, roomy = posed_clearance(
+            centre[None], closing[None], down[None],
+            self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
+            self.clouds[i], self.grasp_config,
+        )  # fmt: skip
+        return valid and bool(roomy[0])
+
+    def _turned_closing(self, i: int, tcp: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
+        """The hand's closing direction now (``tcp (4, 4)``) turned about the vertical as the
+        arm's base joint turns from the hand to ``centre``: the top-down grasp there the wrist
+        reaches without turning (a can's footprint has no narrow side, and a turn of the last
+        joint by up to 90 degrees took 2 s at the convertible speeds); None where the hand's
+        closing direction is vertical."""
+        base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
+        y = tcp[:2, 1]
+        if np.linalg.norm(y) < 0.5:
+            return None
+        a, b = centre[:2] - base, tcp[:2, 3] - base
+        turn = np.arctan2(a[1], a[0]) - np.arctan2(b[1], b[0])
+        c, s = np.cos(turn), np.sin(turn)
+        xy = np.array([c * y[0] - s * y[1], s * y[0] + c * y[1]])
+        return np.array([*(xy / np.linalg.norm(xy)), 0.0])
