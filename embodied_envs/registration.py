@@ -17,7 +17,7 @@ ENTRY_ID = f"embodied_envs:{ENV_ID}"
 CONTROL_FREQ = 50  # Hz, control steps per second (the simulation runs at twice this)
 # 500 control steps = 10 s at CONTROL_FREQ: at the speeds every controller follows (joint
 # targets at most 1 rad/s, solvers/follow.py) the expert's pick and single-mover place
-# episodes take about 130-300 steps and two movers about 400 (tools/bench_solver.py)
+# episodes take about 130-300 steps and two movers about 400 (tools/bench/bench_solver.py)
 MAX_EPISODE_STEPS = 500
 
 

@@ -1,4 +1,4 @@
-"""The bad-input corpus (tests/data/bad_inputs, made by tools/make_bad_inputs.py).
+"""The bad-input corpus (tests/data/bad_inputs, made by tools/make/make_bad_inputs.py).
 
 Every case fails at construction, before any simulation object exists, with the promised error
 type and words; ``layout validate`` reports file problems with exit code 1; nothing is written

@@ -1,6 +1,6 @@
-"""Every generator of shipped data in tools/ writes, into a temporary folder, what is shipped,
-byte for byte: the assets and the room's splat (make_assets.py, mesh_to_splat.py), the layouts
-(make_layouts.py), the grasp zoo (make_grasp_zoo.py) and the bad-input corpus
+"""Every generator of shipped data in tools/make/ writes, into a temporary folder, what is
+shipped, byte for byte: the assets and the room's splat (make_assets.py, mesh_to_splat.py), the
+layouts (make_layouts.py), the grasp zoo (make_grasp_zoo.py) and the bad-input corpus
 (make_bad_inputs.py). A failure names the files that differ and the script that writes them."""
 
 import importlib.util
@@ -9,7 +9,7 @@ import sys
 import pytest
 from conftest import DATA, ROOT, snapshot
 
-TOOLS = ROOT / "tools"
+TOOLS = ROOT / "tools" / "make"
 SHIPPED = {
     "assets": DATA / "assets",
     "layouts": DATA / "layouts",
@@ -20,8 +20,8 @@ SHIPPED = {
 
 @pytest.fixture(scope="module")
 def tool():
-    """A script of tools/ as a module, by its file name (tools/ on the path, as when the scripts
-    run: they import each other); every module loaded is unloaded afterwards."""
+    """A script of tools/make/ as a module, by its file name (tools/make/ on the path, as when
+    the scripts run: they import each other); every module loaded is unloaded afterwards."""
     before = set(sys.modules)
     sys.path.insert(0, str(TOOLS))
     try:
@@ -73,22 +73,24 @@ def test_make_assets_and_mesh_to_splat_reproduce_the_shipped_assets(tmp_path, to
     tool("mesh_to_splat").main(
         [str(background / "mesh_model.ply"), "--out", str(background / "gs_model.ply")]
     )
-    assert_same_files(out, SHIPPED["assets"], "tools/make_assets.py + tools/mesh_to_splat.py")
+    script = "tools/make/make_assets.py + tools/make/mesh_to_splat.py"
+    assert_same_files(out, SHIPPED["assets"], script)
 
 
 def test_make_layouts_reproduces_the_shipped_layouts(tmp_path, tool):
     tool("make_layouts").main(["--out", str(tmp_path)])
-    assert_same_files(tmp_path, SHIPPED["layouts"], "tools/make_layouts.py")
+    assert_same_files(tmp_path, SHIPPED["layouts"], "tools/make/make_layouts.py")
 
 
 def test_make_grasp_zoo_reproduces_the_shipped_zoo(tmp_path, tool):
     tool("make_grasp_zoo").main(["--out", str(tmp_path)])
-    assert_same_files(tmp_path, SHIPPED["zoo"], "tools/make_grasp_zoo.py")
+    assert_same_files(tmp_path, SHIPPED["zoo"], "tools/make/make_grasp_zoo.py")
 
 
 def test_make_bad_inputs_reproduces_the_shipped_corpus(tmp_path, tool):
     tool("make_bad_inputs").main(["--out", str(tmp_path / "bad_inputs")])
-    assert_same_files(tmp_path / "bad_inputs", SHIPPED["bad_inputs"], "tools/make_bad_inputs.py")
+    script = "tools/make/make_bad_inputs.py"
+    assert_same_files(tmp_path / "bad_inputs", SHIPPED["bad_inputs"], script)
 
 
 def test_a_changed_file_is_named(tmp_path):

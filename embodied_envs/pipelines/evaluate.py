@@ -13,7 +13,8 @@ processes (one env per layout per worker, reused across its episodes), and write
   ``"fail"`` the first ``video_episodes`` episodes of each entry of ``layouts`` are filmed (a
   filmed episode costs ~50x an unfilmed one on the CPU), and of those ``"all"`` keeps every
   one, ``"fail"`` the unsuccessful ones; hybrid frames when the layout has a splat, the
-  simulator's otherwise. Unfilmed episodes cost ~1.1x a bare gym loop (``tools/bench_eval.py``).
+  simulator's otherwise. Unfilmed episodes cost ~1.1x a bare gym loop
+  (``tools/bench/bench_eval.py``).
 
 An entry of ``layouts`` may be a layout set: each of its episodes runs in the layout its seed
 draws (a reconfiguration), and ``per_layout`` reports every layout drawn.

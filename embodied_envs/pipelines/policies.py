@@ -3,7 +3,7 @@
 Policies (:func:`load_policy`): ``expert`` (the scripted motion-planned solver, on
 ``pd_joint_pos``), ``random`` (uniform over the action space, seeded by the episode), ``zero``,
 a TorchScript file ``path/to/policy.pt`` (a module from observations to actions, as
-``tools/train_bc.py`` saves), or ``module:factory`` / ``path/to/file.py:factory``:
+``tools/recipes/train_bc.py`` saves), or ``module:factory`` / ``path/to/file.py:factory``:
 ``factory(env)`` (or ``factory()``) returns a callable from observations to actions or a
 ``torch.nn.Module`` (its ``reset(seed)``, if any, is called at each episode start). A policy
 receives the env's observation as ManiSkill returns it (torch tensors with a leading batch of 1,

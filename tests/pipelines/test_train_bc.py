@@ -1,5 +1,5 @@
-"""tools/train_bc.py: a state BC policy trained on collected demos, saved as TorchScript, that
-`embodied-envs eval --policy FILE.pt` runs."""
+"""tools/recipes/train_bc.py: a state BC policy trained on collected demos, saved as
+TorchScript, that `embodied-envs eval --policy FILE.pt` runs."""
 
 import json
 import sys
@@ -13,7 +13,7 @@ from conftest import DEFAULT_LAYOUT
 from embodied_envs.cli.main import main
 from embodied_envs.pipelines.collect import CollectPlan, collect
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools" / "recipes"))
 import train_bc  # noqa: E402
 
 

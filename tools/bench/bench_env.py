@@ -9,7 +9,7 @@
 5. Batched compositing time per frame at n = 1, 64 and 1,024 envs (synthetic 128x128 camera
    images and backgrounds on this machine's device: the per-frame work of the GPU path).
 
-Usage: python tools/bench_env.py [--episodes 20] [--resets 200] [--frames 50]
+Usage: python tools/bench/bench_env.py [--episodes 20] [--resets 200] [--frames 50]
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ it rather than its back; the script prints the poses it found, to pin in the ent
 Asset folders are written relative to ``embodied_envs/data/layouts/`` (``../assets/<node>``),
 where the files ship, wherever ``--out`` is.
 
-Usage: python tools/make_layouts.py [--out embodied_envs/data/layouts]
+Usage: python tools/make/make_layouts.py [--out embodied_envs/data/layouts]
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from embodied_envs.layout import LayoutInfo
 from embodied_envs.layout.placement import place
 from embodied_envs.paths import atomic_output
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "embodied_envs" / "data"  # package data; ./layouts and ./assets link here
 ROBOT = "franka"
 MAX_SEEDS = 10_000  # placement seeds tried for a layout without pinned poses

@@ -5,9 +5,9 @@ Each asset folder ``assets/<stem>/`` gets ``<stem>.urdf``, ``mesh/<stem>.obj`` (
 coloured per part) and ``mesh/<stem>_collision.obj`` whose connected components are convex
 parts. Meshes are designed Z-up and stored Y-up; the URDF origin ``rpy="1.5708 0 0"`` brings
 them back to Z-up, exactly as EmbodiedGen's assets do. The room background's mesh goes to
-``assets/background/mesh_model.ply``; ``tools/mesh_to_splat.py`` turns it into the splat.
+``assets/background/mesh_model.ply``; ``tools/make/mesh_to_splat.py`` turns it into the splat.
 
-Usage: python tools/make_assets.py [--out assets]
+Usage: python tools/make/make_assets.py [--out assets]
 """
 
 from __future__ import annotations
@@ -352,7 +352,7 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    data = Path(__file__).resolve().parent.parent / "embodied_envs" / "data"  # package data
+    data = Path(__file__).resolve().parents[2] / "embodied_envs" / "data"  # package data
     ap.add_argument("--out", type=Path, default=data / "assets")
     args = ap.parse_args(argv)
     for make in ASSETS:

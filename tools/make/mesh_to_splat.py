@@ -2,7 +2,7 @@
 
 With no arguments it makes the shipped room background:
 
-    .venv/bin/python tools/mesh_to_splat.py
+    .venv/bin/python tools/make/mesh_to_splat.py
       -> assets/background/gs_model.ply from assets/background/mesh_model.ply
 
 The mesh keeps its frame (the shipped room is Y-up, metres, floor at y = 0). Only faces that
@@ -18,7 +18,7 @@ from pathlib import Path
 
 from embodied_envs.splat import mesh_file_to_splat
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "embodied_envs" / "data"  # package data; ./layouts and ./assets link here
 BACKGROUND = DATA / "assets" / "background"
 ROOM_INSIDE = (0.0, 1.3, 0.0)  # m, a point inside the shipped room, Y-up

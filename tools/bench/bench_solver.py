@@ -6,7 +6,7 @@ configuration), runs the solver within the env's registered episode limit, and c
 by the env's own ``evaluate()`` at the end. Prints success rate, mean and max episode length
 (control steps), failures by stage, and wall time.
 
-Usage: python tools/bench_solver.py [--episodes 50] [--layout FILE ...]
+Usage: python tools/bench/bench_solver.py [--episodes 50] [--layout FILE ...]
 """
 
 from __future__ import annotations

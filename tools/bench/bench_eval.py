@@ -8,7 +8,7 @@ policy (``EpisodeRunner.run``: the policy call, the action check, the step tally
 seeds. Prints the median seconds per episode of each and their ratio (eval / bare), and the
 cost of a filmed episode (the first ``--video-episodes`` of an eval) once.
 
-Usage: python tools/bench_eval.py [--episodes 5] [--steps 300] [--layout FILE]
+Usage: python tools/bench/bench_eval.py [--episodes 5] [--steps 300] [--layout FILE]
 """
 
 from __future__ import annotations

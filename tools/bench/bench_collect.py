@@ -11,7 +11,7 @@ In one run, interleaved, each timed as a whole command (start-up, planning, phys
 Prints successful demonstrations per minute, the ratio to PickCube's runner (the issue's target
 is >= 0.6 with one worker) and MB per 100 demonstrations.
 
-Usage: python tools/bench_collect.py [--num 20] [--repeats 1] [--layout FILE ...]
+Usage: python tools/bench/bench_collect.py [--num 20] [--repeats 1] [--layout FILE ...]
 """
 
 from __future__ import annotations

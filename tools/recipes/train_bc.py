@@ -14,12 +14,12 @@ The recipe (docs/evaluation.md), on the default layout:
         --out demos
     embodied-envs replay --traj-path demos/default/trajectory.h5 -o state \\
         -c pd_joint_delta_pos --save-traj
-    python tools/train_bc.py \\
+    python tools/recipes/train_bc.py \\
         --demos demos/default/trajectory.state.pd_joint_delta_pos.physx_cpu.h5 --out runs/bc
     embodied-envs eval --policy runs/bc/policy.pt --control-mode pd_joint_delta_pos \\
         --layout layouts/default.json --episodes 50 --seed 10000 --out outputs/eval_bc
 
-Usage: python tools/train_bc.py --demos FILE.h5 --out DIR [--iters 20000] [--seed 0]
+Usage: python tools/recipes/train_bc.py --demos FILE.h5 --out DIR [--iters 20000] [--seed 0]
 """
 
 from __future__ import annotations

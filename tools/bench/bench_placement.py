@@ -3,7 +3,7 @@
 
 Violations are counted with the independent shapely checker of the test suite.
 
-Usage: python tools/bench_placement.py [--seeds 1000]
+Usage: python tools/bench/bench_placement.py [--seeds 1000]
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "tests" / "layout"))
 

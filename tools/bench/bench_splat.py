@@ -6,7 +6,7 @@ Gaussians (surface-aligned, overlapping, most of them in view), posed as the def
 poses its background, seen from the env's default render camera and two room corners.
 Reports the median of ``--repeats`` renders per view and the worst view against the targets.
 
-Usage: python tools/bench_splat.py [--repeats 5] [--threads N] [--backend torch]
+Usage: python tools/bench/bench_splat.py [--repeats 5] [--threads N] [--backend torch]
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from embodied_envs.layout import load_layout
 from embodied_envs.layout.pose import quat_multiply_xyzw
 from embodied_envs.splat import PinholeCamera, mesh_to_splat, pose_splat, render
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 TARGETS = {100_000: 0.3, 1_000_000: 1.0}  # seconds per 256x256 render
 VIEWS = {
     "render_camera": ((0.9, 0.0, 1.1), (0.0, 0.0, 0.9)),

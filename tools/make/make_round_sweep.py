@@ -3,19 +3,17 @@
 and a layout around each (as ``make_grasp_zoo.py`` writes the zoo): balls of several radii
 and masses, cylinders lying on their side, wheels on their edge and one lying flat.
 
-Usage: python tools/make_round_sweep.py --out /tmp/round_sweep
-then:  python tools/bench_solver.py --episodes 6 --layout /tmp/round_sweep/layouts/*.json
+Usage: python tools/make/make_round_sweep.py --out /tmp/round_sweep
+then:  python tools/bench/bench_solver.py --episodes 6 --layout /tmp/round_sweep/layouts/*.json
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import shutil
 from pathlib import Path
 
 import trimesh
-from make_grasp_zoo import DATA, cylinder, write_asset, write_layout
+from make_grasp_zoo import DATA, cylinder, write_shapes
 
 
 def ball(radius: float, subdivisions: int = 2) -> trimesh.Trimesh:
@@ -63,22 +61,8 @@ def cases() -> dict[str, tuple[list[trimesh.Trimesh], float, str]]:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", type=Path, required=True)
-    args = ap.parse_args(argv)
-    assets, layouts = args.out / "assets", args.out / "layouts"
-    for folder in (assets, layouts):
-        if folder.exists():
-            shutil.rmtree(folder)
-        folder.mkdir(parents=True)
-    for name, (parts, mass, desc) in cases().items():
-        write_asset(assets / name, name, parts, mass)
-        path = layouts / f"{name}.json"
-        write_layout(path, name, desc, assets)
-        data = json.loads(path.read_text())  # the shipped assets by absolute path (any --out)
-        for key, value in data["assets"].items():
-            if key != name:
-                data["assets"][key] = str(DATA / "assets" / Path(value).name)
-        path.write_text(json.dumps(data, indent=4) + "\n")
-    print(f"wrote {len(cases())} round shapes to {assets} and their layouts to {layouts}")
+    # the shipped assets by absolute path: the layouts load from any --out
+    write_shapes(ap.parse_args(argv).out, cases(), "round shapes", shipped=DATA / "assets")
 
 
 if __name__ == "__main__":

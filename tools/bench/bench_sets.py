@@ -10,7 +10,7 @@
 Timings are interleaved, state observations, CPU (one env per process), mean ms per reset.
 On a GPU the set's envs hold different layouts at once; that path is not timed here.
 
-Usage: python tools/bench_sets.py [--configs 20] [--resets 200] [--layout L ...]
+Usage: python tools/bench/bench_sets.py [--configs 20] [--resets 200] [--layout L ...]
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ folders it needs). ``case.json`` says what is wrong and what must happen:
 Layouts point at the shipped assets with paths relative to their own folder, as users' do
 (written relative to ``tests/data/bad_inputs/<case>/`` wherever ``--out`` is, so that a corpus
 written elsewhere is byte for byte the shipped one: ``tests/test_shipped_data.py``).
-Usage: python tools/make_bad_inputs.py [--out tests/data/bad_inputs]
+Usage: python tools/make/make_bad_inputs.py [--out tests/data/bad_inputs]
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from PIL import Image
 
 from embodied_envs.splat.ply import REQUIRED
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 OUT = ROOT / "tests" / "data" / "bad_inputs"
 SHIPPED = "../../../../assets/"  # from tests/data/bad_inputs/<case>/ to the repo's assets
 

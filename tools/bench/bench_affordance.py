@@ -9,7 +9,7 @@ copies the layout and its assets to a temporary folder, adds the file beside the
 and runs the same seeded episodes on both within the registered limit. Prints success, mean
 steps and failures.
 
-Usage: python tools/bench_affordance.py [--layout FILE] [--episodes 20] [--radius 0.045]
+Usage: python tools/bench/bench_affordance.py [--layout FILE] [--episodes 20] [--radius 0.045]
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ converted replay ends in success (what each tool saves):
 
 Prints a table of kept/total per dataset, mode and converter.
 
-Usage: python tools/bench_convert.py TRAJ.h5 [TRAJ.h5 ...] [--modes pd_joint_delta_pos ...]
+Usage: python tools/bench/bench_convert.py TRAJ.h5 [TRAJ.h5 ...] [--modes pd_joint_delta_pos ...]
        [--jobs 2]
 """
 

@@ -8,7 +8,7 @@ turned Z-up by the URDF's ``<origin rpy="1.5708 0 0">``. Each layout is the ship
 scene (table, room, distractors) with the shape as its target. Sizes fit the Panda's 8 cm
 opening somewhere on every shape.
 
-Usage: python tools/make_grasp_zoo.py [--out tests/data/zoo]
+Usage: python tools/make/make_grasp_zoo.py [--out tests/data/zoo]
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ import shutil
 from pathlib import Path
 
 import trimesh
-from make_assets import urdf_text, write_obj  # tools/: one object per part, Y-up
+from make_assets import urdf_text, write_obj  # tools/make/: one object per part, Y-up
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "embodied_envs" / "data"
 ZOO = ROOT / "tests" / "data" / "zoo"  # the shipped zoo: the tests' and benchmarks' data
 SEGMENTS = 24  # sides of a cylinder part
@@ -128,8 +128,12 @@ def write_asset(folder: Path, name: str, parts: list[trimesh.Trimesh], mass: flo
     (folder / f"{name}.urdf").write_text(urdf_text(name, (0.7, 0.6), mass))
 
 
-def write_layout(path: Path, name: str, desc: str, assets: Path) -> None:
-    """The shipped default scene graded on the shape (in place of the can)."""
+def write_layout(
+    path: Path, name: str, desc: str, assets: Path, shipped: Path | None = None
+) -> None:
+    """The shipped default scene graded on the shape (in place of the can); ``shipped`` is the
+    shipped assets' folder as the layout names it (default: relative to the shipped zoo's
+    layouts, the same text under any --out)."""
     data = json.loads((DATA / "layouts" / "default.json").read_text())
     rel = data["relation"]
     rel["manipulated_objs"] = [name]
@@ -138,8 +142,8 @@ def write_layout(path: Path, name: str, desc: str, assets: Path) -> None:
         data[key] = {(name if k == "can" else k): v for k, v in data[key].items()}
     data["objs_desc"][name] = desc
     data["tree"]["table"] = [[name if c == "can" else c, r] for c, r in data["tree"]["table"]]
-    # the shipped assets as seen from the shipped zoo's layouts (the same text under any --out)
-    shipped = Path(os.path.relpath(DATA / "assets", ZOO / "layouts"))
+    if shipped is None:
+        shipped = Path(os.path.relpath(DATA / "assets", ZOO / "layouts"))
     data["assets"] = {
         (name if k == "can" else k): str(shipped / Path(v).name) for k, v in data["assets"].items()
     }
@@ -149,19 +153,28 @@ def write_layout(path: Path, name: str, desc: str, assets: Path) -> None:
     path.write_text(json.dumps(data, indent=4) + "\n")
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--out", type=Path, default=ZOO)
-    args = ap.parse_args(argv)
-    assets, layouts = args.out / "assets", args.out / "layouts"
+def write_shapes(
+    out: Path, cases: dict[str, tuple[list[trimesh.Trimesh], float, str]], what: str,
+    shipped: Path | None = None,
+) -> None:
+    """Each case (name -> convex parts, mass kg, description) as an asset under ``out/assets``
+    and a layout around it under ``out/layouts``, both emptied first; ``shipped`` as in
+    ``write_layout``. The zoo's and the round sweep's ``main``."""
+    assets, layouts = out / "assets", out / "layouts"
     for folder in (assets, layouts):
         if folder.exists():
             shutil.rmtree(folder)
         folder.mkdir(parents=True)
-    for name, (parts, mass, desc) in shapes().items():
+    for name, (parts, mass, desc) in cases.items():
         write_asset(assets / name, name, parts, mass)
-        write_layout(layouts / f"{name}.json", name, desc, assets)
-    print(f"wrote {len(shapes())} shapes to {assets} and their layouts to {layouts}")
+        write_layout(layouts / f"{name}.json", name, desc, assets, shipped)
+    print(f"wrote {len(cases)} {what} to {assets} and their layouts to {layouts}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--out", type=Path, default=ZOO)
+    write_shapes(ap.parse_args(argv).out, shapes(), "shapes")
 
 
 if __name__ == "__main__":

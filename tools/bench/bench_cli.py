@@ -6,7 +6,7 @@ Times ``embodied-envs --help``, ``embodied-envs layout validate`` on each shippe
 ``python -c pass`` and ``python -c "import torch"`` (what every command paid before the
 simulator was imported lazily).
 
-Usage: python tools/bench_cli.py [--runs 7]
+Usage: python tools/bench/bench_cli.py [--runs 7]
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def wall(cmd: list[str], runs: int) -> float:

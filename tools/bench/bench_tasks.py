@@ -8,7 +8,7 @@ a few times with zero actions; then ``evaluate()`` followed by ``compute_normali
 hits every layout alike. Prints the median microseconds per call and the ratio to the first
 layout (the issue's target: a place task at most 1.2x the pick task).
 
-Usage: python tools/bench_tasks.py [--calls 2000] [--rounds 5] [--layout FILE ...]
+Usage: python tools/bench/bench_tasks.py [--calls 2000] [--rounds 5] [--layout FILE ...]
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ with a new seed every episode; training loops reset without one. Each layout's e
 PickCube-v1 are timed in alternating rounds (state observations, CPU): the median per-round
 ratio of mean ms per ``reset()``, robust to the machine's drift.
 
-Usage: python tools/bench_reset.py [--resets 200] [--rounds 10] [--layout L ...]
+Usage: python tools/bench/bench_reset.py [--resets 200] [--rounds 10] [--layout L ...]
 """
 
 from __future__ import annotations
