@@ -12,8 +12,8 @@ and the median over rounds of each round's ratio to the first robot's (the Panda
 
 ``--maniskill`` adds ManiSkill's own envs, timed in the same rounds, ratios to their Panda:
 ``PickCube-v1`` with each robot it supports (panda, so100, fetch), what a robot costs in
-ManiSkill's task; ``Empty-v1`` with every robot (the arm alone on a ground plane, its reset a
-no-op), what the robot's model itself costs the physics.
+ManiSkill's task; ``Empty-v1`` with every robot (the arm alone on a ground plane, set to its
+entry's rest joints after each round's resets), what the robot's model itself costs.
 
 Usage: python tools/bench_robots.py [--robots panda so100 ...] [--layout FILE] [--rounds 10]
                                     [--steps 100] [--resets 20] [--obs-mode state ...] [--maniskill]
@@ -32,6 +32,7 @@ os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
 import gymnasium as gym  # noqa: E402
 import mani_skill.envs  # noqa: E402,F401
 import numpy as np  # noqa: E402
+import torch  # noqa: E402
 from bench_reset import reset_ms  # noqa: E402  (tools/: the seeded resets, timed as there)
 from mani_skill.envs.tasks.tabletop.pick_cube import PickCubeEnv  # noqa: E402
 
@@ -49,6 +50,7 @@ class Subject:
 
     label: str
     env: gym.Env
+    rest: tuple[float, ...] | None = None  # joints set after each round's resets (Empty-v1)
     reset: list[float] = field(default_factory=list)
     step: list[float] = field(default_factory=list)
     physics: list[float] = field(default_factory=list)  # of each step
@@ -70,6 +72,11 @@ class Subject:
     def run_round(self, steps: int, resets: int, first_seed: int, rng, record=True) -> None:
         """``resets`` seeded resets from ``first_seed``, then ``steps`` random-action steps."""
         ms = reset_ms(self.env, resets, seeded=True, first_seed=first_seed)
+        if self.rest is not None:  # Empty-v1 leaves the joints where they were
+            agent = self.env.unwrapped.agent
+            agent.robot.set_qpos(torch.tensor([self.rest], dtype=torch.float32))
+            agent.robot.set_qvel(torch.zeros_like(agent.robot.get_qvel()))
+            agent.controller.reset()
         space = self.env.action_space
         actions = rng.uniform(-1, 1, (steps, *space.shape)).astype(space.dtype)
         self.physics_s = 0.0
@@ -153,10 +160,13 @@ def main() -> None:
         groups = {"PickEmbodiedGen-v1": ours}
         if args.maniskill:
             cube = [u for u in args.robots if u in PickCubeEnv.SUPPORTED_ROBOTS]
-            for env_id, uids in (("PickCube-v1", cube), ("Empty-v1", args.robots)):
-                groups[f"ManiSkill {env_id}"] = [
-                    Subject(f"{uid} ({env_id[:-3]})", make(env_id, uid, obs_mode)) for uid in uids
-                ]
+            groups["ManiSkill PickCube-v1"] = [
+                Subject(f"{uid} (PickCube)", make("PickCube-v1", uid, obs_mode)) for uid in cube
+            ]
+            groups["ManiSkill Empty-v1, from each entry's rest joints"] = [
+                Subject(f"{uid} (Empty)", make("Empty-v1", uid, obs_mode), ROBOTS[uid].rest_qpos)
+                for uid in args.robots
+            ]
         measure(list(groups.values()), args.rounds, args.steps, args.resets)
         print(
             f"\nobs_mode={obs_mode}, CPU, {args.rounds} rounds of {args.resets} seeded resets and "
