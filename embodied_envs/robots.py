@@ -59,6 +59,25 @@ class Gripper:
 
 
 @dataclass(frozen=True)
+class FingerGrasp:
+    """A grasp check by two finger links' contacts, the rule of ManiSkill's Panda, SO-100, Koch
+    and Fetch ``is_grasping`` with their defaults: both fingers (the agent's ``finger1_link``,
+    ``finger2_link``) press on the object with at least ``min_force`` newtons, each force within
+    ``max_angle`` degrees of its finger's opening direction, ``opening[i]`` times the finger
+    link's y axis. ``envs/contacts.py`` checks it in one CPU pass (ManiSkill's walks the scene's
+    contacts twice in Python and makes a dozen one-env tensors: 1-2 ms per control step)."""
+
+    max_angle: float = 85.0  # degrees
+    opening: tuple[float, float] = (1.0, -1.0)  # sign of each finger link's y axis that opens
+    min_force: float = 0.5  # N
+
+
+PANDA_GRASP = FingerGrasp()  # Panda.is_grasping
+JAW_GRASP = FingerGrasp(max_angle=110.0)  # SO100.is_grasping, Koch.is_grasping
+FETCH_GRASP = FingerGrasp(opening=(-1.0, 1.0))  # Fetch.is_grasping: its left finger's -y opens
+
+
+@dataclass(frozen=True)
 class Robot:
     """One supported robot; see the module's docstring for the base placement."""
 
@@ -72,7 +91,7 @@ class Robot:
     goal_height: tuple[float, float]  # m above the table top, goals' heights
     gripper: Gripper
     tcp_link: str | None  # link whose pose is the TCP; None: the agent's tcp_pose property
-    grasp_check: str  # "panda_fingers" (envs/contacts.py, as Panda.is_grasping) or "agent"
+    grasp_check: FingerGrasp | None  # the agent's is_grasping rule; None: call it (any rule)
     camera_mount: str  # link the base_camera is mounted on
     camera_eye: tuple[float, float, float]  # in the facing frame at the spot (x to the table)
     camera_target: tuple[float, float, float]
@@ -80,6 +99,9 @@ class Robot:
     base_yaw: float = 0.0  # rad, the base turned about z from the spot's heading
     base_height: str = "table"  # "table": on the spot; "floor": on the floor under it
     mobile_base: bool = False  # its wheels must not touch the ground (ManiSkill's Fetch)
+    # tcp_link None: two links whose midpoint is the agent's tcp_pos, read on the CPU
+    # simulation every step without the agent's property (0.3 ms there; None: the property)
+    tcp_tips: tuple[str, str] | None = None
     in_wheel: bool = True  # False: its model is a separate ManiSkill download
     expert: bool = False  # the scripted expert (solvers/) drives it
 
@@ -122,7 +144,7 @@ PANDA_GRIPPER = Gripper(joints=2, open_qpos=0.04, closed_qpos=0.0, max_opening=0
 PANDA = Robot(
     uid="panda", names=("franka", "franka_panda"), rest_qpos=PANDA_REST,
     noise_joints=tuple(range(7)), reach=(0.30, 0.78), goal_inset=0.10, goal_height=(0.05, 0.25),
-    gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check="panda_fingers",
+    gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
     camera_mount="panda_link0", camera_eye=(0.95, 0.0, 0.55), camera_target=(0.30, 0.0, 0.0),
     expert=True,
 )  # fmt: skip
@@ -133,7 +155,7 @@ ROBOTS: dict[str, Robot] = {
         Robot(
             uid="panda_wristcam", names=(), rest_qpos=PANDA_REST, noise_joints=tuple(range(7)),
             reach=PANDA.reach, goal_inset=PANDA.goal_inset, goal_height=PANDA.goal_height,
-            gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check="panda_fingers",
+            gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
             camera_mount="panda_link0", camera_eye=PANDA.camera_eye,
             camera_target=PANDA.camera_target, expert=True,
         ),
@@ -147,8 +169,9 @@ ROBOTS: dict[str, Robot] = {
             goal_height=(0.05, 0.15),
             gripper=Gripper(joints=1, open_qpos=0.0, closed_qpos=-1.1, max_opening=0.084,
                             action_index=5, action_kind="delta"),
-            tcp_link=None, grasp_check="agent", camera_mount="Base",
+            tcp_link=None, grasp_check=JAW_GRASP, camera_mount="Base",
             camera_eye=(0.55, 0.0, 0.40), camera_target=(0.18, 0.0, 0.0), base_yaw=math.pi / 2,
+            tcp_tips=("Fixed_Jaw_tip", "Moving_Jaw_tip"),
         ),
         # Koch v1.1: ManiSkill's rest keyframe (turned +90 deg), jaw opened to its limit
         # (1.6 rad: 0.078 m between gripper_tcp and gripper_tcp2; 0 rad: shut)
@@ -159,7 +182,7 @@ ROBOTS: dict[str, Robot] = {
             goal_height=(0.05, 0.15),
             gripper=Gripper(joints=1, open_qpos=1.6, closed_qpos=0.0, max_opening=0.078,
                             action_index=5, action_kind="delta"),
-            tcp_link="gripper_tcp", grasp_check="agent", camera_mount="base_link",
+            tcp_link="gripper_tcp", grasp_check=JAW_GRASP, camera_mount="base_link",
             camera_eye=(0.50, 0.0, 0.38), camera_target=(0.16, 0.0, 0.0), base_yaw=math.pi / 2,
         ),
         # Fetch: ManiSkill's table-scene joints (torso up), fingers open (0.05 m each); on the
@@ -173,7 +196,7 @@ ROBOTS: dict[str, Robot] = {
             goal_height=(0.05, 0.25),
             gripper=Gripper(joints=2, open_qpos=0.05, closed_qpos=0.0, max_opening=0.10,
                             action_index=7, action_kind="absolute"),
-            tcp_link="gripper_link", grasp_check="agent", camera_mount="base_link",
+            tcp_link="gripper_link", grasp_check=FETCH_GRASP, camera_mount="base_link",
             camera_eye=(0.95, 0.0, 0.55), camera_target=(0.30, 0.0, 0.0),
             edge_offset=0.345, base_height="floor", mobile_base=True,
         ),
@@ -187,7 +210,7 @@ ROBOTS: dict[str, Robot] = {
             goal_height=(0.05, 0.25),
             gripper=Gripper(joints=6, open_qpos=0.0, closed_qpos=0.81, max_opening=0.085,
                             action_index=6, action_kind="absolute"),
-            tcp_link="eef", grasp_check="agent", camera_mount="link_base",
+            tcp_link="eef", grasp_check=None, camera_mount="link_base",
             camera_eye=(0.95, 0.0, 0.55), camera_target=(0.30, 0.0, 0.0), in_wheel=False,
         ),
         Robot(
@@ -197,7 +220,7 @@ ROBOTS: dict[str, Robot] = {
             goal_height=(0.05, 0.20),
             gripper=Gripper(joints=2, open_qpos=0.04, closed_qpos=0.0, max_opening=0.08,
                             action_index=6, action_kind="absolute"),
-            tcp_link=None, grasp_check="agent", camera_mount="base_link",
+            tcp_link=None, grasp_check=None, camera_mount="base_link",
             camera_eye=(0.60, 0.0, 0.40), camera_target=(0.20, 0.0, 0.0), in_wheel=False,
         ),
         Robot(
@@ -207,7 +230,7 @@ ROBOTS: dict[str, Robot] = {
             goal_height=(0.05, 0.20),
             gripper=Gripper(joints=2, open_qpos=0.037, closed_qpos=0.015, max_opening=0.074,
                             action_index=6, action_kind="absolute"),
-            tcp_link=None, grasp_check="agent", camera_mount="base_link",
+            tcp_link=None, grasp_check=None, camera_mount="base_link",
             camera_eye=(0.60, 0.0, 0.40), camera_target=(0.20, 0.0, 0.0), in_wheel=False,
         ),
     )

@@ -103,15 +103,19 @@ def tcp_pose(agent, entry: robots.Robot):
 
 def tcp_position_cpu(agent, entry: robots.Robot) -> np.ndarray:
     """``(1, 3)``: the TCP position of the CPU simulation's one env, read from SAPIEN."""
-    if entry.tcp_link is None:
-        return agent.tcp_pose.p.cpu().numpy()
-    link = agent.robot.links_map[entry.tcp_link]
-    return np.array([link._objs[0].entity_pose.p])
+    links = agent.robot.links_map
+    if entry.tcp_link is not None:
+        return np.array([links[entry.tcp_link]._objs[0].entity_pose.p])
+    if entry.tcp_tips is not None:  # float32 as the agent's tcp_pos computes it
+        a, b = (links[name]._objs[0].entity_pose.p for name in entry.tcp_tips)
+        return ((a + b) / np.float32(2))[None]
+    return agent.tcp_pose.p.cpu().numpy()
 
 
 def is_grasping(agent, obj, entry: robots.Robot) -> torch.Tensor:
     """Per env (bool tensor): the agent grasps ``obj``, by the agent's own ``is_grasping``
-    (its defaults); the Panda's in one CPU pass (``envs/contacts.py``, the same rule)."""
-    if entry.grasp_check == "panda_fingers":
-        return contacts.is_grasping(agent, obj)
+    rule (its defaults): in one CPU pass (``envs/contacts.py``) where the entry states the rule,
+    else by calling it."""
+    if entry.grasp_check is not None:
+        return contacts.is_grasping(agent, obj, entry.grasp_check)
     return agent.is_grasping(obj)

@@ -1,13 +1,14 @@
-"""The grasp check every step pays for: ManiSkill's Panda ``is_grasping``, in one pass on CPU.
+"""The grasp check every step pays for: an arm's ManiSkill ``is_grasping``, in one pass on CPU.
 
-ManiSkill's ``Panda.is_grasping(obj)`` asks the scene for the contact impulses between each
-finger and the object. On the GPU simulation that is one batched query. On the CPU simulation
-each call walks every contact of the scene in Python, once per finger, and then makes a dozen
-one-env torch tensors; ``evaluate()`` runs it on every step, where it cost more than the physics
-(0.5 ms of 1.5 ms per control step on the shipped default layout). :func:`is_grasping` gives the
-same answer with the same rule (both fingers press on the object with at least ``min_force``
-newtons, each within ``max_angle`` degrees of its opening direction): on GPU it calls
-ManiSkill's; on CPU it walks the contacts once, for both fingers, in numpy.
+ManiSkill's ``is_grasping(obj)`` of the Panda, SO-100, Koch and Fetch asks the scene for the
+contact impulses between each finger and the object. On the GPU simulation that is one batched
+query. On the CPU simulation each call walks every contact of the scene in Python, once per
+finger, and then makes a dozen one-env torch tensors; ``evaluate()`` runs it on every step, where
+it cost more than the physics (0.5 ms of 1.5 ms per control step on the shipped default layout,
+Panda; 1-2 ms of the others' steps, ``tools/bench/bench_robots.py``). :func:`is_grasping` gives the
+same answer with the same rule (``robots.FingerGrasp``: both fingers press on the object with at
+least ``min_force`` newtons, each within ``max_angle`` degrees of its opening direction): on GPU
+it calls the agent's; on CPU it walks the contacts once, for both fingers, in numpy.
 """
 
 from __future__ import annotations
@@ -17,14 +18,15 @@ import math
 import numpy as np
 import torch
 
-MIN_FORCE = 0.5  # N, ManiSkill's Panda.is_grasping default
-MAX_ANGLE = 85.0  # degrees, likewise
+from embodied_envs.robots import PANDA_GRASP, FingerGrasp
 
 
-def is_grasping(agent, obj, min_force: float = MIN_FORCE, max_angle: float = MAX_ANGLE):
-    """Per env (bool tensor, shape (num_envs,)): the Panda ``agent`` grasps the actor ``obj``,
-    as ``agent.is_grasping(obj, min_force, max_angle)`` decides."""
+def is_grasping(agent, obj, rule: FingerGrasp = PANDA_GRASP):
+    """Per env (bool tensor, shape (num_envs,)): ``agent`` (an arm whose ``is_grasping`` follows
+    ``rule``, the Panda's by default) grasps the actor ``obj``, as
+    ``agent.is_grasping(obj, rule.min_force, rule.max_angle)`` decides."""
     scene = agent.scene
+    min_force, max_angle = rule.min_force, rule.max_angle
     if scene.gpu_sim_enabled:
         return agent.is_grasping(obj, min_force, max_angle)
     # the rigid-body components (comparing them costs a third of comparing their entities)
@@ -44,9 +46,9 @@ def is_grasping(agent, obj, min_force: float = MIN_FORCE, max_angle: float = MAX
         side = 0 if finger == fingers[0] else 1 if finger == fingers[1] else None
         if side is not None:
             into[side].extend([point.impulse for point in contact.points])
-    # the opening directions: the left finger's y axis, minus the right one's
+    # the opening directions: each finger's y axis, signed by the rule
     links = agent.finger1_link._objs[0], agent.finger2_link._objs[0]
-    for side, opens in ((0, 1.0), (1, -1.0)):
+    for side, opens in enumerate(rule.opening):
         impulse = np.zeros(3)
         if on_finger[side]:
             impulse += np.sum(on_finger[side], axis=0, dtype=np.float64)

@@ -2,6 +2,7 @@
 the env (make, reset, step in two control modes, obs, base pose, reach, gripper, grasp check);
 the others, and names with no model, are refused in one line before anything is simulated."""
 
+import inspect
 import math
 
 import gymnasium as gym
@@ -81,6 +82,8 @@ def test_robot_resets_reproducibly_and_stands_at_the_layouts_spot(robot_env):
     ahead = np.array([math.cos(heading), math.sin(heading)])
     tcp = agents.tcp_pose(u.agent, entry).p[0].cpu().numpy()
     assert float((tcp[:2] - spot[:2]) @ ahead) > 0.05
+    # the task's every-step CPU read of it (from SAPIEN; the SO-100's its jaw tips' midpoint)
+    np.testing.assert_array_equal(agents.tcp_position_cpu(u.agent, entry)[0], tcp)
     target = u.obj.pose.p[0].cpu().numpy()
     assert entry.reach[0] < np.linalg.norm(target[:2] - spot[:2]) < entry.reach[1]
     assert (u.placement_limits.reach_min, u.placement_limits.reach_max) == entry.reach
@@ -109,14 +112,13 @@ def test_gripper_closes_by_its_entry_and_grasp_is_the_agents(robot_env):
     least = 1 / 3 if grip.action_kind == "absolute" else 0.05
     assert (opened - closed) / (hi - lo) > least, (opened, closed)
     assert set(info) >= {"success", "fail", "is_grasped"} and not bool(info["is_grasped"])
-    if grip is robots.PANDA_GRIPPER:
-        return  # the Panda's check runs in one CPU pass (tests/envs/test_contacts.py)
-    agent = u.agent
-    agent.is_grasping = lambda obj, *a, **k: torch.ones(1, dtype=torch.bool)
-    try:
-        assert bool(u.evaluate()["is_grasped"])  # the agent's own is_grasping decides
-    finally:
-        del agent.is_grasping
+    # the entry's grasp rule is the agent's is_grasping with its defaults (checked step by step
+    # against it in tests/envs/test_contacts.py)
+    defaults = inspect.signature(type(u.agent).is_grasping).parameters
+    rule = robots.ROBOTS[uid].grasp_check
+    assert (rule.min_force, rule.max_angle) == (
+        defaults["min_force"].default, defaults["max_angle"].default,
+    )  # fmt: skip
 
 
 @pytest.mark.parametrize("uid", WHEEL)
