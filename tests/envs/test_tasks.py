@@ -9,7 +9,7 @@ import pytest
 import torch
 from conftest import DATA, REWARD_FALL_TOL
 
-from embodied_envs.envs.tasks import move, place, state
+from embodied_envs.envs.tasks import move, pick, place, state
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.task import Task, parse_task, resolve_task
 
@@ -267,8 +267,6 @@ def test_a_mover_let_go_just_above_its_pose_keeps_its_carry_credit():
 
 
 def test_pick_reward_is_its_maximum_at_success_and_eases_off_past_the_static_speed():
-    from embodied_envs.envs.tasks import pick
-
     def held(qvel, off=0.0):
         return task_state(goal=np.array([[off, 0.0, 0.04]]), grasped=np.array([[True]]),
                           tcp=np.array([[0.0, 0.0, 0.05]]),

@@ -150,8 +150,8 @@ def let_go(s: TaskState, result: dict):
     placing the next mover beside it does not pinch it."""
     xp, grasped = s.xp, s.grasped
     part = xp.maximum(s.opening[:, None] / OPEN_FRACTION, result["hand"] / HAND_AWAY)
-    free = result["released"] | (~grasped & grasped.any(1)[:, None])
-    return xp.where(free, 1.0, xp.where(grasped, 0.0, part.clip(max=1)))
+    free = result["released"] | grasped.any(1)[:, None]
+    return xp.where(grasped, 0.0, xp.where(free, 1.0, part.clip(max=1)))
 
 
 def staged_dense(s: TaskState, result: dict, max_reward: float):
@@ -173,10 +173,9 @@ def staged_dense(s: TaskState, result: dict, max_reward: float):
     pose, grasped = result["pose"], s.grasped
     placed = 4 + let_go(s, result) * (2 - SETTLE + SETTLE * settled(*result["speeds"]))
     active = grasped | result["near"]
-    dest = s.dest
-    carry = 1 - xp.tanh(5 * norm(s.movers[..., :2] - dest[..., :2]))
-    carried = 2 + carry + 1 - xp.tanh(5 * norm(s.movers - dest))
-    credit = xp.where(pose, placed, xp.where(active, carried, 0.0)).sum(1)
+    off = s.movers - s.dest
+    carried = 4 - xp.tanh(5 * norm(off[..., :2])) - xp.tanh(5 * norm(off))
+    credit = xp.where(pose, placed, carried * f(active)).sum(1)
     k = current(pose)
     reach = 1 - xp.tanh(5 * norm(s.tcp - take(s.movers, k)))
     credit = credit + reach * f(~take(pose | active, k))
