@@ -13,7 +13,7 @@ On every shipped layout, at every step of an expert episode and after a drop."""
 
 import numpy as np
 import torch
-from conftest import per_layout_env
+from conftest import REWARD_FALL_TOL, per_layout_env
 from mani_skill.envs.sapien_env import BaseEnv
 
 import embodied_envs  # noqa: F401
@@ -24,15 +24,18 @@ from embodied_envs.solvers import PickPlaceSolver
 env = per_layout_env(control_mode="pd_joint_pos")
 
 
-def expert_episode_then_drop(env, seed: int, evaluate) -> None:
+def expert_episode_then_drop(env, seed: int, evaluate, before_drop=None) -> None:
     """An expert episode, then 15 steps with the fingers open at the goal (the object falls),
-    with ``evaluate`` (which calls the env's own) in place of the env's ``evaluate()``."""
+    with ``evaluate`` (which calls the env's own) in place of the env's ``evaluate()``;
+    ``before_drop()`` is called between the two."""
     u = env.unwrapped
     own = u.evaluate
     u.evaluate = evaluate
     try:
         env.reset(seed=seed)
         PickPlaceSolver(env, seed=seed).solve()
+        if before_drop is not None:
+            before_drop()
         for _ in range(15):
             env.step(np.r_[u.agent.robot.get_qpos()[0, :7].cpu().numpy(), 1.0])
     finally:
@@ -67,12 +70,18 @@ def test_arrays_and_tensors_give_the_same_flags_and_rewards(env):
         seen.append([float(reward[0])] + [bool(info[k][0]) for k in ("success", "is_grasped")])
         return info
 
-    expert_episode_then_drop(env, 0, checked)
+    expert_end = []
+    expert_episode_then_drop(env, 0, checked, lambda: expert_end.append(len(seen)))
     reward, success, grasped = np.array(seen).T
     assert len(seen) > 60
     # every stage of the reward occurs: reaching only, grasped, success (its maximum)
     assert reward.min() < 1 and grasped.any() and (~grasped.astype(bool)).any()
-    assert success.any() and reward.max() == RULES[u.tasks[0].kind].MAX_REWARD
+    top = RULES[u.tasks[0].kind].MAX_REWARD
+    assert success.any() and reward.max() == top
+    # the normalised reward rises along the expert's episode: it ends at 1 and never falls by
+    # more than the tolerance between evaluations
+    expert = reward[: expert_end[0]] / top
+    assert expert[-1] == 1.0 and (-np.diff(expert)).max() <= REWARD_FALL_TOL
 
 
 def test_state_dict_is_maniskills_bit_for_bit(env):

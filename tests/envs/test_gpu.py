@@ -11,6 +11,7 @@ import torch
 from placement_checks import check_constraints, episode_layout
 
 import embodied_envs  # noqa: F401
+from embodied_envs.envs.tasks import pick
 
 pytestmark = [
     pytest.mark.cuda,
@@ -44,10 +45,12 @@ def test_each_env_grades_its_own_target(env):
         own = u.env_actors[f"env{k}"][u.layouts[k].target_node]
         assert torch.allclose(u.obj.pose.p[k], own.pose.p[0])
     _, reward, _, _, info = env.step(torch.zeros(env.action_space.shape, device=u.device))
-    # nothing grasped yet: the reward is the reaching term of each env's own object
+    # nothing grasped yet: the reward is the reaching term of each env's own object (the
+    # default reward mode is ManiSkill's normalized_dense: over pick's maximum)
     dist = torch.linalg.norm(u.obj.pose.p - u.agent.tcp_pose.p, dim=1)
     assert not info["is_grasped"].any()
-    torch.testing.assert_close(reward, 1 - torch.tanh(5 * dist), atol=1e-4, rtol=0)
+    reach = (1 - torch.tanh(5 * dist)) / pick.MAX_REWARD
+    torch.testing.assert_close(reward, reach, atol=1e-4, rtol=0)
 
 
 def test_partial_reset_leaves_other_envs_untouched(env):

@@ -7,9 +7,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import DATA
+from conftest import DATA, REWARD_FALL_TOL
 
-from embodied_envs.envs.tasks import move, place, state
+from embodied_envs.envs.tasks import move, pick, place, state
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.task import Task, parse_task, resolve_task
 
@@ -126,6 +126,13 @@ def task_state(**over):
     return state.TaskState(**base)
 
 
+def as_torch(s: state.TaskState) -> state.TaskState:
+    def to(v):
+        return tuple(torch.as_tensor(x) for x in v) if isinstance(v, tuple) else torch.as_tensor(v)
+
+    return state.TaskState(**{k: to(v) for k, v in vars(s).items()})
+
+
 @pytest.mark.parametrize(
     "case, over, success",
     [
@@ -150,9 +157,7 @@ def test_place_success_truth_table(case, over, success):
     s = task_state(**over)
     assert bool(place.evaluate(s)["success"][0]) is success, case
     # torch gives the same answer
-    t = state.TaskState(**{k: (tuple(torch.as_tensor(x) for x in v) if isinstance(v, tuple)
-                               else torch.as_tensor(v)) for k, v in vars(s).items()})  # fmt: skip
-    assert bool(place.evaluate(t)["success"][0]) is success, case
+    assert bool(place.evaluate(as_torch(s))["success"][0]) is success, case
 
 
 def test_on_needs_no_rim_and_the_table_is_a_receptacle():
@@ -180,16 +185,119 @@ def test_holding_the_mover_over_the_receptacle_scores_clearly_below_success():
                       tcp=np.array([[0.0, 0.0, 0.08]]))  # fmt: skip
     info = place.evaluate(held)
     assert not info["success"][0]
-    assert place.reward(held, info)[0] / place.MAX_REWARD <= 4 / 7 + 1e-6
+    assert place.reward(held, info)[0] / place.MAX_REWARD == pytest.approx(4 / 6)
     free = task_state()
     assert place.reward(free, place.evaluate(free))[0] == place.MAX_REWARD
 
 
+def reward_of(s):
+    return float(place.reward(s, place.evaluate(s))[0]) / place.MAX_REWARD
+
+
+def test_a_mover_twitching_just_over_the_rest_speeds_keeps_most_of_the_reward():
+    """Success needs the mover at rest; the reward's settle stage falls off smoothly past the
+    thresholds (0.01 m/s, 0.5 rad/s), so a twitch after the fingers open costs little and the
+    reward is the maximum only at success."""
+    twitch = task_state(lin_vel=np.array([[[0.0, 0.02, 0.0]]]))
+    assert not place.evaluate(twitch)["success"][0]
+    assert 1 - 0.01 < reward_of(twitch) < 1  # 0.5 / 6 of settle, 94 % of it kept
+    jolt = task_state(lin_vel=np.array([[[0.0, 0.08, 0.0]]]), ang_vel=np.array([[[1.2, 0, 0]]]))
+    assert 1 - 0.05 < reward_of(jolt) < reward_of(twitch)
+    falling = task_state(lin_vel=np.array([[[0.0, 0.0, -0.5]]]))
+    assert reward_of(falling) == pytest.approx(1 - 0.5 / 6, abs=0.005)  # no settle credit
+
+
+def two_movers(mover2, tcp, grasped=(False, False), opening=1.0, **over):
+    """Can 1 resting in its pose on the square receptacle (x = -0.04), can 2 at ``mover2``
+    (its destination: x = +0.05); ``tcp`` the hand."""
+    at = np.array([[[-0.04, 0.0, 0.07], mover2]])
+    bottom = at[..., 2] - 0.03
+    return task_state(
+        tcp=np.array([tcp]), opening=np.array([opening]), movers=at, origins=at - [0, 0, 0.03],
+        lin_vel=np.zeros((1, 2, 3)), ang_vel=np.zeros((1, 2, 3)), bottom=bottom,
+        grasped=np.array([grasped]), start=np.array([[[0.3, 0.0, 0.03], [0.3, 0.2, 0.03]]]),
+        dest=np.array([[[-0.04, 0.0, 0.07], [0.05, 0.0, 0.07]]]),
+        in_receptacle=at - [0, 0, 0.04], **over)  # fmt: skip
+
+
+def test_two_movers_the_first_keeps_its_credit_while_the_hand_works_on_the_second():
+    """place_two as the expert does it: can 1 placed and let go, the hand goes to can 2 on the
+    table, carries it, sets it down beside can 1 (within 10 cm of it, fingers half shut:
+    can 1 is not "released" by the success rule then), opens and withdraws. The reward never
+    falls (it fell by 0.21-0.43 where can 1's release flag dropped or success flickered)."""
+    table = [0.3, 0.2, 0.03]
+    steps = [
+        two_movers(table, [-0.04, 0.0, 0.10], opening=0.95),  # can 1 let go, hand above it
+        two_movers(table, [0.1, 0.1, 0.2]),  # on the way to can 2
+        two_movers(table, [0.3, 0.2, 0.05]),  # at can 2
+        two_movers(table, [0.3, 0.2, 0.05], (False, True), 0.7),  # grasped
+        two_movers([0.2, 0.1, 0.15], [0.2, 0.1, 0.15], (False, True), 0.7),  # carried
+        two_movers([0.05, 0.0, 0.09], [0.05, 0.0, 0.09], (False, True), 0.7),  # over its place
+        two_movers([0.05, 0.0, 0.07], [0.05, 0.0, 0.07], (False, True), 0.7),  # set down
+        two_movers([0.05, 0.0, 0.07], [0.05, 0.0, 0.07], opening=0.8),  # fingers opening
+        two_movers([0.05, 0.0, 0.07], [0.05, 0.0, 0.07], opening=0.95),  # open: success
+    ]
+    r = [reward_of(s) for s in steps]
+    assert np.all(np.diff(r) >= -1e-6), np.round(r, 3)
+    assert r[0] == pytest.approx(0.5, abs=0.02) and r[-1] == 1.0  # can 1's whole share first
+    assert not place.evaluate(steps[6])["success"][0] and place.evaluate(steps[-1])["success"][0]
+    # as the success rule reads it, can 1 is not released while the hand sets can 2 beside it
+    assert not place.evaluate(steps[6])["released"][0, 0]
+    # numpy and torch give the same rewards
+    for s in steps:
+        t = as_torch(s)
+        torch_reward = float(place.reward(t, place.evaluate(t))[0]) / place.MAX_REWARD
+        assert torch_reward == pytest.approx(reward_of(s), abs=1e-6)
+
+
+def test_a_mover_let_go_just_above_its_pose_keeps_its_carry_credit():
+    """Let go 2 cm over the receptacle's top, not yet resting on it: carried credit, not the
+    reach credit of a mover on the table (a 0.42 fall on place_bowl before)."""
+    gap = 0.02
+    up = np.array([0.0, 0.0, gap])
+    held = task_state(grasped=np.array([[True]]), opening=np.array([0.3]),
+                      tcp=np.array([[0.0, 0.0, 0.07]]) + up, movers=np.array([[[0, 0, 0.07]]]) + up,
+                      bottom=np.array([[0.04 + gap]]),
+                      in_receptacle=np.array([[[0.0, 0.0, 0.03]]]) + up)  # fmt: skip
+    falling = state.TaskState(**{**vars(held), "grasped": np.array([[False]]),
+                                 "opening": np.array([0.5])})  # fmt: skip
+    assert not place.in_pose(falling)[0][0, 0] and place.in_pose(falling)[1][0, 0]
+    assert reward_of(falling) == pytest.approx(reward_of(held))
+    assert reward_of(falling) > 3.8 / 6
+
+
+def test_pick_reward_is_its_maximum_at_success_and_eases_off_past_the_static_speed():
+    def held(qvel, off=0.0):
+        return task_state(goal=np.array([[off, 0.0, 0.04]]), grasped=np.array([[True]]),
+                          tcp=np.array([[0.0, 0.0, 0.05]]),
+                          arm_qvel=np.full((1, 7), qvel))  # fmt: skip
+
+    def r(s):
+        return float(pick.reward(s, pick.evaluate(s))[0]) / pick.MAX_REWARD
+
+    assert pick.evaluate(held(0.1))["success"][0] and r(held(0.1)) == 1.0
+    # 0.1 rad/s over the static speed: not success, 0.025 of the reward lost
+    assert not pick.evaluate(held(0.3))["success"][0]
+    assert r(held(0.3)) == pytest.approx(1 - 0.25 * (np.tanh(0.1 / pick.STATIC_SOFT)), abs=1e-6)
+    # 2 cm off the goal is placed; 3 cm is not, and costs only the 5 mm beyond the 2.5 cm
+    assert r(held(0.1, 0.02)) == 1.0 and r(held(0.1, 0.03)) > 0.95
+    assert r(task_state(grasped=np.array([[False]]))) < 0.25  # not grasped: reaching only
+
+
 # --- the expert in the env ----------------------------------------------------------------
 @pytest.mark.parametrize(
-    "name, seed", [("place_box", 0), ("place_bowl", 1), ("place_tray", 0), ("move_left", 2)]
+    "name, seed",
+    [("place_box", 0), ("place_bowl", 1), ("place_tray", 0), ("move_left", 2), ("place_two", 40)],
 )
 def test_the_expert_finishes_place_and_move_tasks_and_the_reward_rises(name, seed):
+    """Along an expert episode the normalised reward stays in [0, 1], never falls by more than
+    ``REWARD_FALL_TOL`` from one step to the next and ends at 1 with success.
+
+    place_two seed 40: two movers one after another (the second can was once swept against
+    the first on the tray; 34 of 50 seeds succeeded before the carry check, the carry over the
+    placed can, equal gaps and the turns); its reward fell by 0.21 when success flickered at
+    the end (tools/bench/bench_reward.py: by up to 0.43 over 10 seeds, also where can 1's release
+    flag dropped as the hand set can 2 beside it)."""
     from embodied_envs.solvers.pick_place import PickPlaceSolver
 
     env = gym.make("PickEmbodiedGen-v1", layout_file=DATA / "layouts" / f"{name}.json",
@@ -206,34 +314,22 @@ def test_the_expert_finishes_place_and_move_tasks_and_the_reward_rises(name, see
     env.step = recording
     try:
         env.reset(seed=seed)
-        kind = env.unwrapped.tasks[0].kind
-        assert kind == ("move" if name.startswith("move") else "place")
+        task = env.unwrapped.tasks[0]
+        assert task.kind == ("move" if name.startswith("move") else "place")
         result = PickPlaceSolver(env, seed=seed).solve()
-        assert result.success.all(), [r.plan_failures + r.misses for r in result.reports]
-    finally:
-        env.close()
-    r = np.array(rewards)
-    assert r.max() == pytest.approx(1.0) and r[0] < 0.4
-    # nearly monotone: the running best is never undercut by more than a tenth
-    assert (np.maximum.accumulate(r) - r).max() < 0.1 * 7 / 7 + 0.05
-
-
-def test_the_expert_puts_two_cans_on_the_tray_within_the_limit():
-    """place_two seed 40: two movers one after another (the second can was once swept against the
-    first on the tray; 34 of 50 seeds succeeded before the carry check, the carry over the
-    placed can, equal gaps and the turns)."""
-    from embodied_envs.solvers.pick_place import PickPlaceSolver
-
-    env = gym.make("PickEmbodiedGen-v1", layout_file=DATA / "layouts" / "place_two.json",
-                   obs_mode="state", control_mode="pd_joint_pos")  # fmt: skip
-    try:
-        env.reset(seed=40)
-        assert env.unwrapped.tasks[0].objects == ("can1", "can2")
-        result = PickPlaceSolver(env, seed=40).solve()
         assert result.success.all(), [r.plan_failures + r.misses for r in result.reports]
         assert result.steps <= gym.spec("PickEmbodiedGen-v1").max_episode_steps
     finally:
         env.close()
+    if name == "place_two":
+        assert task.objects == ("can1", "can2")
+    r = np.array(rewards)
+    assert r.min() >= 0 and r.max() == 1.0 and r[-1] == 1.0 and r[0] < 0.1
+    falls = -np.diff(r)
+    at = falls.argmax()
+    assert falls.max() <= REWARD_FALL_TOL, (at, r[at - 2 : at + 3])
+    # it rises: the running best is never undercut by more than the tolerance either
+    assert (np.maximum.accumulate(r) - r).max() <= REWARD_FALL_TOL
 
 
 def test_a_carry_that_brings_the_held_object_to_an_obstacle_is_refused():

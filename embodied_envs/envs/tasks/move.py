@@ -4,8 +4,9 @@
 **Success**, for every mover: its displacement in the table's plane at least ``MIN_SHIFT``
 along the direction and within ``MAX_ANGLE_DEG`` of it; on the table (its lowest point within
 ``place.TOUCH`` of the top); released and at rest (``state``). **Reward**:
-``state.staged_reward`` towards ``layout.task.MOVE_SHIFT`` along the direction; ``MAX_REWARD``
-on success.
+``state.staged_dense`` towards ``layout.task.MOVE_SHIFT`` along the direction; ``MAX_REWARD``
+at success only (a mover let go shifted far enough, lowest point within ``state.DROP_GAP`` of
+the table, keeps its carry credit while it falls).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import math
 
 from embodied_envs.envs.tasks.place import TOUCH
 from embodied_envs.envs.tasks.state import (
+    DROP_GAP,
     STAGES,
     TaskState,
     norm,
@@ -23,19 +25,21 @@ from embodied_envs.envs.tasks.state import (
 
 MIN_SHIFT = 0.10  # m along the direction
 MAX_ANGLE_DEG = 45.0  # the displacement within this of the direction
-MAX_REWARD = STAGES + 1
+MAX_REWARD = STAGES  # the dense reward on success (its staged reward's maximum)
 
 
 def in_pose(s: TaskState):
-    """``(n, m)``: each mover shifted far enough along the direction, on the table."""
+    """``(n, m)`` each: each mover shifted far enough along the direction, on the table; near
+    it (shifted, lowest point within ``DROP_GAP`` of the table)."""
     d = s.movers[..., :2] - s.start[..., :2]
     along = (d * s.direction[:, None, :]).sum(-1)
-    aligned = along >= math.cos(math.radians(MAX_ANGLE_DEG)) * norm(d)
-    return (along >= MIN_SHIFT) & aligned & (s.bottom <= s.table_z[:, None] + TOUCH)
+    shifted = (along >= MIN_SHIFT) & (along >= math.cos(math.radians(MAX_ANGLE_DEG)) * norm(d))
+    height = s.bottom - s.table_z[:, None]
+    return shifted & (height <= TOUCH), shifted & (height <= DROP_GAP)
 
 
 def evaluate(s: TaskState) -> dict:
-    return staged_evaluate(s, in_pose(s))
+    return staged_evaluate(s, *in_pose(s))
 
 
 def reward(s: TaskState, info: dict):

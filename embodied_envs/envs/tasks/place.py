@@ -10,12 +10,15 @@ grasped; fingers open or the hand away, ``state.released``) and in its pose:
 - the table: its lowest point within ``TOUCH`` of the top.
 
 Held above the receptacle, dropped and still bouncing, next to it on the table, leaning on
-its side: not success. **Reward**: ``state.staged_reward``; ``MAX_REWARD`` on success.
+its side: not success. **Reward**: ``state.staged_dense``, ``MAX_REWARD`` at success only; a
+mover let go over the footprint with its lowest point within ``state.DROP_GAP`` of the
+receptacle's top (or the table's) keeps its carry credit while it falls into its pose.
 """
 
 from __future__ import annotations
 
 from embodied_envs.envs.tasks.state import (
+    DROP_GAP,
     OFF_TABLE,
     STAGES,
     TaskState,
@@ -24,11 +27,12 @@ from embodied_envs.envs.tasks.state import (
 )
 
 TOUCH = 0.01  # m: a lowest point this close above a support surface touches it
-MAX_REWARD = STAGES + 1  # the dense reward on success
+MAX_REWARD = STAGES  # the dense reward on success (its staged reward's maximum)
 
 
 def in_pose(s: TaskState):
-    """``(n, m)``: each mover rests where the task wants it (released or not)."""
+    """``(n, m)`` each: each mover rests where the task wants it (released or not); near it
+    (over the footprint, lowest point within ``DROP_GAP`` of the surface there)."""
     normals, offsets = s.footprint
     xy = s.in_receptacle[..., :2]
     over = ((xy[:, :, None, :] * normals[:, None]).sum(-1) >= offsets[:, None] - 1e-9).all(-1)
@@ -36,11 +40,13 @@ def in_pose(s: TaskState):
     on_object = (s.bottom >= table_z + OFF_TABLE) & (s.bottom <= rec_top + TOUCH)
     on_object &= ~s.is_in[:, None] | (s.in_receptacle[..., 2] < s.rim[:, None])
     on_table = s.bottom <= table_z + TOUCH
-    return over & s.xp.where(s.rec_is_table[:, None], on_table, on_object)
+    pose = over & s.xp.where(s.rec_is_table[:, None], on_table, on_object)
+    top = s.xp.where(s.rec_is_table[:, None], table_z, rec_top)
+    return pose, over & (s.bottom <= top + DROP_GAP)
 
 
 def evaluate(s: TaskState) -> dict:
-    return staged_evaluate(s, in_pose(s))
+    return staged_evaluate(s, *in_pose(s))
 
 
 def reward(s: TaskState, info: dict):

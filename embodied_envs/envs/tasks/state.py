@@ -16,6 +16,10 @@ REST_ANG = 0.5  # rad/s: and turning slower (likewise)
 OPEN_FRACTION = 0.9  # fingers opened this part of their span are open
 HAND_AWAY = 0.10  # m: or the TCP this far from the mover's centre
 OFF_TABLE = 0.003  # m: a mover's lowest point this far above the table's top does not touch it
+DROP_GAP = 0.03  # m: a mover let go with its lowest point this close over its pose falls into it
+REST_LIN_SOFT = 0.15  # m/s over REST_LIN: the settle credit falls to 0.24 (1 - tanh 1)
+REST_ANG_SOFT = 5.0  # rad/s over REST_ANG: likewise
+SETTLE = 0.5  # the settle stage's weight (StackCube's static term is half a stage too)
 
 
 @dataclass(frozen=True)
@@ -83,15 +87,11 @@ def robot_static(s: TaskState):
     return (s.xp.abs(s.arm_qvel) <= STATIC_ARM).all(-1)
 
 
-def at_rest(s: TaskState):
-    """``(n, m)``: each mover moves and turns slower than ``REST_LIN`` and ``REST_ANG``."""
-    return (norm(s.lin_vel) <= REST_LIN) & (norm(s.ang_vel) <= REST_ANG)
-
-
-def released(s: TaskState):
-    """``(n, m)``: not grasped, and the fingers open or the hand away from the mover."""
-    away = norm(s.movers - s.tcp[:, None, :]) >= HAND_AWAY
-    return ~s.grasped & ((s.opening >= OPEN_FRACTION)[:, None] | away)
+def released(s: TaskState, hand=None):
+    """``(n, m)``: not grasped, and the fingers open or the hand away from the mover (``hand``:
+    the TCP's distance to each mover's centre where the caller has it)."""
+    hand = norm(s.movers - s.tcp[:, None, :]) if hand is None else hand
+    return ~s.grasped & ((s.opening >= OPEN_FRACTION)[:, None] | (hand >= HAND_AWAY))
 
 
 def as_float(x):
@@ -113,11 +113,14 @@ def take(x, k):
     return x[rows, k]
 
 
-def staged_evaluate(s: TaskState, pose) -> dict:
+def staged_evaluate(s: TaskState, pose, near) -> dict:
     """``place`` and ``move``: success when every mover is in its pose (``pose (n, m)``, the
-    kind's own rule), released and at rest; the flags of the current mover."""
-    free = released(s)
-    done = pose & free & at_rest(s)
+    kind's own rule), released and at rest; the flags of the current mover. ``near (n, m)``:
+    the kind's looser pose a mover let go there falls into (for the reward)."""
+    hand = norm(s.movers - s.tcp[:, None, :])
+    free = released(s, hand)
+    lin, ang = norm(s.lin_vel), norm(s.ang_vel)
+    done = pose & free & (lin <= REST_LIN) & (ang <= REST_ANG)  # at_rest, speeds kept
     k = current(done)
     return {
         "success": done.all(1),
@@ -125,42 +128,58 @@ def staged_evaluate(s: TaskState, pose) -> dict:
         "is_obj_placed": pose.all(1),
         "is_robot_static": robot_static(s),
         "obj_to_goal_pos": take(s.dest, k) - take(s.movers, k),
-        "done": done,  # (n, m), the poses and releases: for the reward, not in info
-        "pose": pose,
-        "released": free,
-    }
+        # (n, m) each, for the reward, not in info
+        "done": done, "pose": pose, "near": near, "released": free, "hand": hand,
+        "speeds": (lin, ang),
+    }  # fmt: skip
+
+
+def settled(lin, ang):
+    """``(n, m)`` in [0, 1]: 1 at rest (``REST_LIN``, ``REST_ANG``), falling off smoothly with
+    the speeds above them (``REST_LIN_SOFT``, ``REST_ANG_SOFT``): a mover that twitches just
+    over the thresholds keeps most of its credit, one falling or sliding keeps none."""
+    over = (lin - REST_LIN).clip(min=0) / REST_LIN_SOFT
+    return 1 - array_module(lin).tanh(over + (ang - REST_ANG).clip(min=0) / REST_ANG_SOFT)
+
+
+def let_go(s: TaskState, result: dict):
+    """``(n, m)`` in [0, 1]: 1 released (``result["released"]``), 0 grasped; between, the
+    fingers' opening towards ``OPEN_FRACTION`` or the hand's distance towards ``HAND_AWAY``,
+    whichever is nearer (fingers opening after a release, a hand near a mover placed before).
+    A mover not grasped while the hand holds another one counts as released: the hand
+    placing the next mover beside it does not pinch it."""
+    xp, grasped = s.xp, s.grasped
+    part = xp.maximum(s.opening[:, None] / OPEN_FRACTION, result["hand"] / HAND_AWAY)
+    free = result["released"] | grasped.any(1)[:, None]
+    return xp.where(grasped, 0.0, xp.where(free, 1.0, part.clip(max=1)))
 
 
 def staged_dense(s: TaskState, result: dict, max_reward: float):
-    """``place`` and ``move``: :func:`staged_reward` of ``staged_evaluate``'s ``result``;
-    ``max_reward`` on success."""
-    done = result["done"]
-    k = current(done)
-    staged = staged_reward(s, k, take(result["pose"], k), done.sum(1), done.shape[1],
-                           take(result["released"], k))  # fmt: skip
-    return s.xp.where(result["success"], max_reward, staged)
+    """The staged reward of ``place`` and ``move`` (``result``: ``staged_evaluate``'s), per
+    env, in [0, ``STAGES``]: the mean over movers of each one's credit, in [0, ``STAGES``]:
 
+    - in its pose: 4, + let go (:func:`let_go`) times (``2 - SETTLE`` + ``SETTLE`` settled
+      (:func:`settled`)): release and settle share two stages, the settle credit's jolts when
+      the fingers clear the mover weighing little;
+    - grasped, or let go where it falls into its pose (``near``): 2 + carried over its
+      destination ``1 - tanh(5 |xy - dest xy|)`` + brought to it ``1 - tanh(5 |p - dest|)``;
+    - otherwise 0, but the current mover (the first not in its pose) adds reaching
+      ``1 - tanh(5 |tcp - p|)``.
 
-def staged_reward(s: TaskState, k, in_pose, done_before, count: int, free=None):
-    """The staged reward of ``place`` and ``move``, per env, in [0, ``STAGES``]: for the
-    current mover ``k`` (``(n,)``), reach (1) and grasp (1); while grasped, carry over the
-    destination (1) and lower to it (1) (kept when let go within 2 cm of it); in its pose
-    (``in_pose (n,)``), released (1) and the arm still (1); then (``done_before``: movers
-    already done, ``(n,)``) each finished mover adds a whole share: ``(done_before + stage /
-    STAGES) * STAGES / count``. ``free``: the current mover's :func:`released` when the caller
-    has it."""
+    A finished mover keeps its whole credit while the hand works on the next one, so the
+    reward does not fall between movers; it is ``STAGES`` exactly when every mover is in its
+    pose, released and at rest, which is success (``max_reward``, equal to it)."""
     xp, f = s.xp, as_float
-    p, dest = take(s.movers, k), take(s.dest, k)
-    grasped = f(take(s.grasped, k))
-    free = f(take(released(s), k) if free is None else free)
-    reach = 1 - xp.tanh(5 * norm(s.tcp - p))
-    carry = 1 - xp.tanh(5 * norm(p[:, :2] - dest[:, :2]))
-    lower = (1 - xp.tanh(5 * xp.abs(p[:, 2] - dest[:, 2]))) * (carry > 0.9)
-    still = 1 - xp.tanh(5 * norm(s.arm_qvel))
-    # held, or just let go over its destination (falling the release gap): carried and lowered
-    stage = xp.where((grasped > 0) | (lower > 0.9), 2 + carry + lower, reach + grasped)
-    stage = xp.where(in_pose, 4 + free + free * still, stage)
-    return (done_before + stage / STAGES) * STAGES / count
+    pose, grasped = result["pose"], s.grasped
+    placed = 4 + let_go(s, result) * (2 - SETTLE + SETTLE * settled(*result["speeds"]))
+    active = grasped | result["near"]
+    off = s.movers - s.dest
+    carried = 4 - xp.tanh(5 * norm(off[..., :2])) - xp.tanh(5 * norm(off))
+    credit = xp.where(pose, placed, carried * f(active)).sum(1)
+    k = current(pose)
+    reach = 1 - xp.tanh(5 * norm(s.tcp - take(s.movers, k)))
+    credit = credit + reach * f(~take(pose | active, k))
+    return xp.where(result["success"], max_reward, credit / pose.shape[1])
 
 
-STAGES = 6.0  # staged_reward's stages: reach, grasp, carry, lower, release, still
+STAGES = 6.0  # a mover's credit in staged_dense: reach, grasp, carry, lower, release, settle
