@@ -78,6 +78,57 @@ FETCH_GRASP = FingerGrasp(opening=(-1.0, 1.0))  # Fetch.is_grasping: its left fi
 
 
 @dataclass(frozen=True)
+class Hand:
+    """What the scripted expert (``solvers/``) needs of a robot's hand. The expert describes a
+    grasp in one frame for every robot, ManiSkill's Panda ``panda_hand_tcp``'s: origin between
+    the open jaws' tips, z the approach, y the closing direction.
+
+    ``link``: the link the expert plans for (mplib's move group); ``grasp_in_link``: the grasp
+    frame's pose in that link's frame (xyz, quaternion wxyz). ``boxes``: the open hand as
+    boxes in the grasp frame (``solvers.gripper.GripperModel``'s fields: the jaws' opening,
+    width, thickness, how far their tips reach past the origin, their length, the palm's x-y
+    size and z extent). ``grasp_depth``: the grasp centre this far below an object's top
+    (the jaws' usable length); ``approach_offset``: the pre-grasp this far back from the grasp
+    along the approach. ``joint_vel``, ``joint_acc``: per arm joint, the fastest the
+    expert plans (rad/s, rad/s^2). ``action_open``, ``action_closed``: the gripper's
+    ``pd_joint_pos`` action open and shut; ``action_openings``: jaw gaps (m) and the actions
+    that hold them, between which an opening is interpolated. ``tilt_tolerance``: see the
+    field."""
+
+    link: str
+    grasp_in_link: tuple[float, ...]
+    boxes: tuple[tuple[str, object], ...]
+    grasp_depth: float
+    approach_offset: float
+    joint_vel: tuple[float, ...]
+    joint_acc: tuple[float, ...]
+    action_open: float
+    action_closed: float
+    action_openings: tuple[tuple[float, float], ...]  # (jaw gap m, action), gaps ascending
+    max_path_steps: int = 180  # control steps: a longer plan is refused (a wrist flip, a
+    # detour; the SO-100's joints follow at 0.4 rad/s, the Panda's at 0.8)
+    tilt_tolerance: float = 0.0  # rad, how far a pose's orientation may stay off in the IK
+    # (an arm of fewer than six joints, solvers/motion.py)
+    planar: bool = False  # the hand approaches only within the arm's vertical plane (five
+    # joints: base turn, three pitches, wrist roll): its grasps are aimed so
+    # a jaw that the arm's PD gains drive closes gently (solvers/, PickPlaceSolver._close_gently):
+    close_gap: float = 0.0  # m: first at once to the object's width plus this (0: shut at once)
+    close_step: float = 0.0  # then its target leads the jaw by this (action) until it grasps
+    squeeze: float = 0.0  # and stays this far (action) past where the jaw stands
+
+    def action(self, opening: float) -> float:
+        """The ``pd_joint_pos`` gripper action that opens the jaws ``opening`` m apart
+        (``action_openings`` interpolated, clipped to its ends)."""
+        table = self.action_openings
+        if opening <= table[0][0]:
+            return table[0][1]
+        for (g0, a0), (g1, a1) in zip(table, table[1:], strict=False):
+            if opening <= g1:
+                return a0 + (opening - g0) / (g1 - g0) * (a1 - a0)
+        return table[-1][1]
+
+
+@dataclass(frozen=True)
 class Robot:
     """One supported robot; see the module's docstring for the base placement."""
 
@@ -103,7 +154,13 @@ class Robot:
     # simulation every step without the agent's property (0.3 ms there; None: the property)
     tcp_tips: tuple[str, str] | None = None
     in_wheel: bool = True  # False: its model is a separate ManiSkill download
-    expert: bool = False  # the scripted expert (solvers/) drives it
+    hand: Hand | None = None  # what the scripted expert (solvers/) needs; None: it does not
+    # drive this robot
+
+    @property
+    def expert(self) -> bool:
+        """Whether the scripted expert drives this robot."""
+        return self.hand is not None
 
     def base_poses(self, spots, floor_z: float):
         """Base raw poses ``(n, 7)`` (xyz, quaternion wxyz, as ManiSkill's) from the layout
@@ -139,6 +196,39 @@ PANDA_REST = (0.0, math.pi / 8, 0.0, -3 * math.pi / 8, 0.0, 3 * math.pi / 4, mat
 # the Panda's gripper: pd_joint_pos on both fingers (mimic), actions [-1, 1] -> [-0.01, 0.04] m
 PANDA_GRIPPER = Gripper(joints=2, open_qpos=0.04, closed_qpos=0.0, max_opening=0.08,
                         action_index=7, action_kind="absolute")  # fmt: skip
+# the Panda's hand as the expert knows it: the grasp frame is panda_hand_tcp; its boxes are the
+# bounding boxes of ManiSkill's finger and hand collision meshes (solvers/gripper.py's defaults);
+# speeds within Franka's datasheet (velocity 2.175 rad/s for joints 1-4, 2.61 for 5-7;
+# acceleration 15, 7.5, 10, 12.5, 15, 20, 20); pd_joint_pos maps the gripper's action [-1, 1] to
+# each finger at [-0.01, 0.04] m
+PANDA_HAND = Hand(
+    link="panda_hand_tcp", grasp_in_link=(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0), boxes=(),
+    grasp_depth=0.035, approach_offset=0.08, joint_vel=(2.0, 2.0, 2.0, 2.0, 2.5, 2.5, 2.5),
+    joint_acc=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0), action_open=1.0, action_closed=-1.0,
+    action_openings=((-0.02, -1.0), (0.08, 1.0)),
+)  # fmt: skip
+# the SO-100's hand (its jaw's sections measured in ManiSkill 3.0.1's collision meshes, jaw at
+# 0 rad): the grasp frame's origin midway between the jaws' tip links, z along -y of Fixed_Jaw,
+# y along its x. The fixed jaw's inner face stands 0.040 m from the origin over z -0.045..0.015;
+# the moving jaw is slanted (its inner face 0.037 m from the origin at z -0.01, 0.029 at -0.02,
+# 0.018 at -0.03) and its tip ends at z -0.003, so the jaws are modelled 0.06 m apart down to
+# z -0.025, the palm behind that (0.02 m across: the jaws' roots; the jaw's motor, 0.048 m
+# across, is 0.045 m back): objects are taken 0.02 m below their top (the moving jaw's tip
+# then overlaps their side by 0.017 m; at 0.012 it rode on a block's edge), from 0.04 m back.
+# Its pd_joint_pos drives the jaw's angle: 0 open, -1.1 shut, with the arm's gains (stiffness
+# 1e3, 100 N m), so it closes gently
+SO100_HAND = Hand(
+    link="Fixed_Jaw", grasp_in_link=(-0.0306, -0.0873, 0.0, 0.5, 0.5, 0.5, -0.5),
+    boxes=(("opening", 0.06), ("finger_width", 0.02), ("finger_thickness", 0.015),
+           ("finger_tip", 0.012), ("finger_length", 0.037), ("palm_size", (0.02, 0.132)),
+           ("palm_z", (-0.12, -0.025))),
+    grasp_depth=0.02, approach_offset=0.04, joint_vel=(1.5,) * 5, joint_acc=(8.0,) * 5,
+    action_open=0.0, action_closed=-1.1, tilt_tolerance=0.1, planar=True,
+    action_openings=((0.005, -1.1), (0.0121, -1.0), (0.0187, -0.9), (0.0251, -0.8),
+                     (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
+                     (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
+    close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300,
+)  # fmt: skip
 # reach from 0.30 m: the expert's top-down grasps nearer the base need the shoulder bent back
 # (place_two, 50 seeds: 4 failures, movers 0.23-0.25 m away, when the band began at 0.20; 1 at 0.30)
 PANDA = Robot(
@@ -146,7 +236,7 @@ PANDA = Robot(
     noise_joints=tuple(range(7)), reach=(0.30, 0.78), goal_inset=0.10, goal_height=(0.05, 0.25),
     gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
     camera_mount="panda_link0", camera_eye=(0.95, 0.0, 0.55), camera_target=(0.30, 0.0, 0.0),
-    expert=True,
+    hand=PANDA_HAND,
 )  # fmt: skip
 ROBOTS: dict[str, Robot] = {
     r.uid: r
@@ -157,7 +247,7 @@ ROBOTS: dict[str, Robot] = {
             reach=PANDA.reach, goal_inset=PANDA.goal_inset, goal_height=PANDA.goal_height,
             gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
             camera_mount="panda_link0", camera_eye=PANDA.camera_eye,
-            camera_target=PANDA.camera_target, expert=True,
+            camera_target=PANDA.camera_target, hand=PANDA_HAND,
         ),
         # ManiSkill's table scene: base at the table's edge turned +90 deg, these joints;
         # its so100 motion planner opens the jaw at 0 rad (0.084 m between the tips) and
@@ -165,13 +255,14 @@ ROBOTS: dict[str, Robot] = {
         Robot(
             uid="so100", names=("so_100", "so-100"),
             rest_qpos=(0.0, 0.0, 0.0, math.pi / 2, math.pi / 2, 0.0),
-            noise_joints=tuple(range(5)), reach=(0.10, 0.36), goal_inset=0.05,
-            goal_height=(0.05, 0.15),
+            noise_joints=tuple(range(5)), reach=(0.12, 0.30), goal_inset=0.05,
+            goal_height=(0.04, 0.10),  # the expert reaches these holding a block
             gripper=Gripper(joints=1, open_qpos=0.0, closed_qpos=-1.1, max_opening=0.084,
                             action_index=5, action_kind="delta"),
             tcp_link=None, grasp_check=JAW_GRASP, camera_mount="Base",
             camera_eye=(0.55, 0.0, 0.40), camera_target=(0.18, 0.0, 0.0), base_yaw=math.pi / 2,
             tcp_tips=("Fixed_Jaw_tip", "Moving_Jaw_tip"),
+            hand=SO100_HAND,
         ),
         # Koch v1.1: ManiSkill's rest keyframe (turned +90 deg), jaw opened to its limit
         # (1.6 rad: 0.078 m between gripper_tcp and gripper_tcp2; 0 rad: shut)

@@ -13,7 +13,11 @@ DATA = ROOT / "embodied_envs" / "data"  # the shipped data (./layouts and ./asse
 # the shipped pick layouts: the per-layout tests written for the pick task run on these; the
 # place and move layouts are tested in tests/envs/test_tasks.py
 TASK_LAYOUTS = ("place_box", "place_bowl", "place_tray", "place_two", "move_left")
-LAYOUTS = sorted(p for p in (DATA / "layouts").glob("*.json") if p.stem not in TASK_LAYOUTS)
+# the layouts of other robots than the Panda: tested with their robot (tests/solvers/test_hands.py)
+ROBOT_LAYOUTS = ("so100_block",)
+LAYOUTS = sorted(
+    p for p in (DATA / "layouts").glob("*.json") if p.stem not in TASK_LAYOUTS + ROBOT_LAYOUTS
+)
 DEFAULT_LAYOUT = DATA / "layouts" / "default.json"
 # the normalised dense reward's largest fall between two steps of an expert episode: below a
 # whole stage's weight (1/4 of pick's reward; 1/6 of a mover's share: 1/12 with two movers), so

@@ -3,7 +3,8 @@
 ``ArmDriver`` is the machinery under :class:`~embodied_envs.solvers.pick_place.PickPlaceSolver`:
 plan a move for each env that needs one (seeded planners, ``solvers/motion.py``), execute the
 joint paths together with the per-step bounds of ``solvers/follow.py``, and choose among options
-(grasps, turns) by the steps they cost. The gripper's action values are defined here.
+(grasps, turns) by the steps they cost. The gripper's action values are the robot's hand entry's
+(``robots.py``).
 """
 
 from __future__ import annotations
@@ -12,19 +13,8 @@ import numpy as np
 import sapien
 import torch
 
-from embodied_envs.solvers.follow import rate_limited, shortened
+from embodied_envs.solvers.follow import arm_config, rate_limited, shortened
 from embodied_envs.solvers.motion import STRAIGHT_BLOCKED
-
-GRIPPER_OPEN = 1.0  # pd_joint_pos gripper action for open fingers
-GRIPPER_CLOSED = -1.0  # and for closed fingers
-# the Panda's pd_joint_pos gripper maps actions [-1, 1] to finger positions [-0.01, 0.04] m
-FINGER_RANGE = (-0.01, 0.04)
-
-
-def gripper_action(opening: float) -> float:
-    """The gripper action that opens the fingers ``opening`` m apart."""
-    lo, hi = FINGER_RANGE
-    return float(np.clip(2 * (opening / 2 - lo) / (hi - lo) - 1, -1.0, 1.0))
 
 
 class ArmDriver:
@@ -35,8 +25,9 @@ class ArmDriver:
         self, i, pose: sapien.Pose, qpos: np.ndarray, how: str, obstacles: bool,
         key: tuple = (), within: int | None = None, detour: bool = True,
     ):  # fmt: skip
-        """A joint path to ``pose`` for env i by ``how`` ("screw": mplib's straight screw
-        motion; "rrt": the seeded planner), and a status ("" on success).
+        """A joint path that brings the grasp frame to ``pose`` for env i by ``how``
+        ("screw": mplib's straight screw motion; "rrt": the seeded planner), and a status (""
+        on success).
 
         ``obstacles=False`` is for the short straight moves next to the support surface (the
         final descent from the pre-grasp and the lift), which the surface's cloud would block.
@@ -46,7 +37,8 @@ class ArmDriver:
         ``detour=False`` ("rrt" only): the straight joint line or nothing (status
         ``STRAIGHT_BLOCKED``).
         """
-        target = np.concatenate([pose.p, pose.q])
+        link = pose * self.link_in_grasp  # the planned link's pose
+        target = np.concatenate([link.p, link.q])
         dt = self.base.control_timestep
         if how == "screw":
             res = self.planners[i].plan_screw(
@@ -71,16 +63,17 @@ class ArmDriver:
         for t in range(n):
             if self.ended:  # no step past the end of the episode
                 return
-            action = np.zeros((self.num_envs, 8), np.float32)
+            n = self.arm_dof
+            action = np.zeros((self.num_envs, n + 1), np.float32)
             for i, path in enumerate(paths):
                 if path is not None:
-                    action[i, :7] = path[min(t, len(path) - 1)]
+                    action[i, :n] = path[min(t, len(path) - 1)]
                 else:  # holds its last targets
-                    action[i, :7] = self.command[i]
-                action[i, 7] = self.gripper[i]
+                    action[i, :n] = self.command[i]
+                action[i, n] = self.gripper[i]
             if self.cfg.convertible:
-                action[:, :7] = self._bounded(action[:, :7])
-            self.command = action[:, :7].astype(np.float64)
+                action[:, :n] = self._bounded(action[:, :n])
+            self.command = action[:, :n].astype(np.float64)
             self._step(action)
             if until is not None and until():
                 return
@@ -89,23 +82,26 @@ class ArmDriver:
         """Env i's arm joint targets that follow ``path`` (a waypoint per control step).
 
         ``pd_joint_pos`` drives each joint with ``stiffness * (target - q) - damping * qvel``,
-        so a joint lags a moving target by ``damping / stiffness`` (0.1 s for the Panda, 5
-        control steps) times its velocity: each target leads its waypoint by that much of the
-        path's velocity, within the joint limits; the last target is the path's end. On a
-        0.5 rad line at the solver's limits the arm stays within 0.022 rad of the path at
-        every step instead of 0.16 (``test_joint_targets_lead_the_path...``).
+        so a joint lags a moving target by ``damping / stiffness`` (0.1 s for the Panda and the
+        SO-100, 5 control steps) times its velocity: each target leads its waypoint by that
+        much of the path's velocity, within the joint limits; the last target is the path's
+        end. On a 0.5 rad line at the solver's limits the arm stays within 0.022 rad of the
+        path at every step instead of 0.16 (``test_joint_targets_lead_the_path...``).
         With ``convertible``, the targets move from the last ones at most ``follow.step`` a
         step (``follow.rate_limited``; the path's speed is within ``follow.speed``).
         """
-        q = np.asarray(path, dtype=np.float64)[:, :7]
+        n = self.arm_dof
+        q = np.asarray(path, dtype=np.float64)[:, :n]
         lead = q.copy()
         if len(q) >= 3:
-            arm = self.base.agent.controller.controllers["arm"].config
+            arm = arm_config(self.base.agent._controller_configs, "pd_joint_pos", n)
+            lag = np.asarray(arm.damping, np.float64) / np.asarray(arm.stiffness, np.float64)
+            lag = np.broadcast_to(lag, (len(arm.joint_names),))[:n]
             dt = self.base.control_timestep
-            lead = q + arm.damping / arm.stiffness * np.gradient(q, dt, axis=0)
+            lead = q + lag * np.gradient(q, dt, axis=0)
             lead[-1] = q[-1]  # the path ends at rest there
             space = self.base.single_action_space
-            lead = np.clip(lead, space.low[:7], space.high[:7])
+            lead = np.clip(lead, space.low[:n], space.high[:n])
         if not self.cfg.convertible:
             return lead
         return rate_limited(lead, self.command[i], self.follow.step)
@@ -115,7 +111,7 @@ class ArmDriver:
         and leading the measured joints by at most ``follow.lead`` (a joint lagging its target
         more than planned, e.g. the lag building up as it starts, slows the targets down)."""
         arm = self.command + shortened(arm - self.command, self.follow.step)
-        q = self._qpos()[:, :7]
+        q = self._qpos()[:, : self.arm_dof]
         return q + shortened(arm - q, self.follow.lead)
 
     def _step(self, action: np.ndarray) -> None:
@@ -185,16 +181,17 @@ class ArmDriver:
             paths.append(None if best is None else best[1])
             chosen.append(None if best is None else best[2])
         # settle: steps holding the last waypoints, until the arms are there
-        ends = qpos[:, :7].copy()
+        n = self.arm_dof
+        ends = qpos[:, :n].copy()
         for i, path in enumerate(paths):
             if path is not None:
-                ends[i] = path[-1][:7]
+                ends[i] = path[-1][:n]
         start, moving = self.steps, max((len(p) for p in paths if p is not None), default=0)
 
         def arrived() -> bool:
             if self.steps < start + moving:
                 return False
-            return np.abs(self._qpos()[:, :7] - ends).max() < self.cfg.settle_tolerance
+            return np.abs(self._qpos()[:, :n] - ends).max() < self.cfg.settle_tolerance
 
         self._execute(paths, extra_steps=settle, until=arrived if settle else None)
         return chosen
@@ -240,7 +237,7 @@ class ArmDriver:
                     if best is not None and (cost, k) > (best[0], best[3]):
                         continue  # what follows only adds steps
                     if then is not None:
-                        end = np.concatenate([path[-1][:7], qpos[7:]])
+                        end = np.concatenate([path[-1][: self.arm_dof], qpos[self.arm_dof :]])
                         more = then(i, k, end)
                         cost += self.cfg.max_path_steps if more is None else more
                     if best is None or (cost, k) < (best[0], best[3]):

@@ -44,28 +44,44 @@ class FollowLimits:
     speed: np.ndarray  # rad/s, the joint speed plans are timed at (at most)
 
 
-def _bound(config, dof: int) -> np.ndarray:
-    """The smaller of ``|lower|`` and ``upper`` of a normalised joint controller, per joint."""
-    lo = np.abs(np.broadcast_to(np.asarray(config.lower, dtype=np.float64), (dof,)))
-    hi = np.broadcast_to(np.asarray(config.upper, dtype=np.float64), (dof,))
-    return np.minimum(lo, hi)
+def arm_config(configs: dict, mode: str, arm_dof: int):
+    """The controller config of ``mode`` that drives the arm's ``arm_dof`` joints (its
+    ``"arm"`` entry, or the one config that drives every joint, as the SO-100's and Koch's do),
+    or None when the robot has no such mode."""
+    config = configs.get(mode)
+    if isinstance(config, dict):
+        config = config.get("arm")
+    if config is None or len(config.joint_names) < arm_dof:
+        return None
+    return config
 
 
-def follow_limits(agent, control_freq: float, margin: float = MARGIN) -> FollowLimits:
-    """The limits for ``agent``'s arm (a ManiSkill agent whose controller configs name an
-    ``arm`` in ``pd_joint_pos``, ``pd_joint_delta_pos`` and ``pd_joint_vel``)."""
+def _per_joint(values, dof: int) -> np.ndarray:
+    """A config's number or per-joint list (over all its joints) for the first ``dof``."""
+    values = np.asarray(values, dtype=np.float64)
+    return np.broadcast_to(values, (dof,)) if values.ndim == 0 else values[:dof]
+
+
+def follow_limits(agent, control_freq: float, arm_dof: int, margin: float = MARGIN) -> FollowLimits:
+    """The limits for the first ``arm_dof`` joints of ``agent`` (a ManiSkill agent whose
+    ``pd_joint_pos`` and ``pd_joint_delta_pos`` configs drive its arm, and ``pd_joint_vel``
+    where it has one: the SO-100 and Koch have none)."""
     configs = agent._controller_configs
-    missing = [m for m in (RECORDED_MODE, *JOINT_MODES) if "arm" not in configs.get(m, {})]
-    if missing:
+    pos = arm_config(configs, RECORDED_MODE, arm_dof)
+    delta_config = arm_config(configs, JOINT_MODES[0], arm_dof)
+    if pos is None or delta_config is None:
         raise ValueError(
-            f"{type(agent).__name__} has no 'arm' controller in {missing}: the expert's "
-            "targets are bounded by those controllers' limits"
+            f"{type(agent).__name__} has no arm controller in {RECORDED_MODE} or "
+            f"{JOINT_MODES[0]}: the expert's targets are bounded by those controllers' limits"
         )
-    pos = configs[RECORDED_MODE]["arm"]
-    dof = len(pos.joint_names)
-    delta = _bound(configs["pd_joint_delta_pos"]["arm"], dof)  # rad per step
-    vel = _bound(configs["pd_joint_vel"]["arm"], dof)  # rad/s
-    lag = np.broadcast_to(np.asarray(pos.damping, np.float64) / pos.stiffness, (dof,))  # s
+    delta = np.minimum(np.abs(_per_joint(delta_config.lower, arm_dof)),
+                       _per_joint(delta_config.upper, arm_dof))  # rad per step  # fmt: skip
+    vel_config = arm_config(configs, JOINT_MODES[1], arm_dof)
+    vel = np.full(arm_dof, np.inf)  # rad/s
+    if vel_config is not None:
+        vel = np.minimum(np.abs(_per_joint(vel_config.lower, arm_dof)),
+                         _per_joint(vel_config.upper, arm_dof))  # fmt: skip
+    lag = _per_joint(pos.damping, arm_dof) / _per_joint(pos.stiffness, arm_dof)  # s
     step = margin * np.minimum(vel / control_freq, delta)
     lead = margin * delta
     speed = SPEED_SHARE * np.minimum(np.minimum(vel, delta * control_freq), delta / lag)

@@ -29,6 +29,15 @@ if TYPE_CHECKING:
     from embodied_envs.solvers.pick_place import SolverConfig
 
 
+def grasp_pose(approach: np.ndarray, closing: np.ndarray, centre: np.ndarray) -> sapien.Pose:
+    """The grasp frame's pose: z along ``approach``, y along ``closing`` (unit, orthogonal),
+    its origin at ``centre``."""
+    rot = np.stack([np.cross(closing, approach), closing, approach], axis=1)
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = rot, centre
+    return sapien.Pose(m)
+
+
 def grasp_frame(
     vertices_world: np.ndarray, support_z: float, cfg: SolverConfig, current_y: np.ndarray
 ):
@@ -75,8 +84,8 @@ class GraspChoice:
         synthesised grasps the gripper can take here (``grasps.posed_grasps``, pre-shaped);
         the footprint grasp last when it failed those checks, or when the asset's annotated
         grasps (``affordance_annot.json``) lead the synthesised ones."""
-        agent = self.base.agent
-        tcp = agent.tcp.pose.to_transformation_matrix().cpu().numpy()
+        tcp = self._tcp().to_transformation_matrix().cpu().numpy()
+        gripper = self.gripper_model
         poses = []
         for i, layout in enumerate(self.base.layouts):
             actor = self.base.env_actors[f"env{i}"][self._node(i)]
@@ -84,13 +93,13 @@ class GraspChoice:
             geom = asset_geometry(spec)
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             support = float(self.base.layout_scene.top_z[i])
-            grasps = asset_grasps(spec, self.grasp_config)
+            grasps = asset_grasps(spec, self.grasp_config, gripper)
             taken = posed_grasps(
-                grasps, pose.matrix(), support, self.clouds[i], self.grasp_config,
+                grasps, pose.matrix(), support, self.clouds[i], self.grasp_config, gripper,
                 limit=self.cfg.grasp_candidates, with_index=True,
             )  # fmt: skip
             synthesised = [
-                (agent.build_grasp_pose(approach, closing, centre), opening)
+                (grasp_pose(approach, closing, centre), opening)
                 for centre, closing, approach, opening, _ in taken
             ]
             # the asset's own annotated grasps (affordance_annot.json) lead when one is takeable
@@ -98,31 +107,64 @@ class GraspChoice:
             annotated = annotated and bool(grasps.annotated[taken[0][4]])
             verts = pose.transform_points(geom.vertices)
             centre, closing = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
+            if self.robot_hand.planar:
+                checked = (i, grasps, pose, centre)
+                poses.append(self._planar(checked, closing, support, synthesised, gripper))
+                continue
             down = np.array([0, 0, -1.0])
             footprint = [
-                (agent.build_grasp_pose(down, c, centre), self.gripper_model.opening)
+                (grasp_pose(down, c, centre), gripper.opening)
                 for c in (closing, -closing)
             ]
             checked = (i, grasps, pose, centre)
             turned = self._turned_closing(i, tcp[i], centre)
             if turned is not None and self._footprint_fits(*checked, turned, support):
                 # the wrist needs no turn: first
-                footprint.insert(0, (agent.build_grasp_pose(down, turned, centre),
-                                     self.gripper_model.opening))  # fmt: skip
+                footprint.insert(0, (grasp_pose(down, turned, centre),
+                                     gripper.opening))  # fmt: skip
             first = self._footprint_fits(*checked, closing, support) and not annotated
             poses.append(footprint + synthesised if first else synthesised + footprint)
         return poses
 
-    def _footprint_fits(self, i, grasps, pose, centre, closing, support) -> bool:
-        """Whether env i's top-down grasp at ``centre`` closing along ``closing`` passes the
-        synthesised grasps' checks on the object (``pose``) and clears the other objects by the
-        wide margin."""
-        down = np.array([0, 0, -1.0])
+    def _planar(self, checked, closing, support, synthesised, gripper) -> list:
+        """A planar hand's grasps (``robots.Hand.planar``) of the footprint's centre: the
+        approach in the arm's vertical plane, tilted ``planar_tilts`` from straight down
+        toward the far side, closing along the footprint's narrow side as far as that is
+        across the approach (either way: the wrist roll takes one or the other), each kept
+        when it passes the footprint grasp's checks; then the synthesised grasps whose approach
+        lies in that plane."""
+        i, centre = checked[0], checked[3]
+        base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
+        out = centre[:2] - base
+        out = np.array([*(out / max(np.linalg.norm(out), 1e-9)), 0.0])
+        across = np.array([-out[1], out[0], 0.0])  # the plane's normal
+        poses = []
+        for tilt in np.deg2rad(self.cfg.planar_tilts):
+            approach = np.cos(tilt) * np.array([0, 0, -1.0]) + np.sin(tilt) * out
+            c = closing - (closing @ approach) * approach
+            c = c / np.linalg.norm(c) if np.linalg.norm(c) > 1e-6 else across
+            for way in (c, -c):
+                if self._footprint_fits(*checked, way, support, approach):
+                    poses.append((grasp_pose(approach, way, centre), gripper.opening))
+        slack = np.sin(self.robot_hand.tilt_tolerance)
+        in_plane = [g for g in synthesised
+                    if abs(g[0].to_transformation_matrix()[:3, 2] @ across) <= slack]  # fmt: skip
+        return poses + in_plane
+
+    def _footprint_fits(
+        self, i, grasps, pose, centre, closing, support, down: np.ndarray | None = None
+    ) -> bool:
+        """Whether env i's grasp at ``centre`` closing along ``closing``, approaching along
+        ``down`` (straight down unless given), passes the synthesised grasps' checks on the
+        object (``pose``) and clears the other objects by the wide margin."""
+        down = np.array([0, 0, -1.0]) if down is None else down
         world_to_object = np.linalg.inv(pose.matrix())
         rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
         # the footprint grasp's palm stops just above a can's lid: checked without margin
         exact = dataclasses.replace(self.grasp_config, margin=0.0)
-        valid = grasp_is_valid(grasps, rot @ centre + t, rot @ closing, rot @ down, exact)
+        valid = grasp_is_valid(
+            grasps, rot @ centre + t, rot @ closing, rot @ down, exact, self.gripper_model
+        )
         _, roomy = posed_clearance(
             centre[None], closing[None], down[None],
             self.gripper_model.boxes(self.grasp_config.sweep)[None], support,

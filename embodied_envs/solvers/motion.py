@@ -32,6 +32,8 @@ import mplib
 import numpy as np
 import sapien
 from mani_skill.utils.geometry.trimesh_utils import get_component_mesh
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 STRAIGHT_BLOCKED = "the straight joint line is blocked"  # plan_to_pose(detour=False)
 START_COLLIDES = "the start collides and the straight line is blocked: no detour is searched"
@@ -49,6 +51,10 @@ class MotionConfig:
     # does not converge by 300 rarely does, measured 50 vs 54 of 100 random starts, at 0.4
     # instead of 1.0 ms per start)
     distinct: float = 0.1  # rad, solutions closer than this (joint norm) are one
+    tilt_tolerance: float = 0.0  # rad: an arm of fewer than 6 joints reaches most poses only
+    # nearly (the SO-100 turned 0.3 rad about the vertical from its rest grasp: 0.015 rad off);
+    # its solutions are refined to the position exactly (``ik_tolerance`` m) with the hand's
+    # orientation this close (the robot's hand entry sets it, robots.py)
     check_distance: float = 0.01  # m, the farthest a joint's move carries the robot's
     # collision geometry between two collision checks (obstacle points are 1 cm spheres): the
     # joint's move times its lever (``joint_levers``)
@@ -231,6 +237,8 @@ class SeededPlanner:
             mp.pinocchio_model.compute_forward_kinematics(q)
             pose = mp.pinocchio_model.get_link_pose(self.link)
             dist = mp.distance_6D(goal_base[:3], goal_base[3:], pose[:3], pose[3:])
+            if dist >= cfg.ik_tolerance and cfg.tilt_tolerance:
+                q, dist = self._nearly(goal_base, q)
             best = min(best, dist)
             q = q[self.idx]
             if dist >= cfg.ik_tolerance or not self.free(q):
@@ -242,6 +250,28 @@ class SeededPlanner:
         here = qpos[self.idx]
         solutions.sort(key=lambda s: float(np.linalg.norm(s - here)))
         return solutions, best
+
+    def _nearly(self, goal_base: np.ndarray, qpos: np.ndarray) -> tuple[np.ndarray, float]:
+        """``qpos`` refined (bounded least squares over the move group's joints) to reach
+        ``goal_base``'s position exactly and its orientation as near as the arm can, and the
+        distance left: the position error, or ``inf`` when the orientation stays more than
+        ``tilt_tolerance`` off (an arm of fewer than six joints)."""
+        model, goal = self.mp.pinocchio_model, Rotation.from_quat(np.roll(goal_base[3:], -1))
+        q = qpos.copy()
+
+        def error(x: np.ndarray) -> np.ndarray:
+            q[self.idx] = x
+            model.compute_forward_kinematics(q)
+            pose = model.get_link_pose(self.link)
+            turn = Rotation.from_quat(np.roll(pose[3:], -1)) * goal.inv()
+            # position first: a radian of turn weighs as 1 cm
+            return np.concatenate([pose[:3] - goal_base[:3], 0.01 * turn.as_rotvec()])
+
+        fit = least_squares(error, np.clip(qpos[self.idx], self.lo, self.hi),
+                            bounds=(self.lo, self.hi), xtol=1e-10)  # fmt: skip
+        res = error(fit.x)
+        off, tilt = float(np.linalg.norm(res[:3])), float(np.linalg.norm(res[3:]) / 0.01)
+        return q.copy(), off if tilt <= self.cfg.tilt_tolerance else np.inf
 
     def _turned_start(self, goal_base: np.ndarray, qpos: np.ndarray) -> np.ndarray:
         """``qpos`` with the first arm joint (the base's vertical axis) turned by the angle

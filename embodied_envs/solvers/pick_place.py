@@ -1,4 +1,4 @@
-"""Scripted, motion-planned pick-and-place for the Panda (mplib).
+"""Scripted, motion-planned pick-and-place for the arms with a hand entry (mplib).
 
 For every env the solver plans from that env's own robot and object state: grasps synthesised
 from the target's collision geometry (``solvers/grasps.py``: antipodal, collision-free against
@@ -17,6 +17,7 @@ grasp attempt and the episode.
 
 from __future__ import annotations
 
+import dataclasses
 import weakref
 from dataclasses import dataclass, field
 
@@ -24,23 +25,16 @@ import mplib
 import numpy as np
 import sapien
 import torch
+from mani_skill.utils.structs.pose import Pose
 from scipy.spatial import cKDTree
 
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.robots import ROBOTS
-from embodied_envs.solvers.driver import (
-    GRIPPER_CLOSED,
-    GRIPPER_OPEN,
-    ArmDriver,
-    gripper_action,
-)
+from embodied_envs.solvers.driver import ArmDriver
 from embodied_envs.solvers.follow import follow_limits
 from embodied_envs.solvers.grasp_choice import GraspChoice
-from embodied_envs.solvers.grasps import (
-    GraspConfig,
-    GripperModel,
-    hull_points,
-)
+from embodied_envs.solvers.grasps import GraspConfig, hull_points
+from embodied_envs.solvers.gripper import GripperModel
 from embodied_envs.solvers.motion import (
     MotionConfig,
     SeededPlanner,
@@ -53,13 +47,16 @@ from embodied_envs.solvers.place_flow import PlaceFlow
 class SolverConfig:
     """Tunable numbers of the scripted policy."""
 
-    approach_offset: float = 0.08  # m, pre-grasp distance above the grasp along the approach
-    grasp_depth: float = 0.035  # m, grasp centre below the object's top
+    approach_offset: float | None = None  # m, pre-grasp distance above the grasp along the
+    # approach (None: the robot's hand entry's, robots.py)
+    grasp_depth: float | None = None  # m, grasp centre below the object's top (None: the
+    # robot's hand entry's, robots.py)
     min_tcp_height: float = 0.015  # m, lowest grasp centre above the support surface
     lift_heights: tuple[float, ...] = (0.05, 0.10)  # m, lifts after grasping, tried in order
     # (the carry plans from there: 5 cm before 10 saves 3-7 steps an episode on the shipped
     # layouts and the zoo, with the same successes)
     gripper_steps: int = 8  # control steps to open the gripper, and at most to close it
+    close_steps: int = 40  # control steps at most to close a jaw gently (``_close_gently``)
     finger_rest: float = 1e-4  # m per step: fingers moving less are at rest (closed on the
     # object: 3 steps on the shipped layouts)
     rest_steps: int = 40  # control steps at most, after the last release, for the movers to
@@ -67,15 +64,15 @@ class SolverConfig:
     hold_steps: int = 10  # control steps holding still at the goal; a demo goes on for this
     # many steps after its task succeeds (the env terminates there), so that an arm replayed in
     # another controller, which lags the recorded one, comes to rest in success too
-    # rad/s and rad/s^2 per arm joint, within the Panda's (Franka's datasheet: velocity 2.175
-    # for joints 1-4 and 2.61 for 5-7; acceleration 15, 7.5, 10, 12.5, 15, 20, 20)
-    joint_vel_limits: tuple[float, ...] = (2.0, 2.0, 2.0, 2.0, 2.5, 2.5, 2.5)
-    joint_acc_limits: tuple[float, ...] = (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
+    # rad/s and rad/s^2 per arm joint (None: the robot's hand entry's, robots.py)
+    joint_vel_limits: tuple[float, ...] | None = None
+    joint_acc_limits: tuple[float, ...] | None = None
     convertible: bool = True  # joint targets every arm controller can replay (``follow.py``:
     # speeds and per-step changes within pd_joint_delta_pos's and pd_joint_vel's limits);
     # False: the speeds above, which only pd_joint_pos replays
     motion: MotionConfig = MotionConfig()  # the seeded IK and RRT-Connect (solvers/motion.py)
-    max_path_steps: int = 180  # a longer plan (a wrist flip, a detour) is refused as "long"
+    max_path_steps: int | None = None  # a longer plan (a wrist flip, a detour) is refused as
+    # "long" (None: the robot's hand entry's: the Panda's 180)
     # (at the convertible speeds: default seeds 17 and 37 plan approaches and carries of
     # 121-150 steps, which a cap of 120 refused)
     obstacle_points: int = 3000  # surface samples per obstacle actor
@@ -84,6 +81,9 @@ class SolverConfig:
     # below base_clearance_height are dropped: the base stands on the table's edge
     base_clearance_height: float = 0.10  # m above the base
     grasp_candidates: int = 6  # posed grasps tried per attempt, best first
+    planar_tilts: tuple[float, ...] = (30.0, 15.0, 45.0, 0.0, 60.0)  # deg, a planar hand's
+    # (robots.py) approaches from straight down toward the far side of its arm's plane, in
+    # order (the SO-100 reaches a box's top 0.27 m away tilted 15-60 degrees, not straight down)
     option_steps: int = 10  # a grasp one rank lower is taken when its approach is this many
     # steps shorter
     grasp_attempts: int = 3  # grasp, check, lift rounds per episode (a miss opens and retries)
@@ -156,7 +156,8 @@ def _levers(base) -> np.ndarray:
 
 
 def _planners(base) -> list[mplib.Planner]:
-    """``base``'s (an unwrapped env's) mplib planners, built at its first solver."""
+    """``base``'s (an unwrapped env's) mplib planners, built at its first solver, for the link
+    its robot's hand entry names."""
     if base not in _PLANNERS:
         robot = base.agent.robot
         _PLANNERS[base] = [
@@ -165,7 +166,7 @@ def _planners(base) -> list[mplib.Planner]:
                 srdf=base.agent.urdf_path.replace(".urdf", ".srdf"),
                 user_link_names=[link.get_name() for link in robot.get_links()],
                 user_joint_names=[joint.get_name() for joint in robot.get_active_joints()],
-                move_group="panda_hand_tcp",
+                move_group=ROBOTS[base.agent.uid].hand.link,
             )
             for _ in range(base.num_envs)
         ]
@@ -188,7 +189,6 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
     def __init__(self, env, config: SolverConfig | None = None, seed: int = 0):
         self.env = env
         self.base = env.unwrapped
-        self.cfg = config or SolverConfig()
         self.seed = seed
         self.stages = 0  # _per_env calls so far: part of each plan's random key
         self.num_envs = self.base.num_envs
@@ -198,21 +198,39 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
                 f"robot_uids={self.base.robot_uids!r}: the scripted expert drives one arm; make "
                 "the env with one robot (docs/robots.md)"
             )
-        if not ROBOTS[uid].expert:  # grasps, gripper and plans are the Panda's for now
+        if not ROBOTS[uid].expert:
             drivable = [u for u, r in ROBOTS.items() if r.expert]
             raise ValueError(
                 f"robot_uids={uid!r}: the scripted expert drives only {drivable} for now "
-                "(docs/robots.md). Fix: make the env with robot_uids='panda', or drive this "
-                "robot with your own policy"
+                "(docs/robots.md). Fix: make the env with one of them, or drive this robot "
+                "with your own policy"
             )
+        self.robot_hand = hand = ROBOTS[uid].hand
+        self.gripper_entry = ROBOTS[uid].gripper
+        cfg = config or SolverConfig()
+        self.cfg = dataclasses.replace(
+            cfg,
+            grasp_depth=hand.grasp_depth if cfg.grasp_depth is None else cfg.grasp_depth,
+            approach_offset=cfg.approach_offset or hand.approach_offset,
+            max_path_steps=cfg.max_path_steps or hand.max_path_steps,
+            joint_vel_limits=cfg.joint_vel_limits or hand.joint_vel,
+            joint_acc_limits=cfg.joint_acc_limits or hand.joint_acc,
+            motion=dataclasses.replace(
+                cfg.motion, tilt_tolerance=max(cfg.motion.tilt_tolerance, hand.tilt_tolerance)
+            ),
+        )
+        # the grasp frame (z approach, y closing) in the planned link's frame, and back
+        self.grasp_in_link = sapien.Pose(hand.grasp_in_link[:3], hand.grasp_in_link[3:])
+        self.link_in_grasp = self.grasp_in_link.inv()
         if self.base.control_mode != "pd_joint_pos":
             raise ValueError(
                 f"the solver drives control_mode='pd_joint_pos', got {self.base.control_mode!r}"
             )
         base_poses = self.base.agent.robot.pose.raw_pose.cpu().numpy()
         self.planners = _planners(self.base)
+        self.arm_dof = len(self.planners[0].move_group_joint_indices)  # the gripper's after them
         # the joint targets' bounds, so that other controllers replay them (solvers/follow.py)
-        self.follow = follow_limits(self.base.agent, 1 / self.base.control_timestep)
+        self.follow = follow_limits(self.base.agent, 1 / self.base.control_timestep, self.arm_dof)
         vel = np.asarray(self.cfg.joint_vel_limits, dtype=np.float64)
         if self.cfg.convertible:
             vel = np.minimum(vel, self.follow.speed)
@@ -227,16 +245,26 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
         self.succeeded = np.zeros(self.num_envs, dtype=int)  # per env, steps in success so far
         self.last_info: dict = {}
         self._batched_actions = len(self.env.action_space.shape) == 2
-        self.gripper = np.full(self.num_envs, GRIPPER_OPEN)
+        self.gripper = np.full(self.num_envs, self.robot_hand.action_open)
         self.clouds: list[np.ndarray] = []  # per env, the obstacle surface points (world)
         self.cloud_trees: list[cKDTree] = []  # and their KD-trees
         self.slot = 0  # the mover slot being taken (``env.task_scene.movers``)
-        self.command = self._qpos()[:, :7]  # per env, the arm's last joint targets
+        self.command = self._qpos()[:, : self.arm_dof]  # per env, the arm's last joint targets
         self._set_obstacles()
 
     # --- state ---------------------------------------------------------------------------
     def _qpos(self) -> np.ndarray:
         return self.base.agent.robot.get_qpos().cpu().numpy().astype(np.float64)
+
+    def _fingers(self) -> np.ndarray:
+        """Per env, the gripper's joint positions (after the arm's)."""
+        return self._qpos()[:, self.arm_dof :]
+
+    def _tcp(self):
+        """Per env, the grasp frame's pose now (a ManiSkill ``Pose``): the planned link's pose
+        times the hand entry's ``grasp_in_link``."""
+        link = self.base.agent.robot.links_map[self.robot_hand.link].pose
+        return link * Pose.create(self.grasp_in_link)
 
     @property
     def target(self):
@@ -274,11 +302,12 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
 
     @property
     def gripper_model(self) -> GripperModel:
-        return GripperModel()
+        """The robot's open hand as boxes (its hand entry; the Panda's: the defaults)."""
+        return GripperModel(**dict(self.robot_hand.boxes))
 
     def _in_hand(self) -> np.ndarray:
         """Per env, the target's position in the TCP's frame now."""
-        tcp = self.base.agent.tcp.pose.to_transformation_matrix().cpu().numpy()
+        tcp = self._tcp().to_transformation_matrix().cpu().numpy()
         obj = self.target.pose.p.cpu().numpy()
         return np.einsum("nij,ni->nj", tcp[:, :3, :3], obj - tcp[:, :3, 3])
 
@@ -303,10 +332,10 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
         a placed mover as soon as the fingers of ``envs`` are open as the release rule counts it
         (``task_scene.open_fraction``)."""
         self.gripper[envs] = value
-        fingers = [self._qpos()[:, 7:]]
+        fingers = [self._fingers()]
 
         def gripped() -> bool:
-            now = self._qpos()[:, 7:]
+            now = self._fingers()
             still = np.abs(now - fingers[0]).max(1) < self.cfg.finger_rest
             fingers[0] = now
             return bool(np.all((self._grasping() & still)[envs]))
@@ -314,15 +343,61 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
         def opened() -> bool:  # open as the env's release rule counts it: nothing more to wait
             ts = self.base.task_scene
             lo, hi = ts.finger_span
-            open_ = (self._qpos()[:, 7:].sum(1) - lo) / (hi - lo) >= ts.open_fraction
+            open_ = (self._fingers().sum(1) - lo) / (hi - lo) >= ts.open_fraction
             return bool(np.all((open_ & ~self._grasping())[envs]))
 
-        closing = value == GRIPPER_CLOSED
+        closing = value == self.robot_hand.action_closed
+        if closing and self.robot_hand.close_step:
+            self._close_gently(envs)
+            return
         self._execute(
             [None] * self.num_envs,
             self.cfg.gripper_steps,
             until=gripped if closing else (opened if release else None),
         )
+
+    def _close_gently(self, envs: np.ndarray) -> None:
+        """Close the jaws of ``envs`` as a hand whose jaw the arm's PD gains drive must
+        (``robots.Hand.close_gap``; shut at once, the SO-100's jaw meets the object with 100
+        N m and pushes the arm away): at once to the target's width across the jaws plus
+        ``close_gap``, then the jaw's target ``close_step`` ahead of the jaw until the jaws
+        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw."""
+        hand, grip = self.robot_hand, self.gripper_entry
+        way = np.sign(hand.action_closed - hand.action_open)
+        per_qpos = (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)
+
+        def jaw() -> np.ndarray:  # the jaw's position as an action
+            return hand.action_open + (self._fingers()[:, 0] - grip.open_qpos) * per_qpos
+
+        width = self._width_across()
+        near = np.array([hand.action(w + hand.close_gap) for w in width])
+        self.gripper[envs] = near[envs]
+        there = lambda: bool(np.all(np.abs(jaw() - self.gripper)[envs] < hand.close_step))  # noqa: E731
+        self._execute([None] * self.num_envs, self.cfg.close_steps, until=there)
+        closing = envs & ~self._grasping()
+        for _ in range(self.cfg.close_steps):
+            if not closing.any() or self.ended:
+                break
+            shut = jaw() + way * hand.close_step  # from where the jaw stands: no wind-up
+            shut = np.minimum(shut, hand.action_closed) if way > 0 else np.maximum(
+                shut, hand.action_closed
+            )
+            self.gripper[closing] = shut[closing]
+            self._execute([None] * self.num_envs, 1)
+            held = closing & self._grasping()
+            self.gripper[held] = jaw()[held] + way * hand.squeeze
+            closing &= ~held & (self.gripper != hand.action_closed)
+        self._execute([None] * self.num_envs, self.cfg.settle_steps)
+
+    def _width_across(self) -> np.ndarray:
+        """Per env, the current mover's extent along the hand's closing axis now (its
+        collision hull's vertices)."""
+        tcp = self._tcp().to_transformation_matrix().cpu().numpy()
+        obj = self.target.pose.to_transformation_matrix().cpu().numpy()
+        hull = self.base.task_scene.hulls[:, self.slot].astype(np.float64)  # (n, V, 3)
+        world = np.einsum("nij,nvj->nvi", obj[:, :3, :3], hull)
+        along = np.einsum("nvi,ni->nv", world, tcp[:, :3, 1])
+        return along.max(1) - along.min(1)
 
     def _grasp(self, todo: np.ndarray, attempt: int) -> np.ndarray:
         """One grasp attempt in the envs ``todo``: approach the best reachable grasp, close,
@@ -343,7 +418,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
             return descents[i, k]
 
         def take(i, k):  # env i runs option k: fingers pre-shaped on the way, its descent next
-            self.gripper[i] = gripper_action(candidates[i][k][1])
+            self.gripper[i] = self.robot_hand.action(candidates[i][k][1])
             taken[i] = descents.get((i, k))
 
         pre = self._per_env(
@@ -359,7 +434,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
         self._per_env("grasp", grasps, obstacles=False, settle=cfg.settle_steps, planned=taken.get)
         # not again before closing: the descending fingers nudge a rolling body, and closing
         # on it still holds it (a smooth ball: 6/6 closing anyway, 3/6 backing off instead)
-        self._set_gripper(todo & ~moved, GRIPPER_CLOSED)
+        self._set_gripper(todo & ~moved, self.robot_hand.action_closed)
         z0 = self.target.pose.p[:, 2].cpu().numpy()
         lifts = [
             None
@@ -377,8 +452,8 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
         for i in np.flatnonzero(missed):
             self.reports[i].misses.append(f"{'moved' if moved[i] else 'grasp'} (attempt {attempt})")
         if missed.any():  # open and back off upwards, for the next attempt
-            self._set_gripper(missed, GRIPPER_OPEN)
-            tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+            self._set_gripper(missed, self.robot_hand.action_open)
+            tcp = self._tcp().raw_pose.cpu().numpy()
             back = [
                 sapien.Pose(tcp[i, :3] + np.array([0, 0, cfg.approach_offset]), tcp[i, 3:])
                 if missed[i]
@@ -432,6 +507,6 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
             dropped = carry & ~still
             holding &= ~dropped
             if dropped.any():  # grasp again from where the object lies
-                self._set_gripper(dropped, GRIPPER_OPEN)
+                self._set_gripper(dropped, self.robot_hand.action_open)
             if placed.all():
                 break

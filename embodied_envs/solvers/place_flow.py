@@ -10,8 +10,6 @@ import numpy as np
 import sapien
 import torch
 
-from embodied_envs.solvers.driver import GRIPPER_OPEN
-
 
 class PlaceFlow:
     """Carry, lower and release for place and move tasks (a mixin of the solver)."""
@@ -59,7 +57,7 @@ class PlaceFlow:
         withdraw the hand straight up."""
         st = self._task_state()
         drop = st["movers"][:, self.slot, 2] - self._release_height(st)
-        tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+        tcp = self._tcp().raw_pose.cpu().numpy()
 
         def shifted(dz):
             return [sapien.Pose(tcp[i, :3] + [0, 0, dz[i]], tcp[i, 3:]) if envs[i] else None
@@ -67,8 +65,8 @@ class PlaceFlow:
 
         self._per_env("lower", shifted(-np.maximum(drop, 0.0)), obstacles=False,
                       settle=self.cfg.settle_steps)  # fmt: skip
-        self._set_gripper(envs, GRIPPER_OPEN, release=True)
-        tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+        self._set_gripper(envs, self.robot_hand.action_open, release=True)
+        tcp = self._tcp().raw_pose.cpu().numpy()
         self._per_env("withdraw", shifted(np.full(self.num_envs, self.cfg.approach_offset)),
                       obstacles=False)  # fmt: skip
 
@@ -90,13 +88,14 @@ class PlaceFlow:
         base = self.base.agent.robot.pose.raw_pose[:, :2].cpu().numpy()
 
         def targets(yaws, todo):
-            tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+            tcp = self._tcp().raw_pose.cpu().numpy()
             st = self._task_state()  # the point the goal is for: centre, or origin (pick)
             obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
             out = []
             for i in range(self.num_envs):
                 turns = list(yaws)
-                if self.releases[i] and len(yaws) > 1:  # first the turn of the base joint
+                # first the turn of the base joint (a planar hand's only way to another side)
+                if (self.releases[i] or self.robot_hand.planar) and len(yaws) > 1:
                     a, b = goal[i, :2] - base[i], obj[i, :2] - base[i]
                     turns.insert(0, np.arctan2(a[1], a[0]) - np.arctan2(b[1], b[0]))
                 poses = [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in turns]
@@ -112,7 +111,7 @@ class PlaceFlow:
         if high.any():  # over the obstacles: straight up, then the carry from there
             for i in np.flatnonzero(high):  # the carry from above may still plan
                 self.reports[i].plan_failures.clear()
-            tcp = self.base.agent.tcp.pose.raw_pose.cpu().numpy()
+            tcp = self._tcp().raw_pose.cpu().numpy()
             up = [
                 sapien.Pose(
                     [
@@ -131,7 +130,7 @@ class PlaceFlow:
 
     def _held_points(self) -> np.ndarray:
         """Per env, the current mover's collision points ``(V, 3)`` in the TCP's frame now."""
-        tcp = self.base.agent.tcp.pose.to_transformation_matrix().cpu().numpy()
+        tcp = self._tcp().to_transformation_matrix().cpu().numpy()
         obj = self.target.pose.to_transformation_matrix().cpu().numpy()
         rel = np.linalg.inv(tcp) @ obj  # (n, 4, 4) the object in the TCP frame
         hull = self.base.task_scene.hulls[:, self.slot].astype(np.float64)  # (n, V, 3)
@@ -145,13 +144,13 @@ class PlaceFlow:
         (``held (V, 3)``, TCP frame) come within ``carry_clearance`` of an obstacle point;
         "" when neither."""
         model = self.planners[i].pinocchio_model
-        fingers = self._qpos()[i, 7:]
+        fingers = self._fingers()[i]
         base = sapien.Pose(*np.split(self.base.agent.robot.pose.raw_pose[i].cpu().numpy(), [3]))
         points = []
         for k, q in enumerate(path):
-            model.compute_forward_kinematics(np.concatenate([q[:7], fingers]))
+            model.compute_forward_kinematics(np.concatenate([q[: self.arm_dof], fingers]))
             p = model.get_link_pose(self.motion[i].link)
-            tcp = (base * sapien.Pose(p[:3], p[3:])).to_transformation_matrix()
+            tcp = (base * sapien.Pose(p[:3], p[3:]) * self.grasp_in_link).to_transformation_matrix()
             points.append(tcp[:3] @ np.append(in_hand, 1.0))
             if held is not None and self.cloud_trees:
                 near, _ = self.cloud_trees[i].query(held @ tcp[:3, :3].T + tcp[:3, 3])

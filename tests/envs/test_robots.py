@@ -216,12 +216,12 @@ def test_pointcloud_obs_of_a_small_arm():
 
 
 def test_user_limits_win_field_by_field():
-    env = gym.make(ENV_ID, robot_uids="so100", placement_limits=dict(reach_max=0.33),
+    env = gym.make(ENV_ID, robot_uids="so100", placement_limits=dict(reach_max=0.28),
                    goal_region=dict(inset=0.04))  # fmt: skip
     try:
         u = env.unwrapped
-        assert (u.placement_limits.reach_min, u.placement_limits.reach_max) == (0.10, 0.33)
-        assert (u.goal_region.inset, tuple(u.goal_region.height)) == (0.04, (0.05, 0.15))
+        assert (u.placement_limits.reach_min, u.placement_limits.reach_max) == (0.12, 0.28)
+        assert (u.goal_region.inset, tuple(u.goal_region.height)) == (0.04, (0.04, 0.10))
     finally:
         env.close()
 

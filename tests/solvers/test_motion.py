@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from mani_skill.agents.robots import Panda
 
+from embodied_envs.robots import PANDA_HAND
 from embodied_envs.solvers.motion import (
     START_COLLIDES,
     SeededPlanner,
     joint_levers,
     straight_line_trajectory,
 )
-from embodied_envs.solvers.pick_place import SolverConfig
 
 REST = np.array([0.0, np.pi / 8, 0, -5 * np.pi / 8, 0, 3 * np.pi / 4, np.pi / 4, 0.04, 0.04])
 DOWN = [0.0, 1.0, 0.0, 0.0]  # TCP pointing down (wxyz)
@@ -127,8 +127,7 @@ def test_min_steps_bounds_every_time_parameterised_path(planner):
     mp = planner.mp
     rng = np.random.default_rng(0)
     defaults = mp.joint_vel_limits.copy(), mp.joint_acc_limits.copy()
-    cfg = SolverConfig()
-    solver = np.array(cfg.joint_vel_limits), np.array(cfg.joint_acc_limits)
+    solver = np.array(PANDA_HAND.joint_vel), np.array(PANDA_HAND.joint_acc)
     try:
         for vel, acc in (defaults, solver):
             mp.joint_vel_limits, mp.joint_acc_limits = vel, acc
@@ -158,8 +157,7 @@ def test_a_straight_line_moves_time_optimally_within_the_limits(planner):
     acceleration limits at every step, one of them at its limit (it is optimal: within a
     step of the duration of TOPP-RA's numerical optimum on the same line, mplib's ``TOPP``).
     60 random lines from 1 mm to 2 rad."""
-    cfg = SolverConfig()
-    vel, acc = np.array(cfg.joint_vel_limits), np.array(cfg.joint_acc_limits)
+    vel, acc = np.array(PANDA_HAND.joint_vel), np.array(PANDA_HAND.joint_acc)
     mp = planner.mp
     defaults = mp.joint_vel_limits.copy(), mp.joint_acc_limits.copy()
     mp.joint_vel_limits, mp.joint_acc_limits = vel, acc

@@ -8,9 +8,10 @@ import sapien
 from test_grasps import solve, spec_of
 
 from embodied_envs.layout import asset_geometry
+from embodied_envs.robots import PANDA_HAND
 from embodied_envs.solvers.grasp_choice import grasp_frame
 from embodied_envs.solvers.grasps import asset_grasps, posed_grasps
-from embodied_envs.solvers.pick_place import GRIPPER_CLOSED, SolverConfig
+from embodied_envs.solvers.pick_place import SolverConfig
 
 
 @pytest.mark.parametrize(
@@ -26,7 +27,8 @@ from embodied_envs.solvers.pick_place import GRIPPER_CLOSED, SolverConfig
 )
 def test_the_footprint_grasp_closes_at_a_round_bodys_widest_section(name, height):
     verts = asset_geometry(spec_of(name)).vertices
-    centre, closing = grasp_frame(verts, 0.0, SolverConfig(), np.array([0.0, 1.0, 0.0]))
+    cfg = SolverConfig(grasp_depth=PANDA_HAND.grasp_depth)  # the Panda's, as the solver sets it
+    centre, closing = grasp_frame(verts, 0.0, cfg, np.array([0.0, 1.0, 0.0]))
     assert abs(centre[2] - height) < 0.0015, (name, centre[2])
     assert abs(closing[2]) < 1e-9
 
@@ -72,7 +74,7 @@ def test_a_target_that_moved_during_the_approach_is_grasped_where_it_lies():
             return out
 
         def recorded(envs, value):
-            if value == GRIPPER_CLOSED:
+            if value == PANDA_HAND.action_closed:
                 closed.append((len(solver.reports[0].misses), bool(envs[0])))
             set_gripper(envs, value)
 

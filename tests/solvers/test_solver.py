@@ -4,6 +4,7 @@ import torch
 from conftest import DATA, DEFAULT_LAYOUT, per_layout_env
 
 import embodied_envs  # noqa: F401
+from embodied_envs.robots import PANDA_HAND
 from embodied_envs.solvers import PickPlaceSolver
 
 env = per_layout_env([DEFAULT_LAYOUT], control_mode="pd_joint_pos")
@@ -110,7 +111,6 @@ def test_bounded_options_give_the_actions_of_planning_them_all(monkeypatch):
 def test_closing_ends_once_the_fingers_hold_the_target(env, monkeypatch):
     """Closing stops as soon as the env reports the target grasped with the fingers at rest
     (3 of the 8 allowed steps on the default layout), and takes all 8 on nothing."""
-    from embodied_envs.solvers.pick_place import GRIPPER_CLOSED
 
     closes = []
     original = PickPlaceSolver._set_gripper
@@ -118,13 +118,13 @@ def test_closing_ends_once_the_fingers_hold_the_target(env, monkeypatch):
     def counted(self, envs, value):
         before = self.steps
         original(self, envs, value)
-        if value == GRIPPER_CLOSED:
+        if value == PANDA_HAND.action_closed:
             closes.append((self.steps - before, bool(self._grasping()[0])))
 
     monkeypatch.setattr(PickPlaceSolver, "_set_gripper", counted)
     env.reset(seed=0)
     solver = PickPlaceSolver(env, seed=0)
-    solver._set_gripper(np.array([True]), GRIPPER_CLOSED)  # the hand far above the table
+    solver._set_gripper(np.array([True]), PANDA_HAND.action_closed)  # the hand far above the table
     solver._set_gripper(np.array([True]), 1.0)  # open again
     solver.solve()
     assert closes[0] == (solver.cfg.gripper_steps, False)

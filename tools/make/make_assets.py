@@ -272,6 +272,12 @@ def tray() -> Asset:
     return Asset("tray", [Part(m, colour) for m in parts], collision=parts, mass=0.3)
 
 
+def block() -> Asset:
+    """A 4 cm wooden block (ManiSkill's PickCube size): an object the small arms' jaws take."""
+    e = 0.04
+    return Asset("block", [Part(box([e, e, e], [0, 0, e / 2]), (0.85, 0.35, 0.15))], mass=0.05)
+
+
 def banana() -> Asset:
     """An irregular curved object: ellipsoid segments along an arc."""
     parts, collision = [], []
@@ -291,7 +297,7 @@ def banana() -> Asset:
 
 ASSETS = [
     rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana, fruit_bowl, tray,
-    storage_box,
+    storage_box, block,
 ]
 
 

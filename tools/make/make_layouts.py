@@ -45,6 +45,7 @@ class LayoutSpec:
     poses: dict[str, list[float]] = field(default_factory=dict)
     # node -> its asset folder's name where they differ (two cans: can1, can2 -> can)
     asset_of: dict[str, str] = field(default_factory=dict)
+    robot: str = ROBOT  # relation.robot (a name embodied_envs/robots.py knows)
 
 
 # the room, table and robot the task layouts share (their objects differ)
@@ -157,6 +158,22 @@ LAYOUTS = [
         },
         asset_of={"can1": "can", "can2": "can"},
     ),
+    # the SO-100's layout: objects its jaws take (a 4 cm block), within its reach
+    LayoutSpec(
+        name="so100_block",
+        context="table",
+        manipulated=("block",),
+        distractors=("can",),
+        task="Pick up the block and hold it at the green goal.",
+        poses={
+            "background": TASK_ROOM["background"],
+            "table": TASK_ROOM["table"],
+            "so100": TASK_ROOM[ROBOT],
+            "block": [-0.207, 0.08, 0.78, 0.0, 0.0, 0.0, 1.0],
+            "can": [-0.125, 0.209, 0.82, 0.0, 0.0, 0.2549, 0.967],
+        },
+        robot="so100",
+    ),
 ]
 
 DESCRIPTIONS = {
@@ -172,6 +189,7 @@ DESCRIPTIONS = {
     "tray": "a red serving tray with low rims",
     "storage_box": "a low brown cardboard storage box",
     "background": "a room with a window and a bookshelf",
+    "block": "a small orange wooden block",
 }
 
 
@@ -183,7 +201,7 @@ def base_layout(spec: LayoutSpec) -> LayoutInfo:
     mapping.update({o: "distractor_objs" for o in spec.distractors})
     data = {
         "tree": {
-            "background": [[spec.context, "FLOOR"], [ROBOT, "IN"]],
+            "background": [[spec.context, "FLOOR"], [spec.robot, "IN"]],
             spec.context: [[o, "ON"] for o in objs],
         },
         "relation": {
@@ -191,12 +209,12 @@ def base_layout(spec: LayoutSpec) -> LayoutInfo:
             "context": spec.context,
             "distractor_objs": list(spec.distractors),
             "manipulated_objs": list(spec.manipulated),
-            "robot": ROBOT,
+            "robot": spec.robot,
             "task_desc": spec.task,
         },
         "objs_mapping": mapping,
         "assets": {n: f"../assets/{spec.asset_of.get(n, n)}" for n in mapping},
-        "position": {n: [0, 0, 0, 0, 0, 0, 1] for n in [*mapping, ROBOT]},
+        "position": {n: [0, 0, 0, 0, 0, 0, 1] for n in [*mapping, spec.robot]},
         "objs_desc": {n: DESCRIPTIONS[spec.asset_of.get(n, n)] for n in mapping},
     }
     return LayoutInfo.from_dict(data, source=DATA / "layouts" / f"{spec.name}.json")
@@ -208,7 +226,7 @@ def placed(spec: LayoutSpec) -> LayoutInfo:
     layout = base_layout(spec)
     for seed in range(MAX_SEEDS):
         candidate = place(layout, seed)
-        x, y = candidate.pose(ROBOT).p[:2]
+        x, y = candidate.pose(spec.robot).p[:2]
         if x < -0.25 and abs(y) < 0.2 and candidate.pose("background").yaw > 0:
             poses = json.dumps(candidate.to_dict()["position"])
             print(f"{spec.name}: placed by seed {seed}; pin these poses in its entry: {poses}")
