@@ -11,8 +11,8 @@ held) is grasped again from where it lies, while the episode has steps left. A f
 recorded per env and stage; that env then holds still while the others go on.
 
 The solver is cut in rooms: the grasp choice (``grasp_choice.py``), planning and execution
-(``driver.py``), the place and move flows (``place_flow.py``); this file holds the state, the
-grasp attempt and the episode.
+(``driver.py``), opening and closing the hand (``jaws.py``), the place and move flows
+(``place_flow.py``); this file holds the state, the grasp attempt and the episode.
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ from embodied_envs.solvers.follow import follow_limits
 from embodied_envs.solvers.grasp_choice import GraspChoice
 from embodied_envs.solvers.grasps import GraspConfig, hull_points
 from embodied_envs.solvers.gripper import GripperModel
+from embodied_envs.solvers.jaws import Jaws
 from embodied_envs.solvers.motion import (
     MotionConfig,
     SeededPlanner,
@@ -173,7 +174,7 @@ def _planners(base) -> list[mplib.Planner]:
     return _PLANNERS[base]
 
 
-class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
+class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
     """Plans and executes pick-and-place in every env of a ``PickEmbodiedGen-v1`` env.
 
     Args:
@@ -324,80 +325,6 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, ArmDriver):
     def _steps_left(self) -> int:
         limit = getattr(getattr(self.env, "spec", None), "max_episode_steps", None) or 10**9
         return limit - self.steps
-
-    def _set_gripper(self, envs: np.ndarray, value: float, release: bool = False) -> None:
-        """Open or close the gripper of ``envs`` (the others keep theirs), the arms held
-        still: ``gripper_steps`` steps; closing ends as soon as every env of ``envs`` grasps
-        the target (the env's ``is_grasped``) with its fingers at rest; opening to ``release``
-        a placed mover as soon as the fingers of ``envs`` are open as the release rule counts it
-        (``task_scene.open_fraction``)."""
-        self.gripper[envs] = value
-        fingers = [self._fingers()]
-
-        def gripped() -> bool:
-            now = self._fingers()
-            still = np.abs(now - fingers[0]).max(1) < self.cfg.finger_rest
-            fingers[0] = now
-            return bool(np.all((self._grasping() & still)[envs]))
-
-        def opened() -> bool:  # open as the env's release rule counts it: nothing more to wait
-            ts = self.base.task_scene
-            lo, hi = ts.finger_span
-            open_ = (self._fingers().sum(1) - lo) / (hi - lo) >= ts.open_fraction
-            return bool(np.all((open_ & ~self._grasping())[envs]))
-
-        closing = value == self.robot_hand.action_closed
-        if closing and self.robot_hand.close_step:
-            self._close_gently(envs)
-            return
-        self._execute(
-            [None] * self.num_envs,
-            self.cfg.gripper_steps,
-            until=gripped if closing else (opened if release else None),
-        )
-
-    def _close_gently(self, envs: np.ndarray) -> None:
-        """Close the jaws of ``envs`` as a hand whose jaw the arm's PD gains drive must
-        (``robots.Hand.close_gap``; shut at once, the SO-100's jaw meets the object with 100
-        N m and pushes the arm away): at once to the target's width across the jaws plus
-        ``close_gap``, then the jaw's target ``close_step`` ahead of the jaw until the jaws
-        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw."""
-        hand, grip = self.robot_hand, self.gripper_entry
-        way = np.sign(hand.action_closed - hand.action_open)
-        per_qpos = (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)
-
-        def jaw() -> np.ndarray:  # the jaw's position as an action
-            return hand.action_open + (self._fingers()[:, 0] - grip.open_qpos) * per_qpos
-
-        width = self._width_across()
-        near = np.array([hand.action(w + hand.close_gap) for w in width])
-        self.gripper[envs] = near[envs]
-        there = lambda: bool(np.all(np.abs(jaw() - self.gripper)[envs] < hand.close_step))  # noqa: E731
-        self._execute([None] * self.num_envs, self.cfg.close_steps, until=there)
-        closing = envs & ~self._grasping()
-        for _ in range(self.cfg.close_steps):
-            if not closing.any() or self.ended:
-                break
-            shut = jaw() + way * hand.close_step  # from where the jaw stands: no wind-up
-            shut = np.minimum(shut, hand.action_closed) if way > 0 else np.maximum(
-                shut, hand.action_closed
-            )
-            self.gripper[closing] = shut[closing]
-            self._execute([None] * self.num_envs, 1)
-            held = closing & self._grasping()
-            self.gripper[held] = jaw()[held] + way * hand.squeeze
-            closing &= ~held & (self.gripper != hand.action_closed)
-        self._execute([None] * self.num_envs, self.cfg.settle_steps)
-
-    def _width_across(self) -> np.ndarray:
-        """Per env, the current mover's extent along the hand's closing axis now (its
-        collision hull's vertices)."""
-        tcp = self._tcp().to_transformation_matrix().cpu().numpy()
-        obj = self.target.pose.to_transformation_matrix().cpu().numpy()
-        hull = self.base.task_scene.hulls[:, self.slot].astype(np.float64)  # (n, V, 3)
-        world = np.einsum("nij,nvj->nvi", obj[:, :3, :3], hull)
-        along = np.einsum("nvi,ni->nv", world, tcp[:, :3, 1])
-        return along.max(1) - along.min(1)
 
     def _grasp(self, todo: np.ndarray, attempt: int) -> np.ndarray:
         """One grasp attempt in the envs ``todo``: approach the best reachable grasp, close,

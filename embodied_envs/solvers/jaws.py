@@ -1,0 +1,89 @@
+"""The expert's hand: opening and closing it, the arm held still.
+
+``Jaws`` is a mixin of :class:`~embodied_envs.solvers.pick_place.PickPlaceSolver` (it holds the
+env, the robot's hand entry ``robot_hand`` and gripper entry ``gripper_entry``, and the per-env
+gripper actions ``gripper``). A hand whose jaw the arm's PD gains drive (the SO-100's) closes in
+two steps (``_close_gently``); the others are commanded shut at once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class Jaws:
+    """Opening and closing the hand in every env (a mixin of the solver)."""
+
+    def _set_gripper(self, envs: np.ndarray, value: float, release: bool = False) -> None:
+        """Open or close the gripper of ``envs`` (the others keep theirs), the arms held
+        still: ``gripper_steps`` steps; closing ends as soon as every env of ``envs`` grasps
+        the target (the env's ``is_grasped``) with its fingers at rest; opening to ``release``
+        a placed mover as soon as the fingers of ``envs`` are open as the release rule counts it
+        (``task_scene.open_fraction``)."""
+        self.gripper[envs] = value
+        fingers = [self._fingers()]
+
+        def gripped() -> bool:
+            now = self._fingers()
+            still = np.abs(now - fingers[0]).max(1) < self.cfg.finger_rest
+            fingers[0] = now
+            return bool(np.all((self._grasping() & still)[envs]))
+
+        def opened() -> bool:  # open as the env's release rule counts it: nothing more to wait
+            ts = self.base.task_scene
+            lo, hi = ts.finger_span
+            open_ = (self._fingers().sum(1) - lo) / (hi - lo) >= ts.open_fraction
+            return bool(np.all((open_ & ~self._grasping())[envs]))
+
+        closing = value == self.robot_hand.action_closed
+        if closing and self.robot_hand.close_step:
+            self._close_gently(envs)
+            return
+        self._execute(
+            [None] * self.num_envs,
+            self.cfg.gripper_steps,
+            until=gripped if closing else (opened if release else None),
+        )
+
+    def _close_gently(self, envs: np.ndarray) -> None:
+        """Close the jaws of ``envs`` as a hand whose jaw the arm's PD gains drive must
+        (``robots.Hand.close_gap``; shut at once, the SO-100's jaw meets the object with 100
+        N m and pushes the arm away): at once to the target's width across the jaws plus
+        ``close_gap``, then the jaw's target ``close_step`` ahead of the jaw until the jaws
+        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw."""
+        hand, grip = self.robot_hand, self.gripper_entry
+        way = np.sign(hand.action_closed - hand.action_open)
+        per_qpos = (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)
+
+        def jaw() -> np.ndarray:  # the jaw's position as an action
+            return hand.action_open + (self._fingers()[:, 0] - grip.open_qpos) * per_qpos
+
+        width = self._width_across()
+        near = np.array([hand.action(w + hand.close_gap) for w in width])
+        self.gripper[envs] = near[envs]
+        there = lambda: bool(np.all(np.abs(jaw() - self.gripper)[envs] < hand.close_step))  # noqa: E731
+        self._execute([None] * self.num_envs, self.cfg.close_steps, until=there)
+        closing = envs & ~self._grasping()
+        for _ in range(self.cfg.close_steps):
+            if not closing.any() or self.ended:
+                break
+            shut = jaw() + way * hand.close_step  # from where the jaw stands: no wind-up
+            shut = np.minimum(shut, hand.action_closed) if way > 0 else np.maximum(
+                shut, hand.action_closed
+            )
+            self.gripper[closing] = shut[closing]
+            self._execute([None] * self.num_envs, 1)
+            held = closing & self._grasping()
+            self.gripper[held] = jaw()[held] + way * hand.squeeze
+            closing &= ~held & (self.gripper != hand.action_closed)
+        self._execute([None] * self.num_envs, self.cfg.settle_steps)
+
+    def _width_across(self) -> np.ndarray:
+        """Per env, the current mover's extent along the hand's closing axis now (its
+        collision hull's vertices)."""
+        tcp = self._tcp().to_transformation_matrix().cpu().numpy()
+        obj = self.target.pose.to_transformation_matrix().cpu().numpy()
+        hull = self.base.task_scene.hulls[:, self.slot].astype(np.float64)  # (n, V, 3)
+        world = np.einsum("nij,nvj->nvi", obj[:, :3, :3], hull)
+        along = np.einsum("nvi,ni->nv", world, tcp[:, :3, 1])
+        return along.max(1) - along.min(1)
