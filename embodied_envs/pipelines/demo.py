@@ -52,8 +52,9 @@ class DemoPlan:
     workers: int | None = None
 
 
-def _run_env(job: dict) -> list[Episode]:
-    """All episodes of one env (a process of its own when there are several)."""
+def _run_env(job: dict) -> tuple[str | list, list[Episode]]:
+    """The robot uid of one env (two uids: two arms) and all its episodes (a process of its
+    own when there are several)."""
     env = gym.make(
         ENV_ID,
         **job["env_kwargs"],
@@ -64,7 +65,8 @@ def _run_env(job: dict) -> list[Episode]:
     )
     started()
     try:
-        return [
+        uids = env.unwrapped.robot_uids  # the layout's relation.robot, or the config's uid
+        return uids if isinstance(uids, str) else list(uids), [
             run_episode(env, seed, expert, film_every=job["frame_every"], closing_frame=True)
             for seed in job["seeds"]
         ]
@@ -130,8 +132,9 @@ def run_demo(plan: DemoPlan, out: Path, progress: Callable[[int], None] | None =
         _run_env,
         [(job,) for job in jobs],
         workers,
-        on_result=None if progress is None else lambda r: progress(len(r)),
+        on_result=None if progress is None else lambda r: progress(len(r[1])),
     )
+    robots, per_env = zip(*results, strict=True)  # env k's robot uid and its episodes
     fps = max(1, int(round(CONTROL_FREQ / plan.frame_every)))
     summary = dict(
         layout=plan.layout if isinstance(plan.layout, str) else list(plan.layout),
@@ -143,12 +146,12 @@ def run_demo(plan: DemoPlan, out: Path, progress: Callable[[int], None] | None =
         episodes=[],
     )
     for e in range(plan.episodes):
-        eps = [results[k][e] for k in range(plan.num_envs)]
+        eps = [per_env[k][e] for k in range(plan.num_envs)]
         video = out / f"episode_{e:03d}.mp4"
         n_frames = write_video(video, tiled([ep.frames for ep in eps]), fps, quality=7)
         envs = [
-            dict(episode=e, env=k, seed=ep.seed, layout=layouts[k], success=ep.success,
-                 steps=ep.steps, plan_failures=ep.plan_failures,
+            dict(episode=e, env=k, seed=ep.seed, layout=layouts[k], robot=robots[k],
+                 success=ep.success, steps=ep.steps, plan_failures=ep.plan_failures,
                  wall_time_s=round(ep.wall_time_s, 3))
             for k, ep in enumerate(eps)
         ]  # fmt: skip
