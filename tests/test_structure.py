@@ -167,3 +167,18 @@ def test_every_function_local_import_says_why():
         if not explained
     ]
     assert not unexplained, "\n".join(unexplained)
+
+
+MODULE_LINES = 500  # issue 33: no module of the package over this
+ENV_FILE, ENV_FILE_LINES = PACKAGE / "envs" / "pick_embodiedgen.py", 300  # the env reads in one go
+
+
+def test_no_module_is_over_its_size():
+    """Issue 33's targets: every module <= 500 lines, the env file <= 300."""
+    counts = {p: len(p.read_text().splitlines()) for p in sorted(PACKAGE.rglob("*.py"))}
+    over = [f"{p.relative_to(ROOT)}: {n} lines (limit {MODULE_LINES})"
+            for p, n in counts.items() if n > MODULE_LINES]  # fmt: skip
+    if counts[ENV_FILE] > ENV_FILE_LINES:
+        over.append(f"{ENV_FILE.relative_to(ROOT)}: {counts[ENV_FILE]} lines "
+                    f"(limit {ENV_FILE_LINES} for the env file)")  # fmt: skip
+    assert not over, "\n".join(over)

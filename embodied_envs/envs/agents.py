@@ -12,6 +12,7 @@ import numpy as np
 import torch
 from mani_skill.agents.base_agent import BaseAgent
 from mani_skill.agents.registration import REGISTERED_AGENTS
+from mani_skill.utils.structs.pose import Pose
 
 from embodied_envs import robots
 from embodied_envs.envs import contacts
@@ -85,6 +86,38 @@ def opposite_spots(spots: np.ndarray, normals, offsets, lo, hi, margin: float) -
     yaw = np.arctan2(-d[:, 1], -d[:, 0])  # facing back, toward the centre
     out[:, 3:] = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], 1)
     return out.astype(np.float32)
+
+
+def arm_bases(entries, spots: np.ndarray, top, margin: float, floor_z: float, device):
+    """Each arm's spots and base poses: the first arm at the layout's ``spots (n, 7)``, a second
+    across the table (:func:`opposite_spots`; ``top``: the table tops' half-planes and bounds,
+    ``margin`` inside the far edge); the bases at each spot, or by the entry's offsets from it
+    (``Robot.base_poses``), as tensors on ``device``.
+
+    Returns:
+        ``(spots, bases)``: a list per arm of ``(n, 7)`` arrays, and of ``(n, 7)`` tensors.
+    """
+    arm_spots = [spots]
+    if len(entries) > 1:
+        arm_spots.append(opposite_spots(spots, top.normals, top.offsets, top.lo, top.hi, margin))
+    bases = [
+        torch.as_tensor(r.base_poses(sp, floor_z), device=device)
+        for r, sp in zip(entries, arm_spots, strict=True)
+    ]
+    return arm_spots, bases
+
+
+def reset_arms(arms, entries, bases, env_idx: torch.Tensor, noise: float, joint_noise) -> None:
+    """Stand each arm at its base pose ``bases (n, 7)`` for the envs ``env_idx`` at its rest
+    joints (:func:`rest_qpos`) plus ``noise`` times ``joint_noise (b, J)`` (standard normal
+    draws) on its entry's ``noise_joints``; the fingers stay open."""
+    for agent, entry, base in zip(arms, entries, bases, strict=True):
+        agent.robot.set_root_pose(Pose.create(base[env_idx]))
+        rest = rest_qpos(agent, entry)
+        qpos = torch.as_tensor(rest, dtype=torch.float32).repeat(len(env_idx), 1)
+        noisy = list(entry.noise_joints)  # the fingers stay open
+        qpos[:, noisy] += noise * joint_noise[:, : len(noisy)]
+        agent.reset(qpos)
 
 
 def rest_qpos(agent, entry: robots.Robot) -> np.ndarray:

@@ -2,19 +2,21 @@
 
 Types come from the constructor's annotations (``CheckedEnv.check_keyword``); this module adds
 the ranges and the structured values (:func:`check_value`, which config files' values pass
-through too) and what a layout set could meet mid-simulation, refused at construction
-(:func:`one_robot`, :func:`check_layout_set`).
+through too), what a layout set could meet mid-simulation, refused at construction
+(:func:`one_robot`, :func:`check_layout_set`), and the values the keywords resolve to: the
+arms (:func:`robot_arms`), the placement limits and goal region (:func:`limits_and_goals`).
 """
 
 from __future__ import annotations
 
+from embodied_envs import robots
 from embodied_envs.config import CameraSpec, resolve_robot
+from embodied_envs.envs import agents
 from embodied_envs.envs.arguments import check_quaternion, dataclass_arg
 from embodied_envs.layout import GoalRegion, LayoutError, PlacementLimits
 from embodied_envs.layout.errors import check_number
 from embodied_envs.layout.placement import place
 from embodied_envs.layout.sets import LayoutSet
-from embodied_envs.robots import Robot
 from embodied_envs.scene.layout_scene import scene_slots
 
 NUMBER_RANGES = {  # numeric keywords: (low, high)
@@ -42,7 +44,7 @@ def check_value(name: str, value) -> None:
         check_quaternion(name, value)
 
 
-def robot_defaults(entry: Robot) -> tuple[dict, dict]:
+def robot_defaults(entry: robots.Robot) -> tuple[dict, dict]:
     """The placement-limit and goal-region fields that follow the robot (its entry's reach,
     goal inset and heights), as ``placement_limits`` and ``goal_region`` dicts."""
     limits = dict(reach_min=entry.reach[0], reach_max=entry.reach[1])
@@ -62,15 +64,48 @@ def with_defaults(value, defaults: dict):
 
 def one_robot(layout_set: LayoutSet, robot_uids: str | None) -> str:
     """The robot every layout of the set names (one agent serves every env)."""
-    robots = {
+    named = {
         x.source: resolve_robot(x.robot, robot_uids, str(x.source)) for x in layout_set.layouts
     }
-    if len(set(robots.values())) > 1:
+    if len(set(named.values())) > 1:
         raise LayoutError(
             f"layout_file: the layouts of a set must name one robot, and these differ: "
-            f"{ {str(k): v for k, v in robots.items()} }. Fix: split the set by robot."
+            f"{ {str(k): v for k, v in named.items()} }. Fix: split the set by robot."
         )
-    return next(iter(robots.values()))
+    return next(iter(named.values()))
+
+
+def robot_arms(layout_set: LayoutSet, robot_uids) -> tuple[str | tuple, tuple[robots.Robot, ...]]:
+    """The ``robot_uids`` ManiSkill gets (one uid, or a tuple of two: its multi-agent env) and
+    each arm's entry (``embodied_envs/robots.py``; the first stands at the layout's spot):
+    ``robot_uids``, else the robot every layout of the set names.
+
+    Raises:
+        ValueError: a robot the env cannot load (``agents.check_robot``), in one line.
+        LayoutError: layouts of a set that name different robots.
+    """
+    if robot_uids is not None:  # a gripperless or absent robot named in its own words
+        agents.check_robot(robot_uids)
+    two = isinstance(robot_uids, list | tuple)  # two arms: the first at the layout's spot
+    robot = one_robot(layout_set, robot_uids[0] if two else robot_uids)
+    agents.check_robot(robot)  # its model is on this machine
+    uids = tuple(robot_uids) if two else (robot,)
+    return uids if two else robot, tuple(robots.robot(u) for u in uids)
+
+
+def limits_and_goals(
+    entry: robots.Robot, placement_limits, goal_region
+) -> tuple[PlacementLimits, GoalRegion]:
+    """The ``placement_limits`` and ``goal_region`` keywords as dataclasses, the robot's reach
+    and goal band (:func:`robot_defaults`) under each field the user did not set; the goal band
+    checked to lie within the reach."""
+    limits, goals = robot_defaults(entry)
+    placement = dataclass_arg(
+        PlacementLimits, with_defaults(placement_limits, limits), "placement_limits"
+    )
+    region = dataclass_arg(GoalRegion, with_defaults(goal_region, goals), "goal_region")
+    region.check_reach(placement)
+    return placement, region
 
 
 def check_layout_set(

@@ -1,4 +1,4 @@
-"""PickEmbodiedGen-v1: pick the layout's target object and hold it at a goal."""
+"""PickEmbodiedGen-v1: a robot at a table does an EmbodiedGen layout's task (pick, place, move)."""
 
 from __future__ import annotations
 
@@ -15,12 +15,11 @@ from mani_skill.utils.registration import register
 from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
-from embodied_envs import robots
 from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP, SUPPORTED_ROBOTS, CameraSpec
 from embodied_envs.envs import agents, fast_reads, keywords
-from embodied_envs.envs.arguments import check_quaternion, dataclass_arg
+from embodied_envs.envs.arguments import check_quaternion
 from embodied_envs.envs.base import CheckedEnv
-from embodied_envs.envs.rendering import HybridRendering, base_camera, render_camera
+from embodied_envs.envs.rendering import HybridRendering, render_camera, robot_camera
 from embodied_envs.envs.tasks import INFO_KEYS, KIND_IDS, RULES, pick
 from embodied_envs.envs.tasks.scene import TaskReader, TaskScene
 from embodied_envs.layout import GoalRegion, LayoutInfo, PlacementLimits
@@ -33,57 +32,39 @@ from embodied_envs.scene.layout_scene import configuration_layouts
 
 class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     """**Task Description:**
-    Pick up the layout's target object (the first of ``relation.manipulated_objs``) with the
-    robot (``robot_uids``, else the layout's ``relation.robot``; ``embodied_envs/robots.py``),
-    which stands at the table's edge as the layout places it, and hold it still at a goal
-    point above the table (a green sphere in human renders, hidden from sensors). Distractors
-    and the table are obstacles. The scene comes from an EmbodiedGen layout file. A static
-    ground lies at the layout's floor level (the lowest point of its ``FLOOR`` objects; z = 0
-    when none): a knocked-off object comes to rest there. In hybrid frames the splat's room
-    floor shows instead of it.
+    The robot (``robot_uids``, else the layout's ``relation.robot``; or two arms, the second
+    across the table) stands at the table's edge where an EmbodiedGen layout file places it and
+    does the layout's task (``env.unwrapped.tasks``; docs/tasks.md): ``pick`` the target object
+    (the first of ``relation.manipulated_objs``) and hold it still at a goal point above the
+    table (a green sphere in human renders, hidden from sensors), ``place`` movers in or on a
+    receptacle, or ``move`` a mover 10 cm or more along a direction. Distractors and the table
+    are obstacles; a ground at the layout's floor level catches a knocked-off object.
 
-    **Randomizations** (``replace_objs=False``: the file's poses, always):
-    - per configuration (construction, ``reconfiguration_freq``, ``reconfigure=True``): with a
-      layout set (``layout_file`` a list, folder or glob) or asset pools, each env's layout and
-      pooled assets (``layout.sets.LayoutSet.draw``, from the env's seed); then table
-      yaw, robot spot and background yaw per env, by the seeded placement (env 0 keeps the
-      file's poses on the first configuration, unless the set has pools); splat backgrounds
-      are rendered then. ``env.unwrapped.layouts`` holds each env's layout,
-      ``env.unwrapped.instructions`` its task in words
-    - per episode (the reset envs): every object on the table, within the placement limits
-    - arm joints: the robot entry's ``rest_qpos`` plus N(0, ``robot_init_qpos_noise``) on its
-      ``noise_joints``; fingers open
-    - goal: uniform over the table top within the robot's reach (``goal_region``)
+    **Randomizations** (docs/layouts.md, "Placement"; ``replace_objs=False``: the file's poses):
+    - per configuration (construction, ``reconfiguration_freq``, ``reconfigure=True``): each
+      env's layout and pooled assets from a layout set (``env.unwrapped.layouts``,
+      ``env.unwrapped.instructions``), then its table yaw, robot spot and background yaw
+    - per episode (the reset envs): every object on the table, within the placement limits;
+      the goal, uniform over the table top within the robot's reach (``goal_region``); the arm
+      joints, the robot entry's ``rest_qpos`` plus N(0, ``robot_init_qpos_noise``) on its
+      ``noise_joints``, fingers open
 
-    **Task** (per env, ``env.unwrapped.tasks``; ``layout/task.py`` reads it from the layout:
-    ``relation.task``, else the sentence ``relation.task_desc``): ``pick`` (hold the object at
-    the goal), ``place`` (movers in or on a receptacle) or ``move`` (a mover 10 cm or more along
-    a direction). Success, fail extras and the dense reward of each kind: ``envs/tasks/``.
-
-    **Fail Conditions:** ``fail`` when a mover, or a receptacle object, is off the table: more
-    than ``fail_drop`` (0.05 m) below the table's top, or its origin outside the top's footprint.
-
-    **Action Space:** the robot controller's (default ``pd_joint_delta_pos``).
+    **Success Conditions:** by the env's task kind, ``envs/tasks/<kind>.py``. **Fail
+    Conditions:** a mover, or a receptacle object, off the table: more than ``fail_drop`` below
+    the table's top, or its origin outside the top's footprint (docs/layouts.md, "The floor").
 
     **Observation Space:** ManiSkill's agent state plus ``extra``: ``tcp_pose``, ``goal_pos``
     (the pick goal, or the first mover's destination), ``is_grasped``, ``task_kind`` (one-hot:
-    pick, place, move); in state modes also ``obj_pose``, ``tcp_to_obj_pos``, ``obj_to_goal_pos``.
-    Visual modes add the 128x128 ``base_camera`` (composited over the splat with ``hybrid_obs``).
+    pick, place, move); state modes add ``obj_pose``, ``tcp_to_obj_pos``, ``obj_to_goal_pos``;
+    visual modes the 128x128 ``base_camera``. **Action Space:** the robot controller's (default
+    ``pd_joint_delta_pos``). **Rewards:** :meth:`compute_dense_reward`; normalised to [0, 1].
 
-    **Rewards:** :meth:`compute_dense_reward`, in [0, its kind's ``MAX_REWARD``]; normalised [0, 1].
+    **Episode End:** ``terminated`` on ``success`` or ``fail``; truncated after
+    ``MAX_EPISODE_STEPS`` (500) control steps, 10 s.
 
-    **Episode End:** ``terminated`` on ``success`` or ``fail`` (ManiSkill sets it from both);
-    truncation after ``MAX_EPISODE_STEPS`` (500) control steps, 10 s. Both flags are in ``info``.
-
-    **Render modes:** ManiSkill's, and ``"hybrid"`` (``envs/rendering.py``): the env then is an
-    ``rgb_array`` env (so ManiSkill's ``CPUGymWrapper``, ``RecordEpisode`` and ``FrameStack``
-    take its frames unchanged) whose ``render()`` composites the human render cameras over the
-    splat; ``env.unwrapped.render_hybrid`` says so.
-
-    **Arguments:** ``__init__``'s keywords (each commented there; checked in ``envs/keywords.py``),
-    ManiSkill's own, and ``config`` (YAML/JSON files merged in order, ``embodied_envs/config.py``).
-    ``placement_limits`` and ``goal_region`` take the fields of ``layout/placement/limits.py``,
-    ``camera_cfg`` those of ``config.CameraSpec``.
+    **Arguments:** ``__init__``'s keywords (README.md, "Keywords"; checked in
+    ``envs/keywords.py``), ManiSkill's own, ``config`` files (``embodied_envs/config.py``);
+    ``render_mode="hybrid"`` composites frames over the splat (docs/hybrid_rendering.md).
     """
 
     SUPPORTED_ROBOTS = SUPPORTED_ROBOTS
@@ -133,25 +114,14 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         files = self.layout_set.files  # absolute
         self.layout_file = files[0] if len(files) == 1 else files
         self.base_layout: LayoutInfo = self.layout_set.layouts[0]
-        if robot_uids is not None:  # a gripperless or absent robot named in its own words
-            agents.check_robot(robot_uids)
-        two = isinstance(robot_uids, list | tuple)  # two arms: the first at the layout's spot
-        robot = keywords.one_robot(self.layout_set, robot_uids[0] if two else robot_uids)
-        agents.check_robot(robot)  # its model is on this machine
-        uids = tuple(robot_uids) if two else (robot,)
-        self.robot_entries = tuple(robots.robot(u) for u in uids)
+        robot, self.robot_entries = keywords.robot_arms(self.layout_set, robot_uids)
         self.robot_entry = self.robot_entries[0]  # the arm the task's TCP and grasp follow
-        if two:  # ManiSkill's multi-agent env takes a tuple (and warns if it is not listed)
-            robot, self.SUPPORTED_ROBOTS = uids, [*SUPPORTED_ROBOTS, uids]
+        if len(self.robot_entries) > 1:  # ManiSkill's multi-agent env (warns if not listed)
+            self.SUPPORTED_ROBOTS = [*SUPPORTED_ROBOTS, robot]
         # reach and goals follow the robot, for each field the user did not set
-        limits, goals = keywords.robot_defaults(self.robot_entry)
-        self.placement_limits = dataclass_arg(
-            PlacementLimits, keywords.with_defaults(placement_limits, limits), "placement_limits"
+        self.placement_limits, self.goal_region = keywords.limits_and_goals(
+            self.robot_entry, placement_limits, goal_region
         )
-        self.goal_region = dataclass_arg(
-            GoalRegion, keywords.with_defaults(goal_region, goals), "goal_region"
-        )
-        self.goal_region.check_reach(self.placement_limits)
         for name, value in dict(
             robot_init_qpos_noise=robot_init_qpos_noise, objs_z_offset=objs_z_offset,
             robot_z_offset=robot_z_offset, replace_objs=replace_objs, enable_grasp=enable_grasp,
@@ -183,12 +153,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
 
     @property
     def _default_sensor_configs(self):
-        r = self.robot_entry  # eye and target given at the layout's robot spot
-        drop = 0.0
-        if r.base_height == "floor":  # the base stands on the floor under env 0's spot
-            drop = float(self.layout_scene.robot_poses[0, 2]) - float(self.layout_scene.floor_z)
-        eye, target = (r.in_base_frame(p, drop) for p in (r.camera_eye, r.camera_target))
-        return [base_camera(self.main_agent, eye, target, r.camera_mount)]
+        return [robot_camera(self.main_agent, self.robot_entry, self.layout_scene)]
 
     @property
     def _default_human_render_camera_configs(self):
@@ -219,29 +184,19 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         )  # fmt: skip
         self.env_actors, self.obj = ls.env_actors, ls.target_actor
         self.instructions = [layout.instruction for layout in self.layouts]  # one per env
-        entry = self.robot_entry
-        span = tuple(float(np.float32(q)) for q in entry.gripper.span)  # as PhysX holds it
+        span = tuple(float(np.float32(q)) for q in self.robot_entry.gripper.span)  # as PhysX
         spots = ls.robot_poses.cpu().numpy()
         self.task_scene = TaskScene.build(self.layouts, ls.env_actors, spots, span)
-        # each arm's spot: the layout's, and for a second arm the far side of the table
-        self.robot_spots = [spots]
-        if len(self.robot_entries) > 1:
-            top = ls.episodes.top_arrays
-            self.robot_spots.append(agents.opposite_spots(
-                spots, top.normals, top.offsets, top.lo, top.hi, self.placement_limits.hull_margin
-            ))  # fmt: skip
-        # the bases: at each env's robot spot, or by the entry's offsets from it
-        self.robot_bases = [
-            torch.as_tensor(r.base_poses(sp, float(ls.floor_z)), device=ls.robot_poses.device)
-            for r, sp in zip(self.robot_entries, self.robot_spots, strict=True)
-        ]
         self.tasks = self.task_scene.tasks  # one per env (layout/task.py)
         self.task_reader = TaskReader(self, self.task_scene, ls.top_z)
-        self._kinds = sorted({t.kind for t in self.tasks}, key=KIND_IDS.get)
-        self._kind_masks = {k: self.task_scene.kinds == KIND_IDS[k] for k in self._kinds}
+        # each arm's spot (the layout's; a second arm's across the table) and base pose
+        self.robot_spots, self.robot_bases = agents.arm_bases(
+            self.robot_entries, spots, ls.episodes.top_arrays, self.placement_limits.hull_margin,
+            float(ls.floor_z), ls.robot_poses.device,
+        )  # fmt: skip
         ls.register_state(self)
         self.ground = build_ground(self.scene, altitude=ls.floor_z)
-        if entry.mobile_base:  # its wheels do not touch the ground (ManiSkill's table scene)
+        if self.robot_entry.mobile_base:  # its wheels clear the ground (ManiSkill's table scene)
             self.ground.set_collision_group_bit(group=2, bit_idx=FETCH_WHEELS_COLLISION_BIT, bit=1)
         self.goal_site = actors.build_sphere(
             self.scene, radius=pick.GOAL_THRESH, color=[0, 1, 0, 1], name="goal_site",
@@ -258,15 +213,10 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         ls = self.layout_scene
         start = ls.episodes.draw(env_idx, self._batched_episode_rng)
         with torch.device(self.device):
-            for agent, entry, bases in zip(
-                agents.all_agents(self), self.robot_entries, self.robot_bases, strict=True
-            ):
-                agent.robot.set_root_pose(Pose.create(bases[env_idx]))
-                rest = agents.rest_qpos(agent, entry)
-                qpos = torch.as_tensor(rest, dtype=torch.float32).repeat(len(env_idx), 1)
-                noisy = list(entry.noise_joints)  # the fingers stay open
-                qpos[:, noisy] += self.robot_init_qpos_noise * start.joint_noise[:, : len(noisy)]
-                agent.reset(qpos)
+            agents.reset_arms(
+                agents.all_agents(self), self.robot_entries, self.robot_bases, env_idx,
+                self.robot_init_qpos_noise, start.joint_noise,
+            )  # fmt: skip
             ls.set_episode_poses(env_idx, start.objects if self.replace_objs else {})
             dest = self.task_reader.begin_episode(env_idx, start.goal)
             # the goal marker: the pick goal, or where the first mover goes
@@ -280,25 +230,12 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         """The task state now and each present kind's rule results (``envs/tasks``)."""
         reader = self.task_reader
         goal = self.goal_site.pose.p if reader.gpu else fast_reads.positions(self.goal_site)
-        state = reader.state(goal)
-        return state, {k: RULES[k].evaluate(state) for k in self._kinds}
-
-    def _by_kind(self, results: dict, key: str) -> torch.Tensor:
-        """``key`` of each env's own kind, as a tensor on the env's device."""
-        out = None
-        for kind, res in results.items():
-            value = torch.as_tensor(res[key], device=self.device)
-            if out is None:
-                out = value
-            else:
-                mask = self._kind_masks[kind].to(self.device)
-                out = torch.where(mask.reshape(-1, *[1] * (value.ndim - 1)), value, out)
-        return out
+        return reader.rules(goal)
 
     def evaluate(self):
         state, results = self._rules()
         self._last_rules = (state, results)
-        info = {key: self._by_kind(results, key) for key in ("success", *INFO_KEYS)}
+        info = {key: self.task_reader.by_kind(results, key) for key in ("success", *INFO_KEYS)}
         ls, xp = self.layout_scene, state.xp
         movers = range(state.movers.shape[1])
         off = [ls.off_table(state.movers[:, k], self.fail_drop) for k in movers]
@@ -333,12 +270,10 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         0 to that kind's ``MAX_REWARD`` (reached on success only)."""
         state, results = self._last_rules if hasattr(self, "_last_rules") else self._rules()
         rewards = {k: {"reward": RULES[k].reward(state, res)} for k, res in results.items()}
-        return self._by_kind(rewards, "reward").float()
+        return self.task_reader.by_kind(rewards, "reward").float()
 
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        maxima = {k: {"max": np.full(self.num_envs, RULES[k].MAX_REWARD, np.float32)}
-                  for k in self._kinds}  # fmt: skip
-        return self.compute_dense_reward(obs, action, info) / self._by_kind(maxima, "max")
+        return self.compute_dense_reward(obs, action, info) / self.task_reader.max_reward()
 
 
 register(ENV_ID, PickEmbodiedGenEnv, max_episode_steps=MAX_EPISODE_STEPS)

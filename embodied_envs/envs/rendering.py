@@ -1,10 +1,11 @@
 """The env's cameras and its hybrid-render plumbing.
 
-:func:`base_camera` and :func:`render_camera` build the sensor and the human render camera's
-configs. :class:`HybridRendering` is a mixin for a :class:`~embodied_envs.envs.base.CheckedEnv`
-that loads a layout scene (``self.layouts``, ``self.layout_scene``): it holds
-``render_mode="hybrid"`` and ``hybrid_obs``. ``HybridRenderer`` (``envs/hybrid.py``) does the
-compositing; the mixin only hands it the simulator's images at the points ManiSkill makes them.
+:func:`base_camera` (:func:`robot_camera`: at the robot entry's eye and target) and
+:func:`render_camera` build the sensor and the human render camera's configs.
+:class:`HybridRendering` is a mixin for a :class:`~embodied_envs.envs.base.CheckedEnv` that loads
+a layout scene (``self.layouts``, ``self.layout_scene``): it holds ``render_mode="hybrid"`` and
+``hybrid_obs``. ``HybridRenderer`` (``envs/hybrid.py``) does the compositing; the mixin only
+hands it the simulator's images at the points ManiSkill makes them.
 """
 
 from __future__ import annotations
@@ -23,6 +24,17 @@ def base_camera(agent, eye, target, mount: str) -> CameraConfig:
     pose = sapien_utils.look_at(eye=eye, target=target)
     mount = agent.robot.links_map[mount]
     return CameraConfig("base_camera", pose, 128, 128, np.pi / 2, 0.01, 100, mount=mount)
+
+
+def robot_camera(agent, entry, layout_scene) -> CameraConfig:
+    """The ``base_camera`` of the robot entry ``entry`` (its ``camera_eye``, ``camera_target``
+    and ``camera_mount``), given at the layout's robot spot: a base that stands on the floor
+    (``base_height == "floor"``) sits lower by env 0's spot height over the floor."""
+    drop = 0.0
+    if entry.base_height == "floor":  # the base stands on the floor under env 0's spot
+        drop = float(layout_scene.robot_poses[0, 2]) - float(layout_scene.floor_z)
+    eye, target = (entry.in_base_frame(p, drop) for p in (entry.camera_eye, entry.camera_target))
+    return base_camera(agent, eye, target, entry.camera_mount)
 
 
 def render_camera(spec: CameraSpec, framing: tuple | None) -> CameraConfig:

@@ -1,8 +1,9 @@
 """The task kinds' rules: one small file per kind (``pick``, ``place``, ``move``), each with
 ``evaluate(state)`` (the success flags) and ``reward(state, info)`` (the staged dense reward,
 up to its ``MAX_REWARD``), written once for numpy arrays (the CPU simulation's one env) and
-torch tensors (the GPU's batch). What they read is :class:`TaskState`; the env fills it
-(``envs/pick_embodiedgen.py`` ``_task_state``). Where the reward is, where success is: here.
+torch tensors (the GPU's batch). What they read is :class:`TaskState`; ``TaskReader``
+(``tasks/scene.py``) reads it from the simulation and applies the rules. Where the reward is,
+where success is: here.
 """
 
 from embodied_envs.envs.tasks import move, pick, place

@@ -1,5 +1,6 @@
 """Each env's task in the scene: its movers and receptacle as actors merged over envs, their
-geometry, destinations, and the :class:`TaskState` read from the simulation every step."""
+geometry, destinations, the :class:`TaskState` read from the simulation every step, and each
+env's own kind's rule results (:meth:`TaskReader.rules`, :meth:`TaskReader.by_kind`)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from mani_skill.utils.structs import Actor
 from scipy.spatial import ConvexHull
 
 from embodied_envs.envs.agents import is_grasping, tcp_pose, tcp_position_cpu
-from embodied_envs.envs.tasks import KIND_IDS
+from embodied_envs.envs.tasks import KIND_IDS, RULES
 from embodied_envs.envs.tasks.state import OPEN_FRACTION, TaskState
 from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.layout.placement.rules import half_planes, pad_polygons
@@ -193,7 +194,8 @@ class TaskReader:
     """Reads :class:`TaskState` from the simulation: from ManiSkill's structs as tensors on
     the GPU simulation, and on the CPU simulation's one env as numpy arrays straight from the
     SAPIEN objects, as ManiSkill's ``Actor.pose``, ``Link.pose`` and ``Articulation.qpos``
-    read them (each torch operation's fixed cost would make up most of a step's rules)."""
+    read them (each torch operation's fixed cost would make up most of a step's rules). Applies
+    the rules of the kinds present (:attr:`kinds`) and picks each env's own kind's results."""
 
     def __init__(self, env, scene: TaskScene, table_z: torch.Tensor, tensors: bool | None = None):
         self.env, self.ts = env, scene
@@ -208,6 +210,8 @@ class TaskReader:
         n, m = scene.hulls.shape[:2]
         self.start = arr(np.zeros((n, m, 3), np.float32))
         self.dest = arr(np.zeros((n, m, 3), np.float32))
+        self.kinds = sorted({t.kind for t in scene.tasks}, key=KIND_IDS.get)  # those present
+        self.masks = {k: scene.kinds == KIND_IDS[k] for k in self.kinds}  # (n,) per kind
 
     def begin_episode(self, env_idx: torch.Tensor, goal) -> torch.Tensor:
         """Record the envs' mover starts and destinations after their poses were set
@@ -269,3 +273,28 @@ class TaskReader:
             rim=self.rim, rec_top=rec[:, 2] + self.rim, rec_pos=rec[:, :3], is_in=self.is_in,
             rec_is_table=self.rec_is_table, table_z=self.table_z, direction=self.direction,
         )  # fmt: skip
+
+    def rules(self, goal) -> tuple[TaskState, dict]:
+        """The state now (:meth:`state`) and each present kind's rule results
+        (``RULES[kind].evaluate``), kind -> dict."""
+        state = self.state(goal)
+        return state, {k: RULES[k].evaluate(state) for k in self.kinds}
+
+    def by_kind(self, results: dict, key: str) -> torch.Tensor:
+        """``key`` of each env's own kind (``results``: kind -> dict of per-env values), as a
+        tensor on the env's device."""
+        out = None
+        for kind, res in results.items():
+            value = torch.as_tensor(res[key], device=self.env.device)
+            if out is None:
+                out = value
+            else:
+                mask = self.masks[kind].to(self.env.device)
+                out = torch.where(mask.reshape(-1, *[1] * (value.ndim - 1)), value, out)
+        return out
+
+    def max_reward(self) -> torch.Tensor:
+        """``(n,)`` float32: each env's kind's ``MAX_REWARD``, on the env's device."""
+        n = len(self.ts.tasks)
+        maxima = {k: {"max": np.full(n, RULES[k].MAX_REWARD, np.float32)} for k in self.kinds}
+        return self.by_kind(maxima, "max")
