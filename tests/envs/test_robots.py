@@ -283,7 +283,7 @@ def test_the_expert_refuses_an_arm_it_cannot_drive_in_one_line():
             PickPlaceSolver(env)
         line = str(err.value)
         assert line.startswith("robot_uids='koch-v1.1': the scripted expert drives only ")
-        assert "['panda', 'panda_wristcam']" in line and "\n" not in line
+        assert "['panda', 'panda_wristcam', 'so100']" in line and "\n" not in line
     finally:
         env.close()
 
