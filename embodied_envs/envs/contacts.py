@@ -9,6 +9,7 @@ Panda; 1-2 ms of the others' steps, ``tools/bench/bench_robots.py``). :func:`is_
 same answer with the same rule (``robots.FingerGrasp``: both fingers press on the object with at
 least ``min_force`` newtons, each within ``max_angle`` degrees of its opening direction): on GPU
 it calls the agent's; on CPU it walks the contacts once, for both fingers, in numpy.
+:func:`grasped_cpu` answers for several objects (a task's movers) from that one walk.
 """
 
 from __future__ import annotations
