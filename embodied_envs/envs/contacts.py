@@ -9,6 +9,7 @@ Panda; 1-2 ms of the others' steps, ``tools/bench/bench_robots.py``). :func:`is_
 same answer with the same rule (``robots.FingerGrasp``: both fingers press on the object with at
 least ``min_force`` newtons, each within ``max_angle`` degrees of its opening direction): on GPU
 it calls the agent's; on CPU it walks the contacts once, for both fingers, in numpy.
+:func:`grasped_cpu` answers for several objects (a task's movers) from that one walk.
 """
 
 from __future__ import annotations
@@ -26,40 +27,57 @@ def is_grasping(agent, obj, rule: FingerGrasp = PANDA_GRASP):
     ``rule``, the Panda's by default) grasps the actor ``obj``, as
     ``agent.is_grasping(obj, rule.min_force, rule.max_angle)`` decides."""
     scene = agent.scene
-    min_force, max_angle = rule.min_force, rule.max_angle
     if scene.gpu_sim_enabled:
-        return agent.is_grasping(obj, min_force, max_angle)
-    # the rigid-body components (comparing them costs a third of comparing their entities)
+        return agent.is_grasping(obj, rule.min_force, rule.max_angle)
+    return torch.tensor([bool(grasped_cpu(agent, [obj], rule)[0])], device=scene.device)
+
+
+def grasped_cpu(agent, objs, rule: FingerGrasp = PANDA_GRASP) -> np.ndarray:
+    """``(len(objs),)`` bool: on the CPU simulation's one env, :func:`is_grasping` of each actor
+    of ``objs``, from one walk over the scene's contacts for all of them."""
+    scene = agent.scene
+    # the rigid-body components (compared by identity, as ``==`` compares them)
     fingers = agent.finger1_link._bodies[0], agent.finger2_link._bodies[0]
-    target = obj._bodies[0]
-    # per finger, the impulses of its contact points with the target: those acting on the
-    # finger (it is the contact's first body) and those acting on the target
-    on_finger, on_target = ([], []), ([], [])
+    targets = [obj._bodies[0] for obj in objs]
+    slot = {body: k for k, body in enumerate(dict.fromkeys(targets))}
+    # per target and finger, the impulses of its contact points with the target: those acting
+    # on the finger (it is the contact's first body) and those acting on the target
+    on_finger = [([], []) for _ in slot]
+    on_target = [([], []) for _ in slot]
     for contact in scene.px.get_contacts():
         a, b = contact.bodies
-        if b == target:
-            finger, into = a, on_finger
-        elif a == target:
-            finger, into = b, on_target
+        if b in slot:
+            finger, into = a, on_finger[slot[b]]
+        elif a in slot:
+            finger, into = b, on_target[slot[a]]
         else:
             continue
         side = 0 if finger == fingers[0] else 1 if finger == fingers[1] else None
         if side is not None:
             into[side].extend([point.impulse for point in contact.points])
-    # the opening directions: each finger's y axis, signed by the rule
     links = agent.finger1_link._objs[0], agent.finger2_link._objs[0]
-    for side, opens in enumerate(rule.opening):
+    step = scene.px.timestep
+    held = [_presses(on_finger[k], on_target[k], links, rule, step) for k in slot.values()]
+    return np.array([held[slot[body]] for body in targets], dtype=bool)
+
+
+def _presses(on_finger, on_target, links, rule: FingerGrasp, timestep: float) -> bool:
+    """Both fingers press on the target (their contact impulses with it, ``on_finger`` and
+    ``on_target`` per finger) with ``rule.min_force``, within ``rule.max_angle`` of opening."""
+    for side, opens in enumerate(rule.opening):  # the opening: each finger's y axis, signed
+        if not on_finger[side] and not on_target[side] and rule.min_force > 0:
+            return False  # no force
         impulse = np.zeros(3)
         if on_finger[side]:
             impulse += np.sum(on_finger[side], axis=0, dtype=np.float64)
         if on_target[side]:
             impulse -= np.sum(on_target[side], axis=0, dtype=np.float64)
-        force = impulse / scene.px.timestep
+        force = impulse / timestep
         magnitude = float(np.linalg.norm(force))
-        if magnitude < min_force:
-            return torch.tensor([False], device=scene.device)
+        if magnitude < rule.min_force:
+            return False
         opening = opens * links[side].entity_pose.to_transformation_matrix()[:3, 1]
         cos = float(np.dot(force, opening)) / magnitude
-        if math.degrees(math.acos(min(max(cos, -1.0), 1.0))) > max_angle:
-            return torch.tensor([False], device=scene.device)
-    return torch.tensor([True], device=scene.device)
+        if math.degrees(math.acos(min(max(cos, -1.0), 1.0))) > rule.max_angle:
+            return False
+    return True

@@ -15,7 +15,13 @@ static threshold, or an object just outside the goal, loses only a little of it.
 
 from __future__ import annotations
 
-from embodied_envs.envs.tasks.state import STATIC_ARM, TaskState, norm, robot_static
+from embodied_envs.envs.tasks.state import (
+    STATIC_ARM,
+    TaskState,
+    at_least,
+    norm,
+    robot_static,
+)
 
 GOAL_THRESH = 0.025  # m, object-to-goal distance that counts as placed
 STATIC_SOFT = 1.0  # rad/s over STATIC_ARM: the static credit falls to 0.24 (1 - tanh 1)
@@ -38,9 +44,9 @@ def evaluate(s: TaskState) -> dict:
 def reward(s: TaskState, info: dict):
     xp = s.xp
     reach = 1 - xp.tanh(5 * norm(s.origins[:, 0] - s.tcp))
-    place = 1 - xp.tanh(5 * (norm(info["obj_to_goal_pos"]) - GOAL_THRESH).clip(min=0))
+    place = 1 - xp.tanh(5 * at_least(norm(info["obj_to_goal_pos"]) - GOAL_THRESH, 0))
     speed = xp.abs(s.arm_qvel)
     speed = speed.max(-1) if xp.__name__ == "numpy" else speed.amax(-1)
-    static = 1 - xp.tanh((speed - STATIC_ARM).clip(min=0) / STATIC_SOFT)
+    static = 1 - xp.tanh(at_least(speed - STATIC_ARM, 0) / STATIC_SOFT)
     reward = xp.where(info["is_grasped"], 2 + place * (1 + static), reach)
     return xp.where(info["success"], MAX_REWARD, reward)

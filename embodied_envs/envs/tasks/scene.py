@@ -12,6 +12,7 @@ from mani_skill.utils.structs import Actor
 from scipy.spatial import ConvexHull
 
 from embodied_envs.envs.agents import is_grasping, tcp_pose, tcp_position_cpu
+from embodied_envs.envs.contacts import grasped_cpu
 from embodied_envs.envs.tasks import KIND_IDS, RULES
 from embodied_envs.envs.tasks.state import OPEN_FRACTION, TaskState
 from embodied_envs.layout.assets import asset_geometry
@@ -24,14 +25,32 @@ SPREAD = 0.9  # several movers' destinations spread over this part of the recept
 def quat_matrix(q):
     """Rotation matrices ``(..., 3, 3)`` of scalar-first quaternions ``q (..., 4)`` (numpy or
     torch, as ManiSkill's raw poses hold them)."""
+    if isinstance(q, np.ndarray):
+        return _quat_matrix_np(q)
     w, x, y, z = (q[..., i] for i in range(4))
     entries = [
         1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
     ]  # fmt: skip
-    stack = np.stack if isinstance(q, np.ndarray) else torch.stack
-    return stack(entries, -1).reshape(*q.shape[:-1], 3, 3)
+    return torch.stack(entries, -1).reshape(*q.shape[:-1], 3, 3)
+
+
+# quat_matrix's nine entries as ``diagonal + 2 * sign * (a + b)`` of products of two of the
+# quaternion's components (w, x, y, z = 0..3): one numpy operation each for all entries, with
+# the same float operations as the torch form, so the same values to the bit
+_FIRST = [(2, 2), (1, 2), (1, 3), (1, 2), (1, 1), (2, 3), (1, 3), (2, 3), (1, 1)]  # fmt: skip
+_SECOND = [(3, 3), (0, 3), (0, 2), (0, 3), (3, 3), (0, 1), (0, 2), (0, 1), (2, 2)]  # fmt: skip
+_LEFT, _RIGHT = np.array(_FIRST + _SECOND).T
+_SIGN = np.array([1, -1, 1, 1, 1, -1, -1, 1, 1], np.float32)  # of the second product
+_TWICE = np.array([-2, 2, 2, 2, -2, 2, 2, 2, -2], np.float32)  # the diagonal: 1 - 2 (a + b)
+
+
+def _quat_matrix_np(q: np.ndarray) -> np.ndarray:
+    products = q[..., _LEFT] * q[..., _RIGHT]
+    out = _TWICE * (products[..., :9] + _SIGN * products[..., 9:])
+    out[..., ::4] += 1
+    return out.reshape(*q.shape[:-1], 3, 3)
 
 
 def support_height(parts: tuple[np.ndarray, ...], xy: np.ndarray, default: float) -> float:
@@ -203,6 +222,7 @@ class TaskReader:
         arr = (lambda x: torch.as_tensor(x, device=env.device)) if self.gpu else np.asarray
         self.arr = arr
         self.hulls, self.centres = arr(scene.hulls), arr(scene.centres)
+        self.hulls_t = self.hulls.swapaxes(-1, -2)  # (n, m, 3, V)
         self.footprint = tuple(arr(x) for x in scene.footprint)
         self.rim, self.is_in = arr(scene.rim), arr(scene.is_in)
         self.rec_is_table, self.direction = arr(scene.rec_is_table), arr(scene.direction)
@@ -245,23 +265,30 @@ class TaskReader:
         poses = [a._objs[0].pose for a in movers]
         bodies = [a._bodies[0] for a in movers]
         rp = rec._objs[0].pose
+        if entry.grasp_check is not None:  # one walk over the contacts for every mover
+            grasped = grasped_cpu(agent, movers, entry.grasp_check)[None]
+        else:
+            grasped = np.array([[bool(is_grasping(agent, a, entry)[0]) for a in movers]])
         return (
             tcp_position_cpu(agent, entry), robot.qpos[None], robot.qvel[None],
             np.array([[np.concatenate([p.p, p.q]) for p in poses]]),
             np.array([[b.linear_velocity for b in bodies]]),
             np.array([[b.angular_velocity for b in bodies]]),
-            np.concatenate([rp.p, rp.q])[None],
-            np.array([[bool(is_grasping(agent, a, entry)[0]) for a in movers]]),
+            np.concatenate([rp.p, rp.q])[None], grasped,
         )  # fmt: skip
 
     def state(self, goal) -> TaskState:
         """The state now; ``goal (n, 3)`` the pick goal (same array type as the reads)."""
         tcp, qpos, qvel, poses, lin, ang, rec, grasped = self._read()
-        origin, rot = poses[..., :3], quat_matrix(poses[..., 3:])
+        origin, m = poses[..., :3], poses.shape[1]
+        if self.gpu:
+            rot, rec_rot = quat_matrix(poses[..., 3:]), quat_matrix(rec[:, 3:])
+        else:  # one call for the movers and the receptacle: numpy's cost is per call
+            rots = quat_matrix(np.concatenate([poses[..., 3:], rec[:, None, 3:]], 1))
+            rot, rec_rot = rots[:, :m], rots[:, m]
         p = origin + (rot @ self.centres[..., None])[..., 0]  # the movers' centres
-        low = (rot[..., 2:3, :] @ self.hulls.swapaxes(-1, -2))[..., 0, :]  # (n, m, V)
+        low = (rot[..., 2:3, :] @ self.hulls_t)[..., 0, :]  # (n, m, V)
         bottom = origin[..., 2] + (low.min(-1) if not self.gpu else low.amin(-1))
-        rec_rot = quat_matrix(rec[:, 3:])
         local = ((p - rec[:, None, :3])[..., None, :] @ rec_rot[:, None])[..., 0, :]
         lo, hi = self.ts.finger_span
         j = self.env.robot_entry.gripper.joints  # the trailing gripper joints

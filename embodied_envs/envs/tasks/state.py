@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -75,10 +76,27 @@ class TaskState:
 
     @property
     def xp(self):
-        return array_module(self.tcp)
+        return _module(self.tcp)
+
+
+def _module(x):
+    """``array_module``, numpy's arrays first (the CPU simulation's every step)."""
+    return np if isinstance(x, np.ndarray) else array_module(x)
+
+
+def at_least(x, low):
+    """``x.clip(min=low)``; numpy's clip calls ``np.maximum``, here without its Python wrapper."""
+    return np.maximum(x, low) if isinstance(x, np.ndarray) else x.clip(min=low)
+
+
+def at_most(x, high):
+    """``x.clip(max=high)``, likewise (``np.minimum``)."""
+    return np.minimum(x, high) if isinstance(x, np.ndarray) else x.clip(max=high)
 
 
 def norm(x, axis=-1):
+    if isinstance(x, np.ndarray) and x.dtype.kind == "f":  # np.linalg.norm.s sum, no checks
+        return np.sqrt(np.add.reduce(x * x, axis=axis))
     return array_module(x).linalg.norm(x, axis=axis)
 
 
@@ -101,16 +119,21 @@ def as_float(x):
 
 def current(done):
     """``(n,)`` index of each env's first mover not ``done (n, m)`` (the last when all are)."""
-    xp = array_module(done)
+    xp = _module(done)
     first = (~done).argmax(1) if xp is np else (~done).int().argmax(1)
     return xp.where(done.all(1), done.shape[1] - 1, first)
 
 
 def take(x, k):
     """Row-wise ``x[i, k[i]]`` for ``x (n, m, ...)`` and ``k (n,)``."""
-    xp = array_module(x)
-    rows = np.arange(len(k)) if xp is np else xp.arange(len(k), device=x.device)
-    return x[rows, k]
+    if isinstance(x, np.ndarray):
+        return x[_rows(len(k)), k]
+    return x[array_module(x).arange(len(k), device=x.device), k]
+
+
+@functools.cache
+def _rows(n: int) -> np.ndarray:
+    return np.arange(n)
 
 
 def staged_evaluate(s: TaskState, pose, near) -> dict:
@@ -138,8 +161,8 @@ def settled(lin, ang):
     """``(n, m)`` in [0, 1]: 1 at rest (``REST_LIN``, ``REST_ANG``), falling off smoothly with
     the speeds above them (``REST_LIN_SOFT``, ``REST_ANG_SOFT``): a mover that twitches just
     over the thresholds keeps most of its credit, one falling or sliding keeps none."""
-    over = (lin - REST_LIN).clip(min=0) / REST_LIN_SOFT
-    return 1 - array_module(lin).tanh(over + (ang - REST_ANG).clip(min=0) / REST_ANG_SOFT)
+    over = at_least(lin - REST_LIN, 0) / REST_LIN_SOFT
+    return 1 - _module(lin).tanh(over + at_least(ang - REST_ANG, 0) / REST_ANG_SOFT)
 
 
 def let_go(s: TaskState, result: dict):
@@ -151,7 +174,7 @@ def let_go(s: TaskState, result: dict):
     xp, grasped = s.xp, s.grasped
     part = xp.maximum(s.opening[:, None] / OPEN_FRACTION, result["hand"] / HAND_AWAY)
     free = result["released"] | grasped.any(1)[:, None]
-    return xp.where(grasped, 0.0, xp.where(free, 1.0, part.clip(max=1)))
+    return xp.where(grasped, 0.0, xp.where(free, 1.0, at_most(part, 1)))
 
 
 def staged_dense(s: TaskState, result: dict, max_reward: float):
