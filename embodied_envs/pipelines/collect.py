@@ -37,11 +37,12 @@ from embodied_envs.registration import ENTRY_ID, ENV_ID
 from embodied_envs.workers import report, run, started
 
 SOURCE_DESC = (
-    "embodied_envs PickPlaceSolver (embodied_envs/solvers/pick_place.py): antipodal parallel-jaw "
-    "grasps synthesised from each mover's collision mesh (embodied_envs/solvers/grasps.py), posed "
-    "where it lies within 65 degrees of straight down (the top-down grasp across its footprint's "
-    "narrow side first) and kept when the gripper clears the object, the table and the other "
-    "objects; the arm takes the one it reaches soonest (IK and a collision-free plan, lower ranks "
+    "embodied_envs PickPlaceSolver (embodied_envs/solvers/pick_place.py) with the robot's hand "
+    "entry (embodied_envs/robots.py): antipodal parallel-jaw grasps synthesised from each mover's "
+    "collision mesh (embodied_envs/solvers/grasps.py) and the asset's annotated grasps where it "
+    "has them, posed where it lies within 65 degrees of straight down (the top-down grasp across "
+    "its footprint's narrow side first; a five-joint arm's tilted in its arm's plane) and kept "
+    "when the gripper clears the object, the table and the other objects; the arm takes the one it reaches soonest (IK and a collision-free plan, lower ranks "
     "costing steps); seeded plans (straight joint lines, screw motions, RRT-Connect) approach, "
     "grasp, lift and carry it: to the goal and hold still (pick), or over its destination, "
     "lowered and released (place, move); a missed or slipped grasp is made again; pd_joint_pos "
