@@ -13,7 +13,7 @@ import numpy as np
 import sapien
 import torch
 
-from embodied_envs.solvers.follow import arm_config, rate_limited, shortened
+from embodied_envs.solvers.follow import rate_limited, shortened
 from embodied_envs.solvers.motion import STRAIGHT_BLOCKED
 
 
@@ -82,11 +82,11 @@ class ArmDriver:
         """Env i's arm joint targets that follow ``path`` (a waypoint per control step).
 
         ``pd_joint_pos`` drives each joint with ``stiffness * (target - q) - damping * qvel``,
-        so a joint lags a moving target by ``damping / stiffness`` (0.1 s for the Panda and the
-        SO-100, 5 control steps) times its velocity: each target leads its waypoint by that
-        much of the path's velocity, within the joint limits; the last target is the path's
-        end. On a 0.5 rad line at the solver's limits the arm stays within 0.022 rad of the
-        path at every step instead of 0.16 (``test_joint_targets_lead_the_path...``).
+        so a joint lags a moving target by ``damping / stiffness`` (``follow.lag``: 0.1 s for the
+        Panda and the SO-100, 5 control steps) times its velocity: each target leads its
+        waypoint by that much of the path's velocity, within the joint limits; the last target
+        is the path's end. On a 0.5 rad line at the solver's limits the arm stays within 0.022
+        rad of the path at every step instead of 0.16 (``test_joint_targets_lead_the_path...``).
         With ``convertible``, the targets move from the last ones at most ``follow.step`` a
         step (``follow.rate_limited``; the path's speed is within ``follow.speed``).
         """
@@ -94,11 +94,8 @@ class ArmDriver:
         q = np.asarray(path, dtype=np.float64)[:, :n]
         lead = q.copy()
         if len(q) >= 3:
-            arm = arm_config(self.base.agent._controller_configs, "pd_joint_pos", n)
-            lag = np.asarray(arm.damping, np.float64) / np.asarray(arm.stiffness, np.float64)
-            lag = np.broadcast_to(lag, (len(arm.joint_names),))[:n]
             dt = self.base.control_timestep
-            lead = q + lag * np.gradient(q, dt, axis=0)
+            lead = q + self.follow.lag * np.gradient(q, dt, axis=0)
             lead[-1] = q[-1]  # the path ends at rest there
             space = self.base.single_action_space
             lead = np.clip(lead, space.low[:n], space.high[:n])

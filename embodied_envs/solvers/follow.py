@@ -42,6 +42,7 @@ class FollowLimits:
     step: np.ndarray  # rad, a joint target's change between two control steps
     lead: np.ndarray  # rad, a joint target ahead of the measured joint position
     speed: np.ndarray  # rad/s, the joint speed plans are timed at (at most)
+    lag: np.ndarray  # s, how far a pd_joint_pos joint lags a moving target (damping/stiffness)
 
 
 def arm_config(configs: dict, mode: str, arm_dof: int):
@@ -85,7 +86,7 @@ def follow_limits(agent, control_freq: float, arm_dof: int, margin: float = MARG
     step = margin * np.minimum(vel / control_freq, delta)
     lead = margin * delta
     speed = SPEED_SHARE * np.minimum(np.minimum(vel, delta * control_freq), delta / lag)
-    return FollowLimits(step=step, lead=lead, speed=speed)
+    return FollowLimits(step=step, lead=lead, speed=speed, lag=lag)
 
 
 def shortened(move: np.ndarray, bound: np.ndarray) -> np.ndarray:

@@ -58,7 +58,9 @@ class Jaws:
         def jaw() -> np.ndarray:  # the jaw's position as an action
             return hand.action_open + (self._fingers()[:, 0] - grip.open_qpos) * per_qpos
 
-        width = self._width_across()
+        # the mover's extent along the closing axis (TCP y): its hull points in the TCP frame
+        held = self._held_points()
+        width = held[..., 1].max(1) - held[..., 1].min(1)
         near = np.array([hand.action(w + hand.close_gap) for w in width])
         self.gripper[envs] = near[envs]
         there = lambda: bool(np.all(np.abs(jaw() - self.gripper)[envs] < hand.close_step))  # noqa: E731
@@ -77,13 +79,3 @@ class Jaws:
             self.gripper[held] = jaw()[held] + way * hand.squeeze
             closing &= ~held & (self.gripper != hand.action_closed)
         self._execute([None] * self.num_envs, self.cfg.settle_steps)
-
-    def _width_across(self) -> np.ndarray:
-        """Per env, the current mover's extent along the hand's closing axis now (its
-        collision hull's vertices)."""
-        tcp = self._tcp().to_transformation_matrix().cpu().numpy()
-        obj = self.target.pose.to_transformation_matrix().cpu().numpy()
-        hull = self.base.task_scene.hulls[:, self.slot].astype(np.float64)  # (n, V, 3)
-        world = np.einsum("nij,nvj->nvi", obj[:, :3, :3], hull)
-        along = np.einsum("nvi,ni->nv", world, tcp[:, :3, 1])
-        return along.max(1) - along.min(1)
