@@ -65,6 +65,12 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--workers", type=positive_int, default=None, help="processes (default 1)")
     p.add_argument("--video", action="store_true", help="also an MP4 per kept episode")
+    p.add_argument(
+        "--fixed-hand",
+        action="store_true",
+        help="grasp top-down at the hand's start orientation and carry without turning it: "
+        "demos that convert to pd_ee_delta_pos, which cannot turn the hand",
+    )
     add_config_argument(p)
     p.set_defaults(func=cmd_collect, builds_env=True)
 
@@ -114,6 +120,7 @@ def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
         max_attempts=args.max_attempts,
         workers=workers,
         video=args.video,
+        fixed_hand=args.fixed_hand,
         env_kwargs=config,
     )
     with tqdm(total=plan.attempts(), desc=label, unit="episode") as bar:

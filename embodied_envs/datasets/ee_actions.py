@@ -8,6 +8,13 @@ rotated; every layout here yaws the base to face the table, so its conversions d
 :func:`joint_pos_to_ee` computes the same actions in the root frame: forward kinematics of each
 joint target gives the wanted end-effector pose relative to the root, and the action moves the
 controller's current end-effector pose there. ``embodied-envs replay -c pd_ee_*`` uses it.
+
+A held object follows its recorded path, not only the hand: ``pd_ee_delta_pos`` leaves the
+hand's orientation to the controller's IK, which turns it (50-120 degrees over an episode), so an
+object held off the hand's origin ends centimetres from where the demo put it. While both the
+recorded run (``ori_env``, stepped alongside as ManiSkill's converter steps it) and the
+converted one grasp one of this env's movers, the hand's target is shifted by the difference of
+the mover's offset from the hand in the two runs (:func:`held_shift`).
 """
 
 from __future__ import annotations
@@ -25,6 +32,45 @@ from mani_skill.utils.geometry.rotation_conversions import (
 # steps at most that a converted demo holds its last target for its task to succeed (measured:
 # 1-7 on the default layout's demos that needed any)
 SETTLE_STEPS = 20
+# metres at most that a held mover's shift moves the hand's target: a grasp this different from
+# the recorded one is not corrected (measured shifts of converted demos: under 0.05)
+MAX_SHIFT = 0.1
+
+
+def _mover_offsets(env, ee_name: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(m, 3)`` each mover's position minus the end-effector link's (world frame) and ``(m,)``
+    whether the arm grasps it; ``None`` for an env that is not this package's (no movers)."""
+    # here, not at the top: the env modules import this package's datasets through the CLI
+    from embodied_envs.envs.agents import is_grasping
+
+    u = env.unwrapped
+    scene = getattr(u, "task_scene", None)
+    if scene is None:
+        return None
+    agent = u.main_agent
+    ee = agent.robot.links_map[ee_name].pose.p[0].cpu().numpy()
+    pos = np.stack([a.pose.p[0].cpu().numpy() for a in scene.movers]) - ee
+    held = np.array([bool(is_grasping(agent, a, u.robot_entry)[0]) for a in scene.movers])
+    return pos, held
+
+
+def held_shift(ori_env, env, ee_name: str) -> np.ndarray:
+    """``(3,)`` in the robot's root frame: how far to move the converted hand's target so that a
+    mover held in both runs sits where the recorded run holds it (zero when none is held in
+    both, or the shift is over ``MAX_SHIFT``)."""
+    ori, now = _mover_offsets(ori_env, ee_name), _mover_offsets(env, ee_name)
+    if ori is None or now is None:
+        return np.zeros(3)
+    both = ori[1] & now[1]
+    if not both.any():
+        return np.zeros(3)
+    k = int(np.argmax(both))
+    shift = ori[0][k] - now[0][k]
+    if np.linalg.norm(shift) > MAX_SHIFT:
+        return np.zeros(3)
+    root = env.unwrapped.main_agent.robot.pose
+    rot = quaternion_to_matrix(root.q[0].cpu()).numpy()
+    return rot.T @ shift
 
 
 def _root_pose_of_target(pin_model, qpos: np.ndarray, ee_index: int):
@@ -77,8 +123,9 @@ def joint_pos_to_ee(
 ) -> dict:
     """Replay ``pd_joint_pos`` actions in ``env`` with an end-effector controller.
 
-    The signature is ManiSkill's converter's; ``ori_env`` (the original control mode) is not
-    needed: a ``pd_joint_pos`` action holds the joint targets themselves. When a target is
+    The signature is ManiSkill's converter's; ``ori_env`` (the original control mode) is
+    stepped alongside for the held movers' recorded path (:func:`held_shift`); a ``pd_joint_pos``
+    action holds the joint targets themselves. When a target is
     farther than one controller step, up to ``substeps`` steps are taken toward it. A demo
     ends at the first step its task succeeds, with the arm still slowing down and the object
     just inside the goal; the converted arm lags a little behind it, so after the last action
@@ -117,11 +164,15 @@ def joint_pos_to_ee(
         qpos = robot.get_qpos()[0].cpu().numpy().astype(np.float64)
         qpos[arm_joints] = common.to_numpy(ori["arm"]).reshape(-1)
         target = _root_pose_of_target(pin_model, qpos, arm.ee_link.index)
+        goal = target.p
+        target.p = goal + held_shift(ori_env, env, arm.ee_link.name)
+        ori_env.step(ori_actions[t])
         for _ in range(substeps):
             if not toward(target, ori["gripper"]):
                 break
     for _ in range(settle if len(ori_actions) else 0):
         if bool(torch.as_tensor(info["success"]).all()):
             break
+        target.p = goal + held_shift(ori_env, env, arm.ee_link.name)
         toward(target, ori["gripper"])
     return info

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import fcntl
+import functools
 import json
 import math
 import os
@@ -34,6 +35,7 @@ from embodied_envs.datasets.records import RECORD_KEY, scene_record
 from embodied_envs.paths import atomic_output
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode
 from embodied_envs.registration import ENTRY_ID, ENV_ID
+from embodied_envs.solvers.pick_place import SolverConfig
 from embodied_envs.workers import report, run, started
 
 SOURCE_DESC = (
@@ -48,6 +50,10 @@ SOURCE_DESC = (
     "grasp, lift and carry it: to the goal and hold still (pick), or over its destination, "
     "lowered and released (place, move); a missed or slipped grasp is made again; pd_joint_pos "
     "actions"
+)
+FIXED_HAND_DESC = (
+    "; every grasp top-down at the hand's start orientation, carried without turning it "
+    "(collect --fixed-hand: demos for pd_ee_delta_pos)"
 )
 OBS_MODES = ("none", "state", "rgb", "rgbd")
 
@@ -71,6 +77,8 @@ class CollectPlan:
         max_attempts: the bound on seeds tried for ``only_success``.
         workers: processes.
         video: also write one MP4 per kept episode.
+        fixed_hand: the expert keeps the hand's orientation (``SolverConfig.fixed_hand``): demos
+            that ``pd_ee_delta_pos`` replays.
         env_kwargs: further ``gym.make`` keywords (from ``--config`` files), recorded with the
             dataset's ``env_kwargs``.
     """
@@ -85,6 +93,7 @@ class CollectPlan:
     max_attempts: int | None = None
     workers: int = 1
     video: bool = False
+    fixed_hand: bool = False
     env_kwargs: dict = field(default_factory=dict)
 
     @property
@@ -150,14 +159,15 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         save_on_reset=False,
         record_reward=True,
         source_type="motionplanning",
-        source_desc=SOURCE_DESC,
+        source_desc=SOURCE_DESC + (FIXED_HAND_DESC if plan.fixed_hand else ""),
         video_fps=int(round(1 / env.unwrapped.control_timestep)),
     )
+    drive = functools.partial(expert, config=SolverConfig(fixed_hand=plan.fixed_hand))
     started()
     kept, records = 0, []
     try:
         for seed in seeds:
-            episode = run_episode(env, seed, expert)
+            episode = run_episode(env, seed, drive)
             episode.kept = episode.success or not plan.only_success
             env.flush_trajectory(save=episode.kept)
             if plan.video:

@@ -112,12 +112,13 @@ class Tally:
         return out
 
 
-def expert(tally: Tally, obs, seed: int) -> list[str]:
-    """The driver of the scripted expert: it plans and steps the episode itself."""
+def expert(tally: Tally, obs, seed: int, config=None) -> list[str]:
+    """The driver of the scripted expert: it plans and steps the episode itself (``config``: a
+    ``SolverConfig``, None for the default one)."""
     # the solver (torch, SAPIEN, mplib) only where the expert runs, not for --help
     from embodied_envs.solvers.pick_place import PickPlaceSolver
 
-    return PickPlaceSolver(tally, seed=seed).solve().reports[0].plan_failures
+    return PickPlaceSolver(tally, config, seed=seed).solve().reports[0].plan_failures
 
 
 def run_episode(

@@ -25,6 +25,10 @@ from embodied_envs.solvers.grasps import (
     widest_height,
 )
 
+# rad: ``SolverConfig.fixed_hand`` takes a synthesised grasp this close to straight down and to
+# the hand's closing direction
+FIXED_SLACK = np.deg2rad(15.0)
+
 if TYPE_CHECKING:
     from embodied_envs.solvers.pick_place import SolverConfig
 
@@ -72,6 +76,15 @@ def grasp_frame(
     return np.array([centre2[0], centre2[1], z]), closing
 
 
+def _held_so(grasps, object_to_world: np.ndarray, hand_y: np.ndarray) -> np.ndarray:
+    """``(n,)`` bool: the grasps a hand kept at its orientation takes (``SolverConfig.fixed_hand``):
+    within ``FIXED_SLACK`` of straight down, closing within it of ``hand_y`` either way."""
+    rot = object_to_world[:3, :3]
+    cos = np.cos(FIXED_SLACK)
+    down = -(grasps.approach @ rot.T)[:, 2] >= cos
+    return down & (np.abs(grasps.closing @ rot.T @ hand_y) >= cos)
+
+
 class GraspChoice:
     """The grasps to try per env (a mixin of the solver)."""
 
@@ -94,21 +107,30 @@ class GraspChoice:
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             support = float(self.base.layout_scene.top_z[i])
             grasps = asset_grasps(spec, self.grasp_config, gripper)
+            hand_y = np.array([*tcp[i, :2, 1], 0.0]) / max(np.linalg.norm(tcp[i, :2, 1]), 1e-9)
+            keep = _held_so(grasps, pose.matrix(), hand_y) if self.cfg.fixed_hand else None
             taken = posed_grasps(
                 grasps, pose.matrix(), support, self.clouds[i], self.grasp_config, gripper,
-                limit=self.cfg.grasp_candidates, with_index=True,
+                limit=self.cfg.grasp_candidates, with_index=True, keep=keep,
             )  # fmt: skip
-            synthesised = [
-                (grasp_pose(approach, closing, centre), opening)
+            synthesised = [  # with a fixed hand, closing along the hand's (the jaws' symmetry)
+                (grasp_pose(approach, closing * np.sign(closing @ hand_y or 1.0), centre), opening)
+                if self.cfg.fixed_hand else (grasp_pose(approach, closing, centre), opening)
                 for centre, closing, approach, opening, _ in taken
-            ]
+            ]  # fmt: skip
             # the asset's own annotated grasps (affordance_annot.json) lead when one is takeable
             annotated = bool(taken) and grasps.annotated is not None
             annotated = annotated and bool(grasps.annotated[taken[0][4]])
             verts = pose.transform_points(geom.vertices)
             centre, closing = grasp_frame(verts, support, self.cfg, tcp[i, :3, 1])
+            checked = (i, grasps, pose, centre)
+            if self.cfg.fixed_hand:
+                fits = self._footprint_fits(*checked, hand_y, support)
+                down = np.array([0, 0, -1.0])
+                poses.append([(grasp_pose(down, hand_y, centre), gripper.opening)] * fits
+                             + synthesised)  # fmt: skip
+                continue
             if self.robot_hand.planar:
-                checked = (i, grasps, pose, centre)
                 poses.append(self._planar(checked, closing, support, synthesised, gripper))
                 continue
             down = np.array([0, 0, -1.0])
@@ -116,7 +138,6 @@ class GraspChoice:
                 (grasp_pose(down, c, centre), gripper.opening)
                 for c in (closing, -closing)
             ]
-            checked = (i, grasps, pose, centre)
             turned = self._turned_closing(i, tcp[i], centre)
             if turned is not None and self._footprint_fits(*checked, turned, support):
                 # the wrist needs no turn: first

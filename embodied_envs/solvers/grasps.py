@@ -399,6 +399,7 @@ def posed_grasps(
     gripper: GripperModel | None = None,
     limit: int = 8,
     with_index: bool = False,
+    keep: np.ndarray | None = None,
 ) -> list[tuple]:
     """The grasps the gripper can take in this episode, best first, as world
     ``(centre, closing, approach, opening)``: approach within ``max_tilt_deg`` of straight down, the
@@ -406,14 +407,15 @@ def posed_grasps(
     ``obstacle_margin``, ranked by the pre-posing score plus the tilt, those clear of the
     obstacles by ``wide_margin`` first (among the ``posed_scan`` best, or until ``limit`` are
     clear). At most ``limit``; an empty list when none. ``with_index``: each tuple ends with
-    the grasp's index in ``grasps``."""
+    the grasp's index in ``grasps``. ``keep``: ``(n,)`` bool, the grasps considered (all when
+    None)."""
     cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
     rot, t = object_to_world[:3, :3], object_to_world[:3, 3]
     centre = grasps.centre @ rot.T + t
     closing = grasps.closing @ rot.T
     approach = grasps.approach @ rot.T
     tilt = np.arccos(np.clip(-approach[:, 2], -1.0, 1.0))
-    idx = np.flatnonzero(tilt <= np.radians(cfg.max_tilt_deg))
+    idx = np.flatnonzero((tilt <= np.radians(cfg.max_tilt_deg)) & (True if keep is None else keep))
     idx = idx[np.argsort(grasps.score[idx] + tilt[idx] / np.radians(45.0), kind="stable")]
     boxes = gripper.boxes(cfg.sweep, grasps.opening)  # (n, 3, 2, 3)
     if obstacles is not None and len(obstacles):  # those a gripper box can reach

@@ -71,6 +71,9 @@ class SolverConfig:
     convertible: bool = True  # joint targets every arm controller can replay (``follow.py``:
     # speeds and per-step changes within pd_joint_delta_pos's and pd_joint_vel's limits);
     # False: the speeds above, which only pd_joint_pos replays
+    fixed_hand: bool = False  # every grasp top-down with the hand's closing direction as it
+    # starts, and no turn of the hand on the carry: demos that pd_ee_delta_pos, which keeps the
+    # hand's orientation, replays (``grasp_choice.py``); an object the hand cannot take so fails
     motion: MotionConfig = MotionConfig()  # the seeded IK and RRT-Connect (solvers/motion.py)
     max_path_steps: int | None = None  # a longer plan (a wrist flip, a detour) is refused as
     # "long" (None: the robot's hand entry's: the Panda's 180)
@@ -216,6 +219,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
             max_path_steps=cfg.max_path_steps or hand.max_path_steps,
             joint_vel_limits=cfg.joint_vel_limits or hand.joint_vel,
             joint_acc_limits=cfg.joint_acc_limits or hand.joint_acc,
+            carry_yaws=(0.0,) if cfg.fixed_hand else cfg.carry_yaws,
             motion=dataclasses.replace(
                 cfg.motion, tilt_tolerance=max(cfg.motion.tilt_tolerance, hand.tilt_tolerance)
             ),

@@ -259,3 +259,18 @@ def test_two_collect_runs_of_the_same_seeds_give_the_same_actions(tmp_path):
         for key in a:
             assert a[key]["actions"][:].tobytes() == b[key]["actions"][:].tobytes(), key
             assert len(a[key]["actions"]) > 80  # a whole pick and place (84-134 steps)
+
+
+def test_fixed_hand_demos_convert_to_position_only_control(tmp_path):
+    """`collect --fixed-hand` says so in the dataset's source_desc, and `replay -c
+    pd_ee_delta_pos` keeps its demo: round_table seed 115, whose demo without the flag turns
+    the hand and does not convert (tests/datasets/test_ee_actions.py)."""
+    layout = DATA / "layouts" / "round_table.json"
+    args = ["--num", "1", "--seed", "115", "--only-success", "--fixed-hand", "--out", "out"]
+    res = run(["collect", "--layout", str(layout), *args], tmp_path, check=False)
+    assert "round_table.json: 1 demonstrations (1/1 successful" in res.stdout, res.stdout[-2000:]
+    traj = tmp_path / "out" / "round_table" / "trajectory.h5"
+    meta = json.loads(traj.with_suffix(".json").read_text())
+    assert "collect --fixed-hand" in meta["source_desc"]
+    res = run(["replay", "--traj-path", str(traj), "-c", "pd_ee_delta_pos"], tmp_path)
+    assert "1/1=" in res.stdout, res.stdout[-2000:]

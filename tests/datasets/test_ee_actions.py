@@ -66,3 +66,46 @@ def test_the_converted_arm_holds_the_last_target_until_success(seed):
     assert bool(done["success"][0])
     assert torch.linalg.norm(done["obj_to_goal_pos"][0]) <= 0.025
     assert cut_steps < steps <= cut_steps + SETTLE_STEPS  # the same replay, then held
+
+
+ROUND_TABLE = default_layout().parent / "round_table.json"
+
+
+def test_a_fixed_hand_demo_converts_to_position_only_control():
+    """``pd_ee_delta_pos`` keeps the hand's orientation: the expert's demo of round_table seed
+    115 turns the hand to the banana and converts to no success (measured, 2026-11-25). With
+    ``SolverConfig(fixed_hand=True)`` the hand keeps its closing direction within 20 degrees
+    all episode, and the converted replay (the held banana following its recorded path)
+    succeeds with the banana within the goal's 2.5 cm."""
+    seed = 115
+    make = lambda mode: gym.make(ENV_ID, layout_file=str(ROUND_TABLE), control_mode=mode)  # noqa: E731
+    env = make("pd_joint_pos")
+    u, actions, turns = env.unwrapped, [], []
+    step = env.step
+
+    def recorded(a):
+        out = step(a)
+        actions.append(np.asarray(a, np.float32).copy())
+        y = u.agent.tcp.pose.to_transformation_matrix()[0, :3, 1].numpy()
+        turns.append(np.degrees(np.arccos(min(1.0, abs(float(y @ y0))))))
+        return out
+
+    try:
+        env.reset(seed=seed)
+        y0 = u.agent.tcp.pose.to_transformation_matrix()[0, :3, 1].numpy()
+        env.step = recorded
+        solver = PickPlaceSolver(env, SolverConfig(fixed_hand=True), seed=seed)
+        assert bool(solver.solve().success[0])
+    finally:
+        env.close()
+    assert max(turns) <= 20.0, max(turns)
+    conv, ori = make("pd_ee_delta_pos"), make("pd_joint_pos")
+    try:
+        conv.reset(seed=seed)
+        ori.reset(seed=seed)
+        info = joint_pos_to_ee("pd_ee_delta_pos", np.array(actions), ori, conv)
+    finally:
+        conv.close()
+        ori.close()
+    assert bool(info["success"][0])
+    assert torch.linalg.norm(info["obj_to_goal_pos"][0]) <= 0.025
