@@ -115,6 +115,10 @@ class Hand:
     close_gap: float = 0.0  # m: first at once to the object's width plus this (0: shut at once)
     close_step: float = 0.0  # then its target leads the jaw by this (action) until it grasps
     squeeze: float = 0.0  # and stays this far (action) past where the jaw stands
+    convertible: bool = True  # its joint targets kept within what its other joint controllers
+    # follow (solvers/follow.py; SolverConfig.convertible). False: an arm whose one controller
+    # drives every joint, which ManiSkill 3.0.1's converter cannot convert anyway (the SO-100:
+    # at 0.4 rad/s 8 of 20 episodes ran out of steps; docs/robots.md)
 
     def action(self, opening: float) -> float:
         """The ``pd_joint_pos`` gripper action that opens the jaws ``opening`` m apart
@@ -227,7 +231,7 @@ SO100_HAND = Hand(
     action_openings=((0.005, -1.1), (0.0121, -1.0), (0.0187, -0.9), (0.0251, -0.8),
                      (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
-    close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300,
+    close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300, convertible=False,
 )  # fmt: skip
 # reach from 0.30 m: the expert's top-down grasps nearer the base need the shoulder bent back
 # (place_two, 50 seeds: 4 failures, movers 0.23-0.25 m away, when the band began at 0.20; 1 at 0.30)

@@ -217,6 +217,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
             grasp_depth=hand.grasp_depth if cfg.grasp_depth is None else cfg.grasp_depth,
             approach_offset=cfg.approach_offset or hand.approach_offset,
             max_path_steps=cfg.max_path_steps or hand.max_path_steps,
+            convertible=cfg.convertible and hand.convertible,
             joint_vel_limits=cfg.joint_vel_limits or hand.joint_vel,
             joint_acc_limits=cfg.joint_acc_limits or hand.joint_acc,
             carry_yaws=(0.0,) if cfg.fixed_hand else cfg.carry_yaws,
