@@ -21,8 +21,8 @@ from embodied_envs.envs.arguments import check_quaternion
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.rendering import HybridRendering, render_camera, robot_camera
 from embodied_envs.envs.tasks import INFO_KEYS, KIND_IDS, RULES, pick
-from embodied_envs.envs.tasks.state import concat, some
 from embodied_envs.envs.tasks.scene import TaskReader, TaskScene
+from embodied_envs.envs.tasks.state import concat, some
 from embodied_envs.layout import GoalRegion, LayoutInfo, PlacementLimits
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import default_layout
