@@ -22,6 +22,7 @@ from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.rendering import HybridRendering, render_camera, robot_camera
 from embodied_envs.envs.tasks import INFO_KEYS, KIND_IDS, RULES, pick
 from embodied_envs.envs.tasks.scene import TaskReader, TaskScene
+from embodied_envs.envs.tasks.state import concat, some
 from embodied_envs.layout import GoalRegion, LayoutInfo, PlacementLimits
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.paths import default_layout
@@ -236,12 +237,10 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         state, results = self._rules()
         self._last_rules = (state, results)
         info = {key: self.task_reader.by_kind(results, key) for key in ("success", *INFO_KEYS)}
-        ls, xp = self.layout_scene, state.xp
-        movers = range(state.movers.shape[1])
-        off = [ls.off_table(state.movers[:, k], self.fail_drop) for k in movers]
-        # an object off the table, or the receptacle knocked off
-        off.append(ls.off_table(state.rec_pos, self.fail_drop) & ~state.rec_is_table)
-        info["fail"] = torch.as_tensor(xp.stack(off, 0).any(0), device=self.device)
+        # a mover off the table, or the receptacle knocked off: one check for all
+        points = concat([state.movers, state.rec_pos[:, None]], 1)
+        off = self.layout_scene.off_table(points, self.fail_drop) & self.task_reader.can_fall
+        info["fail"] = torch.as_tensor(some(off, 1), device=self.device)
         return info
 
     def get_state_dict(self):
@@ -273,7 +272,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         return self.task_reader.by_kind(rewards, "reward").float()
 
     def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
-        return self.compute_dense_reward(obs, action, info) / self.task_reader.max_reward()
+        return self.compute_dense_reward(obs, action, info) / self.task_reader.max_reward
 
 
 register(ENV_ID, PickEmbodiedGenEnv, max_episode_steps=MAX_EPISODE_STEPS)

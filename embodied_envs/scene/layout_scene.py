@@ -183,12 +183,12 @@ class LayoutScene:
             actor.set_angular_velocity(zeros)
 
     def off_table(self, points: torch.Tensor, drop: float) -> torch.Tensor:
-        """``(n,)`` bool: each env's point (``points (n, 3)``, a tensor or a numpy array) is more
-        than ``drop`` below its table's top or outside the top's footprint (the whole top hull,
-        seen from above)."""
+        """``(n, ...)`` bool: each env's points (``points (n, ..., 3)``, a tensor or a numpy
+        array) are more than ``drop`` below its table's top or outside the top's footprint (the
+        whole top hull, seen from above)."""
         top = self.episodes.top if isinstance(points, torch.Tensor) else self.episodes.top_arrays
-        inside = top.contains(points[:, None, :2])[:, 0]
-        return (points[:, 2] < top.z - drop) | ~inside
+        low = (top.z - drop).reshape(-1, *[1] * (points.ndim - 2))
+        return (points[..., 2] < low) | ~top.contains(points[..., :2])
 
     def framing(
         self, back: float, eye_rise: float, target_rise: float, env: int = 0

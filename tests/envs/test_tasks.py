@@ -128,6 +128,8 @@ def task_state(**over):
 
 def as_torch(s: state.TaskState) -> state.TaskState:
     def to(v):
+        if v is None:  # bounds: place makes them from the fields
+            return v
         return tuple(torch.as_tensor(x) for x in v) if isinstance(v, tuple) else torch.as_tensor(v)
 
     return state.TaskState(**{k: to(v) for k, v in vars(s).items()})

@@ -19,23 +19,28 @@ from embodied_envs.envs.tasks.state import (
     STAGES,
     TaskState,
     norm,
+    number_set,
     staged_dense,
     staged_evaluate,
+    total,
 )
 
 MIN_SHIFT = 0.10  # m along the direction
 MAX_ANGLE_DEG = 45.0  # the displacement within this of the direction
 MAX_REWARD = STAGES  # the dense reward on success (its staged reward's maximum)
+numbers = number_set(MIN_SHIFT=MIN_SHIFT, COS_ANGLE=math.cos(math.radians(MAX_ANGLE_DEG)),
+                     TOUCH=TOUCH, DROP_GAP=DROP_GAP)  # fmt: skip
 
 
 def in_pose(s: TaskState):
     """``(n, m)`` each: each mover shifted far enough along the direction, on the table; near
     it (shifted, lowest point within ``DROP_GAP`` of the table)."""
+    c = numbers(s.movers)
     d = s.movers[..., :2] - s.start[..., :2]
-    along = (d * s.direction[:, None, :]).sum(-1)
-    shifted = (along >= MIN_SHIFT) & (along >= math.cos(math.radians(MAX_ANGLE_DEG)) * norm(d))
+    along = total(d * s.direction[:, None, :])
+    shifted = (along >= c.MIN_SHIFT) & (along >= c.COS_ANGLE * norm(d))
     height = s.bottom - s.table_z[:, None]
-    return shifted & (height <= TOUCH), shifted & (height <= DROP_GAP)
+    return shifted & (height <= c.TOUCH), shifted & (height <= c.DROP_GAP)
 
 
 def evaluate(s: TaskState) -> dict:

@@ -17,32 +17,70 @@ receptacle's top (or the table's) keeps its carry credit while it falls into its
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+from typing import Any
+
 from embodied_envs.envs.tasks.state import (
     DROP_GAP,
     OFF_TABLE,
     STAGES,
     TaskState,
+    every,
+    number_set,
     staged_dense,
     staged_evaluate,
+    total,
 )
+from embodied_envs.layout.placement.rules import array_module
 
 TOUCH = 0.01  # m: a lowest point this close above a support surface touches it
 MAX_REWARD = STAGES  # the dense reward on success (its staged reward's maximum)
+EDGE_TOLERANCE = 1e-9  # m: a centre this close outside the footprint's edge is over it
+numbers = number_set(TOUCH=TOUCH, DROP_GAP=DROP_GAP)
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """What :func:`in_pose` compares with that stays the same over a configuration, per env
+    (``TaskReader`` makes it once; ``TaskState.bounds``), from the state's receptacle fields.
+
+    Attributes:
+        normals: ``(n, 1, E, 2)``, ``offsets``: ``(n, 1, E)``: the footprint's half planes,
+            the offsets less ``EDGE_TOLERANCE``.
+        floor: ``(n, 1)`` the lowest a mover's lowest point rests on a receptacle object
+            (``OFF_TABLE`` over the table's top); ``-inf`` where the receptacle is the table.
+        rim: ``(n, 1)`` the highest a mover's centre rests in the receptacle's frame: its rim
+            for "in" on an object, ``inf`` otherwise.
+    """
+
+    normals: Any
+    offsets: Any
+    floor: Any
+    rim: Any
+
+    @classmethod
+    def of(cls, footprint: tuple, rim, is_in, rec_is_table, table_z) -> Bounds:
+        """From those fields of a :class:`TaskState` (numpy arrays or tensors)."""
+        (normals, offsets), xp = footprint, array_module(rim)
+        floor = xp.where(rec_is_table, -math.inf, table_z + OFF_TABLE)
+        rim = xp.where(is_in & ~rec_is_table, rim, math.inf)
+        return cls(normals[:, None], offsets[:, None] - EDGE_TOLERANCE, floor[:, None],
+                   rim[:, None])  # fmt: skip
 
 
 def in_pose(s: TaskState):
     """``(n, m)`` each: each mover rests where the task wants it (released or not); near it
     (over the footprint, lowest point within ``DROP_GAP`` of the surface there)."""
-    normals, offsets = s.footprint
+    xp, c = s.xp, numbers(s.bottom)
+    b = s.bounds
+    if b is None:
+        b = Bounds.of(s.footprint, s.rim, s.is_in, s.rec_is_table, s.table_z)
     xy = s.in_receptacle[..., :2]
-    over = ((xy[:, :, None, :] * normals[:, None]).sum(-1) >= offsets[:, None] - 1e-9).all(-1)
-    table_z, rec_top = s.table_z[:, None], s.rec_top[:, None]
-    on_object = (s.bottom >= table_z + OFF_TABLE) & (s.bottom <= rec_top + TOUCH)
-    on_object &= ~s.is_in[:, None] | (s.in_receptacle[..., 2] < s.rim[:, None])
-    on_table = s.bottom <= table_z + TOUCH
-    pose = over & s.xp.where(s.rec_is_table[:, None], on_table, on_object)
-    top = s.xp.where(s.rec_is_table[:, None], table_z, rec_top)
-    return pose, over & (s.bottom <= top + DROP_GAP)
+    over = every(total(xy[:, :, None, :] * b.normals) >= b.offsets)
+    top = xp.where(s.rec_is_table, s.table_z, s.rec_top)[:, None]  # the surface's height
+    pose = over & (s.bottom >= b.floor) & (s.in_receptacle[..., 2] < b.rim)
+    return pose & (s.bottom <= top + c.TOUCH), over & (s.bottom <= top + c.DROP_GAP)
 
 
 def evaluate(s: TaskState) -> dict:

@@ -13,7 +13,7 @@ from scipy.spatial import ConvexHull
 
 from embodied_envs.envs.agents import is_grasping, tcp_pose, tcp_position_cpu
 from embodied_envs.envs.contacts import grasped_cpu
-from embodied_envs.envs.tasks import KIND_IDS, RULES
+from embodied_envs.envs.tasks import KIND_IDS, RULES, place
 from embodied_envs.envs.tasks.state import OPEN_FRACTION, TaskState
 from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.layout.placement.rules import half_planes, pad_polygons
@@ -231,7 +231,17 @@ class TaskReader:
         self.start = arr(np.zeros((n, m, 3), np.float32))
         self.dest = arr(np.zeros((n, m, 3), np.float32))
         self.kinds = sorted({t.kind for t in scene.tasks}, key=KIND_IDS.get)  # those present
-        self.masks = {k: scene.kinds == KIND_IDS[k] for k in self.kinds}  # (n,) per kind
+        kinds = scene.kinds.to(env.device)
+        self.masks = {k: kinds == KIND_IDS[k] for k in self.kinds}  # (n,) per kind
+        maxima = torch.tensor([RULES[k].MAX_REWARD for k in RULES], dtype=torch.float32)
+        self.max_reward = maxima.to(env.device)[kinds]  # (n,) each env's kind's MAX_REWARD
+        # (n, m + 1): what can fall off the table, each mover and the receptacle not the table
+        can_fall = np.concatenate([np.ones((n, m), bool), ~scene.rec_is_table[:, None]], 1)
+        self.can_fall = arr(can_fall)
+        # place's bounds, once: the receptacle fields they come from stay the same
+        self.bounds = place.Bounds.of(
+            self.footprint, self.rim, self.is_in, self.rec_is_table, self.table_z
+        )
 
     def begin_episode(self, env_idx: torch.Tensor, goal) -> torch.Tensor:
         """Record the envs' mover starts and destinations after their poses were set
@@ -299,6 +309,7 @@ class TaskReader:
             start=self.start, dest=self.dest, in_receptacle=local, footprint=self.footprint,
             rim=self.rim, rec_top=rec[:, 2] + self.rim, rec_pos=rec[:, :3], is_in=self.is_in,
             rec_is_table=self.rec_is_table, table_z=self.table_z, direction=self.direction,
+            bounds=self.bounds,
         )  # fmt: skip
 
     def rules(self, goal) -> tuple[TaskState, dict]:
@@ -316,12 +327,6 @@ class TaskReader:
             if out is None:
                 out = value
             else:
-                mask = self.masks[kind].to(self.env.device)
+                mask = self.masks[kind]
                 out = torch.where(mask.reshape(-1, *[1] * (value.ndim - 1)), value, out)
         return out
-
-    def max_reward(self) -> torch.Tensor:
-        """``(n,)`` float32: each env's kind's ``MAX_REWARD``, on the env's device."""
-        n = len(self.ts.tasks)
-        maxima = {k: {"max": np.full(n, RULES[k].MAX_REWARD, np.float32)} for k in self.kinds}
-        return self.by_kind(maxima, "max")

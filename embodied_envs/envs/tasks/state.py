@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -50,6 +51,8 @@ class TaskState:
         rec_is_table: ``(n,)`` bool: the receptacle is the context (the table).
         table_z: ``(n,)`` height of the table's top.
         direction: ``(n, 2)`` unit vector of a move's direction in the world's XY.
+        bounds: ``place.Bounds`` of the receptacle fields, made once per configuration
+            (``TaskReader``); ``None``: ``place`` makes them on every call.
     """
 
     tcp: Any
@@ -73,6 +76,7 @@ class TaskState:
     rec_is_table: Any
     table_z: Any
     direction: Any
+    bounds: Any = None
 
     @property
     def xp(self):
@@ -100,16 +104,66 @@ def norm(x, axis=-1):
     return array_module(x).linalg.norm(x, axis=axis)
 
 
-def robot_static(s: TaskState):
+def every(x, axis=-1):
+    """``x.all(axis)``; numpy's method adds a Python wrapper to ``np.logical_and.reduce``."""
+    return np.logical_and.reduce(x, axis) if isinstance(x, np.ndarray) else x.all(axis)
+
+
+def some(x, axis=-1):
+    """``x.any(axis)``, likewise (``np.logical_or.reduce``)."""
+    return np.logical_or.reduce(x, axis) if isinstance(x, np.ndarray) else x.any(axis)
+
+
+def total(x, axis=-1):
+    """``x.sum(axis)``, likewise (``np.add.reduce``)."""
+    return np.add.reduce(x, axis) if isinstance(x, np.ndarray) else x.sum(axis)
+
+
+def concat(arrays, axis):
+    return np.concatenate(arrays, axis) if isinstance(arrays[0], np.ndarray) else \
+        array_module(arrays[0]).cat(arrays, axis)  # fmt: skip
+
+
+def number_set(**values):
+    """A function ``x -> namespace`` of ``values`` (floats, or tuples of them) as ``x``'s rules
+    compute with them: for numpy arrays, arrays of ``x``'s dtype (0-d for a float; made once
+    per dtype); for tensors, the floats and tensors on ``x``'s device (once per device).
+    numpy's arithmetic with a Python float converts it every time, twice the cost of the
+    operation itself on one env's arrays; a 0-d array of the same dtype gives the same values
+    (the float is cast to that dtype either way) without it."""
+
+    @functools.cache
+    def arrays(dtype) -> SimpleNamespace:
+        return SimpleNamespace(**{k: np.array(v, dtype) for k, v in values.items()})
+
+    @functools.cache
+    def tensors(xp, dtype, device) -> SimpleNamespace:
+        return SimpleNamespace(**{
+            k: xp.tensor(v, dtype=dtype, device=device) if isinstance(v, tuple) else float(v)
+            for k, v in values.items()
+        })  # fmt: skip
+
+    def numbers(x) -> SimpleNamespace:
+        if isinstance(x, np.ndarray):
+            return arrays(x.dtype)
+        return tensors(array_module(x), x.dtype, x.device)
+
+    return numbers
+
+
+# the numbers the shared rules compute with
+numbers = number_set(
+    ZERO=0.0, ONE=1.0, FOUR=4.0, FIVE=5.0, STATIC_ARM=STATIC_ARM, REST_LIN=REST_LIN,
+    REST_ANG=REST_ANG, OPEN_FRACTION=OPEN_FRACTION, HAND_AWAY=HAND_AWAY,
+    REST_LIN_SOFT=REST_LIN_SOFT, REST_ANG_SOFT=REST_ANG_SOFT, SETTLE=SETTLE,
+    RELEASE=2 - SETTLE, REST=(REST_LIN, REST_ANG), REST_SOFT=(REST_LIN_SOFT, REST_ANG_SOFT),
+)  # fmt: skip
+
+
+def robot_static(s: TaskState, c: SimpleNamespace | None = None):
     """``(n,)``: every arm joint slower than ``STATIC_ARM`` (ManiSkill's ``Panda.is_static``)."""
-    return (s.xp.abs(s.arm_qvel) <= STATIC_ARM).all(-1)
-
-
-def released(s: TaskState, hand=None):
-    """``(n, m)``: not grasped, and the fingers open or the hand away from the mover (``hand``:
-    the TCP's distance to each mover's centre where the caller has it)."""
-    hand = norm(s.movers - s.tcp[:, None, :]) if hand is None else hand
-    return ~s.grasped & ((s.opening >= OPEN_FRACTION)[:, None] | (hand >= HAND_AWAY))
+    c = numbers(s.arm_qvel) if c is None else c
+    return every(s.xp.abs(s.arm_qvel) <= c.STATIC_ARM)
 
 
 def as_float(x):
@@ -117,15 +171,20 @@ def as_float(x):
     return x.astype(np.float32) if isinstance(x, np.ndarray) else x.float()
 
 
-def current(done):
-    """``(n,)`` index of each env's first mover not ``done (n, m)`` (the last when all are)."""
+def current(done, every_done):
+    """Each env's first mover not ``done (n, m)`` (the last when all are, ``every_done (n,)``):
+    ``(n,)`` indices, or ``0`` where there is one mover (always the current one)."""
+    if done.shape[1] == 1:
+        return 0
     xp = _module(done)
     first = (~done).argmax(1) if xp is np else (~done).int().argmax(1)
-    return xp.where(done.all(1), done.shape[1] - 1, first)
+    return xp.where(every_done, done.shape[1] - 1, first)
 
 
 def take(x, k):
-    """Row-wise ``x[i, k[i]]`` for ``x (n, m, ...)`` and ``k (n,)``."""
+    """Row-wise ``x[i, k[i]]`` for ``x (n, m, ...)`` and ``k (n,)`` (:func:`current`'s)."""
+    if isinstance(k, int):
+        return x[:, k]
     if isinstance(x, np.ndarray):
         return x[_rows(len(k)), k]
     return x[array_module(x).arange(len(k), device=x.device), k]
@@ -136,45 +195,60 @@ def _rows(n: int) -> np.ndarray:
     return np.arange(n)
 
 
+# the columns of staged_evaluate's ``norms (n, m, 4)``, one set of operations for all: each
+# mover's speed, turning speed, distance from the TCP, distance from its destination
+LIN, ANG, HAND, DEST = range(4)
+
+
 def staged_evaluate(s: TaskState, pose, near) -> dict:
     """``place`` and ``move``: success when every mover is in its pose (``pose (n, m)``, the
     kind's own rule), released and at rest; the flags of the current mover. ``near (n, m)``:
-    the kind's looser pose a mover let go there falls into (for the reward)."""
-    hand = norm(s.movers - s.tcp[:, None, :])
-    free = released(s, hand)
-    lin, ang = norm(s.lin_vel), norm(s.ang_vel)
-    done = pose & free & (lin <= REST_LIN) & (ang <= REST_ANG)  # at_rest, speeds kept
-    k = current(done)
+    the kind's looser pose a mover let go there falls into (for the reward).
+
+    Released: not grasped, and the fingers open (``OPEN_FRACTION``) or the hand away
+    (``HAND_AWAY``) from the mover's centre; at rest: slower than ``REST_LIN`` and turning
+    slower than ``REST_ANG``."""
+    c = numbers(s.movers)
+    to_dest = s.dest - s.movers
+    vectors = (s.lin_vel, s.ang_vel, s.movers - s.tcp[:, None, :], to_dest)
+    norms = norm(concat([v[..., None, :] for v in vectors], -2))
+    away = norms[..., HAND] >= c.HAND_AWAY
+    free = ~s.grasped & ((s.opening >= c.OPEN_FRACTION)[:, None] | away)
+    done = pose & free & (norms[..., LIN] <= c.REST_LIN) & (norms[..., ANG] <= c.REST_ANG)
+    success, placed = every(done, 1), every(pose, 1)
+    k = current(done, success)
     return {
-        "success": done.all(1),
+        "success": success,
         "is_grasped": take(s.grasped, k),
-        "is_obj_placed": pose.all(1),
-        "is_robot_static": robot_static(s),
-        "obj_to_goal_pos": take(s.dest, k) - take(s.movers, k),
-        # (n, m) each, for the reward, not in info
-        "done": done, "pose": pose, "near": near, "released": free, "hand": hand,
-        "speeds": (lin, ang),
+        "is_obj_placed": placed,
+        "is_robot_static": robot_static(s, c),
+        "obj_to_goal_pos": take(to_dest, k),
+        # for the reward, not in info: (n, m) each; the first mover not in its pose
+        "pose": pose, "near": near, "released": free, "norms": norms, "to_dest": to_dest,
+        "first_off_pose": current(pose, placed),
     }  # fmt: skip
 
 
-def settled(lin, ang):
-    """``(n, m)`` in [0, 1]: 1 at rest (``REST_LIN``, ``REST_ANG``), falling off smoothly with
-    the speeds above them (``REST_LIN_SOFT``, ``REST_ANG_SOFT``): a mover that twitches just
-    over the thresholds keeps most of its credit, one falling or sliding keeps none."""
-    over = at_least(lin - REST_LIN, 0) / REST_LIN_SOFT
-    return 1 - _module(lin).tanh(over + at_least(ang - REST_ANG, 0) / REST_ANG_SOFT)
+def settled(speeds, c: SimpleNamespace):
+    """``(n, m)`` in [0, 1] from ``speeds (n, m, 2)`` (each mover's speed, turning speed): 1 at
+    rest (``REST_LIN``, ``REST_ANG``), falling off smoothly with the speeds above them
+    (``REST_LIN_SOFT``, ``REST_ANG_SOFT``): a mover that twitches just over the thresholds
+    keeps most of its credit, one falling or sliding keeps none."""
+    over = at_least(speeds - c.REST, c.ZERO) / c.REST_SOFT
+    return c.ONE - _module(speeds).tanh(total(over))
 
 
-def let_go(s: TaskState, result: dict):
+def let_go(s: TaskState, result: dict, c: SimpleNamespace):
     """``(n, m)`` in [0, 1]: 1 released (``result["released"]``), 0 grasped; between, the
     fingers' opening towards ``OPEN_FRACTION`` or the hand's distance towards ``HAND_AWAY``,
     whichever is nearer (fingers opening after a release, a hand near a mover placed before).
     A mover not grasped while the hand holds another one counts as released: the hand
     placing the next mover beside it does not pinch it."""
     xp, grasped = s.xp, s.grasped
-    part = xp.maximum(s.opening[:, None] / OPEN_FRACTION, result["hand"] / HAND_AWAY)
-    free = result["released"] | grasped.any(1)[:, None]
-    return xp.where(grasped, 0.0, xp.where(free, 1.0, at_most(part, 1)))
+    hand = result["norms"][..., HAND]
+    part = xp.maximum(s.opening[:, None] / c.OPEN_FRACTION, hand / c.HAND_AWAY)
+    free = result["released"] | some(grasped, 1)[:, None]
+    return xp.where(grasped, c.ZERO, xp.where(free, c.ONE, at_most(part, c.ONE)))
 
 
 def staged_dense(s: TaskState, result: dict, max_reward: float):
@@ -192,16 +266,16 @@ def staged_dense(s: TaskState, result: dict, max_reward: float):
     A finished mover keeps its whole credit while the hand works on the next one, so the
     reward does not fall between movers; it is ``STAGES`` exactly when every mover is in its
     pose, released and at rest, which is success (``max_reward``, equal to it)."""
-    xp, f = s.xp, as_float
-    pose, grasped = result["pose"], s.grasped
-    placed = 4 + let_go(s, result) * (2 - SETTLE + SETTLE * settled(*result["speeds"]))
-    active = grasped | result["near"]
-    off = s.movers - s.dest
-    carried = 4 - xp.tanh(5 * norm(off[..., :2])) - xp.tanh(5 * norm(off))
-    credit = xp.where(pose, placed, carried * f(active)).sum(1)
-    k = current(pose)
-    reach = 1 - xp.tanh(5 * norm(s.tcp - take(s.movers, k)))
-    credit = credit + reach * f(~take(pose | active, k))
+    xp, c = s.xp, numbers(s.movers)
+    pose, norms = result["pose"], result["norms"]
+    speed = settled(norms[..., LIN : ANG + 1], c)
+    placed = c.FOUR + let_go(s, result, c) * (c.RELEASE + c.SETTLE * speed)
+    active = s.grasped | result["near"]
+    far = xp.tanh(c.FIVE * norms[..., HAND:])  # from the TCP, from the destination
+    carried = c.FOUR - xp.tanh(c.FIVE * norm(result["to_dest"][..., :2])) - far[..., 1]
+    credit = total(xp.where(pose, placed, xp.where(active, carried, c.ZERO)), 1)
+    reach = xp.where(pose | active, c.ZERO, c.ONE - far[..., 0])
+    credit = credit + take(reach, result["first_off_pose"])
     return xp.where(result["success"], max_reward, credit / pose.shape[1])
 
 
