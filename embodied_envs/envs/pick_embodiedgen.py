@@ -243,6 +243,9 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         info["fail"] = torch.as_tensor(some(off, 1), device=self.device)
         return info
 
+    def _before_control_step(self):
+        self.task_reader.before_step()  # the arm's speeds: its displacement over each step
+
     def get_state_dict(self):
         """ManiSkill's, read in one pass on the CPU simulation (``envs/fast_reads.py``)."""
         return super().get_state_dict() if self.gpu_sim_enabled else fast_reads.cpu_state_dict(self)

@@ -55,6 +55,9 @@ def test_arrays_and_tensors_give_the_same_flags_and_rewards(env):
         u.task_reader = TaskReader(u, u.task_scene, u.layout_scene.top_z, tensors=True)
         u.task_reader.start = torch.as_tensor(arrays.start)
         u.task_reader.dest = torch.as_tensor(arrays.dest)
+        u.task_reader.fresh = torch.as_tensor(arrays.fresh)
+        if arrays.step_start is not None:  # the arm's joints when the step began
+            u.task_reader.step_start = torch.as_tensor(arrays.step_start)
         try:
             info_t = evaluate()
             reward_t = u.compute_dense_reward(None, None, info_t)

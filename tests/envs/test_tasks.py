@@ -112,7 +112,7 @@ def task_state(**over):
 
     normals, offsets = half_planes(square)
     base = dict(
-        tcp=np.array([[0.0, 0.0, 0.5]]), goal=np.zeros((1, 3)), arm_qvel=np.zeros((1, 7)),
+        tcp=np.array([[0.0, 0.0, 0.5]]), goal=np.zeros((1, 3)), arm_speed=np.zeros((1, 7)),
         opening=np.array([1.0]), movers=np.array([[[0.0, 0.0, 0.07]]]),
         origins=np.array([[[0.0, 0.0, 0.04]]]), lin_vel=np.zeros((1, 1, 3)),
         ang_vel=np.zeros((1, 1, 3)), bottom=np.array([[0.04]]), grasped=np.array([[False]]),
@@ -272,7 +272,7 @@ def test_pick_reward_is_its_maximum_at_success_and_eases_off_past_the_static_spe
     def held(qvel, off=0.0):
         return task_state(goal=np.array([[off, 0.0, 0.04]]), grasped=np.array([[True]]),
                           tcp=np.array([[0.0, 0.0, 0.05]]),
-                          arm_qvel=np.full((1, 7), qvel))  # fmt: skip
+                          arm_speed=np.full((1, 7), qvel))  # fmt: skip
 
     def r(s):
         return float(pick.reward(s, pick.evaluate(s))[0]) / pick.MAX_REWARD

@@ -45,7 +45,7 @@ def reward(s: TaskState, info: dict):
     xp = s.xp
     reach = 1 - xp.tanh(5 * norm(s.origins[:, 0] - s.tcp))
     place = 1 - xp.tanh(5 * at_least(norm(info["obj_to_goal_pos"]) - GOAL_THRESH, 0))
-    speed = xp.abs(s.arm_qvel)
+    speed = s.arm_speed
     speed = speed.max(-1) if xp.__name__ == "numpy" else speed.amax(-1)
     static = 1 - xp.tanh(at_least(speed - STATIC_ARM, 0) / STATIC_SOFT)
     reward = xp.where(info["is_grasped"], 2 + place * (1 + static), reach)

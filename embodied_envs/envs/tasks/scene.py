@@ -242,6 +242,17 @@ class TaskReader:
         self.bounds = place.Bounds.of(
             self.footprint, self.rim, self.is_in, self.rec_is_table, self.table_z
         )
+        # the arm's joint positions when the control step began (``before_step``), and the envs
+        # reset since (their arm counts as still: nothing has moved it yet)
+        self.step_start = None
+        self.fresh = arr(np.ones(n, bool))
+
+    def before_step(self) -> None:
+        """At the start of a control step (the env's ``_before_control_step``): keep the arm's
+        joint positions, from which :meth:`state` measures its speeds."""
+        robot = self.env.main_agent.robot
+        self.step_start = robot.get_qpos().clone() if self.gpu else robot._objs[0].qpos[None]
+        self.fresh[:] = False
 
     def begin_episode(self, env_idx: torch.Tensor, goal) -> torch.Tensor:
         """Record the envs' mover starts and destinations after their poses were set
@@ -254,9 +265,11 @@ class TaskReader:
         dest = self.ts.destinations(env_idx, rec, start, goal)
         if self.gpu:
             self.start[env_idx], self.dest[env_idx] = start, dest
+            self.fresh[env_idx] = True
         else:
             idx = env_idx.cpu().numpy()
             self.start[idx], self.dest[idx] = start.cpu().numpy(), dest.cpu().numpy()
+            self.fresh[idx] = True
         return dest
 
     def _read(self):
@@ -265,7 +278,7 @@ class TaskReader:
         if self.gpu:
             poses = torch.stack([a.pose.raw_pose for a in movers], 1)
             return (
-                tcp_pose(agent, entry).p, agent.robot.get_qpos(), agent.robot.get_qvel(), poses,
+                tcp_pose(agent, entry).p, agent.robot.get_qpos(), poses,
                 torch.stack([a.linear_velocity for a in movers], 1),
                 torch.stack([a.angular_velocity for a in movers], 1),
                 rec.pose.raw_pose,
@@ -280,16 +293,27 @@ class TaskReader:
         else:
             grasped = np.array([[bool(is_grasping(agent, a, entry)[0]) for a in movers]])
         return (
-            tcp_position_cpu(agent, entry), robot.qpos[None], robot.qvel[None],
+            tcp_position_cpu(agent, entry), robot.qpos[None],
             np.array([[np.concatenate([p.p, p.q]) for p in poses]]),
             np.array([[b.linear_velocity for b in bodies]]),
             np.array([[b.angular_velocity for b in bodies]]),
             np.concatenate([rp.p, rp.q])[None], grasped,
         )  # fmt: skip
 
+    def _arm_speed(self, arm_qpos):
+        """``(n, J)`` each arm joint's speed over the last control step: its displacement since
+        the step began over the step's duration (0 in an env reset since). Not the simulator's
+        joint velocities: an arm whose jaws squeeze an object can report 0.2-0.6 rad/s with its
+        joints still to 1e-4 rad (ManiSkill's SO-100; docs/robots.md)."""
+        if self.step_start is None:
+            return abs(arm_qpos) * 0
+        moved = abs(arm_qpos - self.step_start[:, : arm_qpos.shape[1]])
+        speed = moved / self.env.control_timestep
+        return speed * ~self.fresh[:, None]
+
     def state(self, goal) -> TaskState:
         """The state now; ``goal (n, 3)`` the pick goal (same array type as the reads)."""
-        tcp, qpos, qvel, poses, lin, ang, rec, grasped = self._read()
+        tcp, qpos, poses, lin, ang, rec, grasped = self._read()
         origin, m = poses[..., :3], poses.shape[1]
         if self.gpu:
             rot, rec_rot = quat_matrix(poses[..., 3:]), quat_matrix(rec[:, 3:])
@@ -303,7 +327,7 @@ class TaskReader:
         lo, hi = self.ts.finger_span
         j = self.env.robot_entry.gripper.joints  # the trailing gripper joints
         return TaskState(
-            tcp=tcp, goal=goal, arm_qvel=qvel[:, :-j],
+            tcp=tcp, goal=goal, arm_speed=self._arm_speed(qpos[:, :-j]),
             opening=(qpos[:, -j:].sum(-1) - lo) / (hi - lo),
             movers=p, origins=origin, lin_vel=lin, ang_vel=ang, bottom=bottom, grasped=grasped,
             start=self.start, dest=self.dest, in_receptacle=local, footprint=self.footprint,

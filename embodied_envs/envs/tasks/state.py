@@ -33,7 +33,8 @@ class TaskState:
     Attributes:
         tcp, goal: ``(n, 3)``: the TCP; the pick goal (``pick``) or the current mover's
             destination (``place``, ``move``).
-        arm_qvel: ``(n, J)`` arm joint speeds; ``opening``: ``(n,)`` fingers' opening, as a
+        arm_speed: ``(n, J)`` arm joint speeds over the last control step (``TaskReader``:
+            displacement over time); ``opening``: ``(n,)`` fingers' opening, as a
             part of their span (0 closed, 1 open).
         movers, lin_vel, ang_vel: ``(n, m, 3)``: each mover's centre (its collision box's)
             and velocities; ``origins``: ``(n, m, 3)`` their actors' origins.
@@ -57,7 +58,7 @@ class TaskState:
 
     tcp: Any
     goal: Any
-    arm_qvel: Any
+    arm_speed: Any
     opening: Any
     movers: Any
     origins: Any
@@ -161,9 +162,10 @@ numbers = number_set(
 
 
 def robot_static(s: TaskState, c: SimpleNamespace | None = None):
-    """``(n,)``: every arm joint slower than ``STATIC_ARM`` (ManiSkill's ``Panda.is_static``)."""
-    c = numbers(s.arm_qvel) if c is None else c
-    return every(s.xp.abs(s.arm_qvel) <= c.STATIC_ARM)
+    """``(n,)``: every arm joint slower than ``STATIC_ARM`` over the last control step
+    (ManiSkill's ``Panda.is_static`` threshold, on displacement rather than reported velocity)."""
+    c = numbers(s.arm_speed) if c is None else c
+    return every(s.arm_speed <= c.STATIC_ARM)
 
 
 def as_float(x):
