@@ -88,6 +88,8 @@ class SolverConfig:
     planar_tilts: tuple[float, ...] = (30.0, 15.0, 45.0, 0.0, 60.0)  # deg, a planar hand's
     # (robots.py) approaches from straight down toward the far side of its arm's plane, in
     # order (the SO-100 reaches a box's top 0.27 m away tilted 15-60 degrees, not straight down)
+    planar_lift_turns: tuple[float, ...] = (15.0, -15.0, 30.0, -30.0)  # deg, a planar hand's
+    # lifts turned in its arm's plane, tried after the grasp's own orientation
     option_steps: int = 10  # a grasp one rank lower is taken when its approach is this many
     # steps shorter
     grasp_attempts: int = 3  # grasp, check, lift rounds per episode (a miss opens and retries)
@@ -371,8 +373,9 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         lifts = [
             None
             if g is None
-            else [sapien.Pose(g.p + np.array([0, 0, h]), g.q) for h in cfg.lift_heights]
-            for g in grasps
+            else [sapien.Pose(g.p + np.array([0, 0, h]), q)
+                  for q in self._lift_turns(i, g) for h in cfg.lift_heights]  # fmt: skip
+            for i, g in enumerate(grasps)
         ]
         self._per_env("lift", lifts, obstacles=False)
         # held: the object came up with the hand (a physical check, not a contact threshold)
@@ -394,6 +397,18 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
             ]
             self._per_env("retreat", back, obstacles=False)
         return held
+
+    def _lift_turns(self, i: int, grasp: sapien.Pose) -> list[np.ndarray]:
+        """The hand's orientations to lift env i's grasp with: the grasp's; a planar hand's
+        also turned in its arm's vertical plane by ``planar_lift_turns`` (a five-joint arm that
+        took a block tilted cannot always rise keeping the tilt: SO-100 seeds 21 and 46)."""
+        if not self.robot_hand.planar:
+            return [grasp.q]
+        out = grasp.p[:2] - self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
+        across = np.array([-out[1], out[0], 0.0]) / max(np.linalg.norm(out), 1e-9)
+        half = np.deg2rad(np.asarray(self.cfg.planar_lift_turns)) / 2
+        turns = [sapien.Pose(q=[np.cos(h), *(np.sin(h) * across)]) for h in half]
+        return [grasp.q, *((t * sapien.Pose(q=grasp.q)).q for t in turns)]
 
     def solve(self) -> SolveResult:
         """Run the whole task in every env: each mover in turn (``pick``: the one, held at the
