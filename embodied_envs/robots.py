@@ -233,6 +233,27 @@ SO100_HAND = Hand(
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
     close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300, convertible=False,
 )  # fmt: skip
+# the Koch's hand (its jaws' collision hulls in ManiSkill 3.0.1's model): the fixed jaw is
+# link_6 (inner face at x -0.009 over z -0.069..0), the moving jaw (link "gripper") turns about
+# link_6's -y at x 0.007, z -0.013, 0 rad shut (tips 3 mm apart), 1.6 open. The grasp frame: z
+# along link_6's -z, y along its x, origin mid-opening 0.058 down (the tips 0.011 past it).
+# The moving jaw is slanted when open (its face furthest out at its tip), so the gap per angle
+# is measured at the object's top (0.015 above the origin: grasp_depth): 0.0445 m at 1.0 rad;
+# above 1.25 rad its tip no longer reaches down there. Palm: link_5 and the jaws' roots above.
+# Its pd_joint_pos drives the jaw with stiffness 100, damping 1 (1 mrad: about 3 N on an object)
+KOCH_HAND = Hand(
+    link="link_6", grasp_in_link=(0.0136, 0.0, -0.058, 0.0, 0.7071068, 0.7071068, 0.0),
+    boxes=(("opening", 0.045), ("finger_width", 0.03), ("finger_thickness", 0.015),
+           ("finger_tip", 0.011), ("finger_length", 0.033), ("palm_size", (0.052, 0.07)),
+           ("palm_z", (-0.115, -0.022))),
+    grasp_depth=0.015, approach_offset=0.04, joint_vel=(1.5,) * 5, joint_acc=(8.0,) * 5,
+    action_open=1.6, action_closed=0.0, tilt_tolerance=0.1, planar=True,
+    action_openings=((0.0027, 0.0), (0.0078, 0.1), (0.0129, 0.2), (0.0178, 0.3),
+                     (0.0211, 0.4), (0.0243, 0.5), (0.0277, 0.6), (0.0315, 0.7),
+                     (0.0357, 0.8), (0.0401, 0.9), (0.0445, 1.0), (0.0497, 1.1),
+                     (0.0563, 1.2)),
+    close_gap=0.004, close_step=0.02, squeeze=0.05, max_path_steps=300, convertible=False,
+)  # fmt: skip
 # reach from 0.30 m: the expert's top-down grasps nearer the base need the shoulder bent back
 # (place_two, 50 seeds: 4 failures, movers 0.23-0.25 m away, when the band began at 0.20; 1 at 0.30)
 PANDA = Robot(
@@ -268,17 +289,20 @@ ROBOTS: dict[str, Robot] = {
             tcp_tips=("Fixed_Jaw_tip", "Moving_Jaw_tip"),
             hand=SO100_HAND,
         ),
-        # Koch v1.1: ManiSkill's rest keyframe (turned +90 deg), jaw opened to its limit
-        # (1.6 rad: 0.078 m between gripper_tcp and gripper_tcp2; 0 rad: shut)
+        # Koch v1.1: turned +90 deg as ManiSkill's keyframes; its hand pointing down, the jaws'
+        # tips 0.10 m above the table 0.12 m out (ManiSkill's rest keyframe, folded, holds
+        # them 0.02 m above it, where the expert's planner finds the start colliding), jaw
+        # opened to its limit (1.6 rad: 0.078 m between gripper_tcp and gripper_tcp2; 0: shut)
         Robot(
             uid="koch-v1.1", names=("koch", "koch_v1.1", "koch-v1.1"),
-            rest_qpos=(0.0, 2.2, 3.017, -0.25, 0.0, 1.6),
-            noise_joints=tuple(range(5)), reach=(0.10, 0.30), goal_inset=0.05,
-            goal_height=(0.05, 0.15),
+            rest_qpos=(0.0, 2.2, 1.6, 2.0, 0.0, 1.6),
+            noise_joints=tuple(range(5)), reach=(0.12, 0.26), goal_inset=0.04,
+            goal_height=(0.04, 0.10),  # the expert reaches these holding a block
             gripper=Gripper(joints=1, open_qpos=1.6, closed_qpos=0.0, max_opening=0.078,
                             action_index=5, action_kind="delta"),
             tcp_link="gripper_tcp", grasp_check=JAW_GRASP, camera_mount="base_link",
             camera_eye=(0.50, 0.0, 0.38), camera_target=(0.16, 0.0, 0.0), base_yaw=math.pi / 2,
+            hand=KOCH_HAND,
         ),
         # Fetch: ManiSkill's table-scene joints (torso up), fingers open (0.05 m each); on the
         # floor 0.345 m behind the spot (ManiSkill: 0.325 m behind the table's edge; the spot

@@ -14,7 +14,7 @@ DATA = ROOT / "embodied_envs" / "data"  # the shipped data (./layouts and ./asse
 # place and move layouts are tested in tests/envs/test_tasks.py
 TASK_LAYOUTS = ("place_box", "place_bowl", "place_tray", "place_two", "move_left")
 # the layouts of other robots than the Panda: tested with their robot (tests/solvers/test_hands.py)
-ROBOT_LAYOUTS = ("so100_block",)
+ROBOT_LAYOUTS = ("so100_block", "koch_block")
 LAYOUTS = sorted(
     p for p in (DATA / "layouts").glob("*.json") if p.stem not in TASK_LAYOUTS + ROBOT_LAYOUTS
 )

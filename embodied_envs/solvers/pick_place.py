@@ -42,6 +42,7 @@ from embodied_envs.solvers.motion import (
     joint_levers,
 )
 from embodied_envs.solvers.place_flow import PlaceFlow
+from embodied_envs.solvers.planner_urdf import planner_urdf
 
 
 @dataclass(frozen=True)
@@ -168,8 +169,8 @@ def _planners(base) -> list[mplib.Planner]:
         robot = base.agent.robot
         _PLANNERS[base] = [
             mplib.Planner(
-                urdf=base.agent.urdf_path,
-                srdf=base.agent.urdf_path.replace(".urdf", ".srdf"),
+                urdf=(urdf := planner_urdf(base.agent.urdf_path)),
+                srdf=urdf.replace(".urdf", ".srdf"),
                 user_link_names=[link.get_name() for link in robot.get_links()],
                 user_joint_names=[joint.get_name() for joint in robot.get_active_joints()],
                 move_group=ROBOTS[base.agent.uid].hand.link,

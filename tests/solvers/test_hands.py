@@ -1,6 +1,6 @@
 """The expert on another hand than the Panda's: the hand entries (``robots.Hand``), the
-SO-100's grasp frame, its controller limits, the relaxed IK of a five-joint arm, and an expert
-episode on the SO-100's shipped layout."""
+SO-100's and the Koch's grasp frames, their controller limits, the relaxed IK of a five-joint
+arm, and expert episodes on their shipped layouts."""
 
 import gymnasium as gym
 import numpy as np
@@ -9,13 +9,14 @@ import sapien
 from conftest import DATA
 
 import embodied_envs  # noqa: F401
-from embodied_envs.robots import PANDA_HAND, ROBOTS, SO100_HAND
+from embodied_envs.robots import KOCH_HAND, PANDA_HAND, ROBOTS, SO100_HAND
 from embodied_envs.solvers import PickPlaceSolver
 from embodied_envs.solvers.follow import MARGIN, SPEED_SHARE, follow_limits
 from embodied_envs.solvers.grasp_choice import grasp_pose
 
 ENV_ID = "PickEmbodiedGen-v1"
 SO100_LAYOUT = DATA / "layouts" / "so100_block.json"
+KOCH_LAYOUT = DATA / "layouts" / "koch_block.json"
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +39,12 @@ def test_hand_actions_interpolate_the_table():
 
 
 def test_only_hands_with_an_entry_are_driven():
-    assert [u for u, r in ROBOTS.items() if r.expert] == ["panda", "panda_wristcam", "so100"]
+    assert [u for u, r in ROBOTS.items() if r.expert] == [
+        "panda",
+        "panda_wristcam",
+        "so100",
+        "koch-v1.1",
+    ]
 
 
 def test_so100_grasp_frame_is_its_tcp_with_the_approach_out_of_the_jaws(so100):
@@ -155,3 +161,67 @@ def test_so100_expert_grasps_the_block_and_carries_it_to_the_goal(so100):
     info = u.evaluate()
     assert bool(info["is_robot_static"][0]) and bool(info["success"][0])
     assert bool(result.success[0])
+
+
+@pytest.fixture(scope="module")
+def koch():
+    env = gym.make(ENV_ID, layout_file=str(KOCH_LAYOUT), control_mode="pd_joint_pos")
+    yield env
+    env.close()
+
+
+def test_koch_grasp_frame_sits_between_its_jaws(koch):
+    """The Koch's grasp frame: approach along its fixed jaw (link_6's -z), closing across the
+    jaws (link_6's x, the moving jaw's swing), its origin half the modelled opening from the
+    fixed jaw's inner face (x -0.0089 in link_6) and 0.058 m down the jaws; the jaw's actions
+    are its angle (0 shut, 1.6 open), about 1.0 rad for the modelled 0.045 m."""
+    koch.reset(seed=0)
+    solver = PickPlaceSolver(koch, seed=0)
+    u = koch.unwrapped
+    assert solver.arm_dof == 5 and not solver.cfg.convertible
+    ours = solver._tcp().to_transformation_matrix()[0].numpy()
+    jaw = u.agent.robot.links_map["link_6"].pose.to_transformation_matrix()[0].numpy()
+    np.testing.assert_allclose(ours[:3, 2], -jaw[:3, 2], atol=1e-5)
+    np.testing.assert_allclose(ours[:3, 1], jaw[:3, 0], atol=1e-5)
+    local = np.linalg.inv(jaw) @ ours[:, 3]
+    opening = dict(KOCH_HAND.boxes)["opening"]
+    np.testing.assert_allclose(local[:3], [-0.0089 + opening / 2, 0.0, -0.058], atol=2e-4)
+    assert KOCH_HAND.action(0.0445) == pytest.approx(1.0)
+    assert KOCH_HAND.action(opening) == pytest.approx(1.0, abs=0.01)
+    assert KOCH_HAND.action(0.0) == 0.0 and KOCH_HAND.action(0.1) == 1.2
+    assert ours[2, 2] < -0.97  # its rest pose holds the hand pointing down
+
+
+def test_koch_targets_follow_its_one_controller(koch):
+    """The Koch's pd_joint_delta_pos steps its arm by 0.05 rad a step, its wrist roll by 0.1:
+    its targets step at most 0.9 of those; its plans run at its entry's speeds (one controller:
+    not convertible)."""
+    lim = follow_limits(koch.unwrapped.agent, 50, 5)
+    np.testing.assert_allclose(lim.step, MARGIN * np.array([0.05, 0.05, 0.05, 0.05, 0.1]))
+    koch.reset(seed=0)
+    solver = PickPlaceSolver(koch, seed=0)
+    np.testing.assert_allclose(solver.planners[0].joint_vel_limits, KOCH_HAND.joint_vel)
+
+
+def test_koch_expert_holds_the_block_at_the_goal(koch):
+    """Seed 7 of the Koch's layout: its jaw closes gently on the 3 cm block (it stays within
+    1.5 cm of where it lay; the jaw then stands near 0.6 rad, where its low friction still
+    holds it), and the expert holds it at the goal within 250 steps, grasped."""
+    koch.reset(seed=7)
+    u = koch.unwrapped
+    start = u.task_scene.movers[0].pose.p[0].numpy().copy()
+    solver = PickPlaceSolver(koch, seed=7)
+    closed = []
+    gentle = solver._close_gently
+
+    def watched(envs):
+        gentle(envs)
+        closed.append((u.task_scene.movers[0].pose.p[0].numpy().copy(), solver._fingers()[0, 0]))
+
+    solver._close_gently = watched
+    result = solver.solve()
+    info = u.evaluate()
+    assert closed and np.linalg.norm(closed[0][0][:2] - start[:2]) < 0.015
+    assert 0.45 < closed[0][1] < 0.7
+    assert bool(info["is_grasped"][0]) and bool(info["is_obj_placed"][0])
+    assert not solver.reports[0].plan_failures and result.steps < 250

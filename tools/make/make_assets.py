@@ -278,6 +278,13 @@ def block() -> Asset:
     return Asset("block", [Part(box([e, e, e], [0, 0, e / 2]), (0.85, 0.35, 0.15))], mass=0.05)
 
 
+def small_block() -> Asset:
+    """A 3 cm wooden block: what the Koch's jaw holds (docs/robots.md)."""
+    e = 0.03
+    colour = (0.2, 0.55, 0.3)
+    return Asset("small_block", [Part(box([e, e, e], [0, 0, e / 2]), colour)], mass=0.02)
+
+
 def banana() -> Asset:
     """An irregular curved object: ellipsoid segments along an arc."""
     parts, collision = [], []
@@ -297,7 +304,7 @@ def banana() -> Asset:
 
 ASSETS = [
     rect_table, round_table, can, cracker_box, bottle, mug, bowl, banana, fruit_bowl, tray,
-    storage_box, block,
+    storage_box, block, small_block,
 ]
 
 

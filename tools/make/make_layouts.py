@@ -174,6 +174,22 @@ LAYOUTS = [
         },
         robot="so100",
     ),
+    # the Koch's layout: a 3 cm block its low-friction jaw holds, within its reach
+    LayoutSpec(
+        name="koch_block",
+        context="table",
+        manipulated=("small_block",),
+        distractors=("can",),
+        task="Pick up the block and hold it at the green goal.",
+        poses={
+            "background": TASK_ROOM["background"],
+            "table": TASK_ROOM["table"],
+            "koch": TASK_ROOM[ROBOT],
+            "small_block": [-0.254, 0.098, 0.775, 0.0, 0.0, 0.0, 1.0],
+            "can": [-0.242, 0.218, 0.82, 0.0, 0.0, 0.2549, 0.967],
+        },
+        robot="koch",
+    ),
 ]
 
 DESCRIPTIONS = {
@@ -190,6 +206,7 @@ DESCRIPTIONS = {
     "storage_box": "a low brown cardboard storage box",
     "background": "a room with a window and a bookshelf",
     "block": "a small orange wooden block",
+    "small_block": "a small green wooden block",
 }
 
 
