@@ -4,12 +4,14 @@
 readable, the env id is known, the layout exists, and its content is the one recorded; a changed
 scene is said in one line, not discovered as "0/3 saved". :func:`replay` then runs ManiSkill's
 ``replay_trajectory`` with conversions from ``pd_joint_pos`` to end-effector control modes in
-the robot's root frame (:mod:`embodied_envs.datasets.ee_actions`).
+the robot's root frame (:mod:`embodied_envs.datasets.ee_actions`) and, for an arm with one
+controller, to its other joint modes (:mod:`embodied_envs.datasets.joint_actions`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 from pathlib import Path
 
@@ -99,20 +101,25 @@ def check_replayable(traj_path: str | Path) -> list[str]:
 
 @contextlib.contextmanager
 def root_frame_conversion():
-    """ManiSkill's ``replay_trajectory`` takes no converter argument and looks its end-effector
-    converter up as a module global (``conversion.from_pd_joint_pos_to_ee``): ours (root-frame
-    actions) is set there for the ``with`` block only, and the original put back after."""
+    """ManiSkill's ``replay_trajectory`` takes no converter argument and looks its converters
+    up as module globals (``conversion.from_pd_joint_pos``, ``from_pd_joint_pos_to_ee``): ours
+    are set there for the ``with`` block only, and the originals put back after: end-effector
+    actions in the robot's root frame (``ee_actions``), and joint modes for an arm with one
+    controller (``joint_actions``)."""
     # ManiSkill's conversion module and ours import torch: only when a replay runs
     from mani_skill.trajectory.utils.actions import conversion
 
     from embodied_envs.datasets.ee_actions import joint_pos_to_ee
+    from embodied_envs.datasets.joint_actions import joint_pos_to_joint
 
-    original = conversion.from_pd_joint_pos_to_ee
+    to_ee, to_joint = conversion.from_pd_joint_pos_to_ee, conversion.from_pd_joint_pos
     conversion.from_pd_joint_pos_to_ee = joint_pos_to_ee
+    conversion.from_pd_joint_pos = functools.partial(joint_pos_to_joint, combined=to_joint)
     try:
         yield
     finally:
-        conversion.from_pd_joint_pos_to_ee = original
+        conversion.from_pd_joint_pos_to_ee = to_ee
+        conversion.from_pd_joint_pos = to_joint
 
 
 def replay(options) -> None:
