@@ -15,6 +15,9 @@ import torch
 
 from embodied_envs.solvers.follow import rate_limited, shortened
 from embodied_envs.solvers.motion import STRAIGHT_BLOCKED
+from embodied_envs.solvers.screw import polyline_trajectory, screw_waypoints
+
+START_REFUSED = " at waypoint 0"  # how a path_ok reason that refuses a path's start ends
 
 
 class ArmDriver:
@@ -41,9 +44,7 @@ class ArmDriver:
         target = np.concatenate([link.p, link.q])
         dt = self.base.control_timestep
         if how == "screw":
-            res = self.planners[i].plan_screw(
-                target, qpos.copy(), time_step=dt, use_point_cloud=obstacles
-            )
+            res = self._screw(i, target, qpos, obstacles)
         else:
             rng = np.random.default_rng([self.seed, i, *key])
             res = self.motion[i].plan_to_pose(target, qpos, rng, dt, obstacles, within, detour)
@@ -53,9 +54,27 @@ class ArmDriver:
             return None, f"{len(res['position'])} steps, over max_path_steps"
         return res["position"], ""
 
-    def _execute(self, paths: list[np.ndarray | None], extra_steps: int = 0, until=None) -> None:
+    def _screw(self, i: int, target: np.ndarray, qpos: np.ndarray, obstacles: bool) -> dict:
+        """mplib's screw motion of env i's planned link to ``target`` (world), timed in closed
+        form at the planner's joint limits (``solvers/screw.py``): {"status", "position"}."""
+        planner = self.planners[i]
+        planner.planning_world.set_use_point_cloud(obstacles)
+        planner.planning_world.set_use_attach(False)
+        goal = planner.transform_goal_to_wrt_base(target)
+        path, status = screw_waypoints(planner, goal, qpos)
+        if path is None:
+            return {"status": status}
+        limits = planner.joint_vel_limits, planner.joint_acc_limits
+        dt = self.base.control_timestep
+        return {"status": "Success", "position": polyline_trajectory(path, *limits, dt)}
+
+    def _execute(
+        self, paths: list[np.ndarray | None], extra_steps: int = 0, until=None, open_before=0
+    ) -> None:
         """Step all envs along their paths in lockstep; envs without a path hold still.
-        ``until()``: checked after every step; True ends the steps early."""
+        ``until()``: checked after every step; True ends the steps early. ``open_before``:
+        an env's hand is commanded open this many steps before the end of its path (a release
+        while the lowering brakes)."""
         paths = [None if p is None or not len(p) else self._commands(p, i)
                  for i, p in enumerate(paths)]  # fmt: skip
         lengths = [len(p) if p is not None else 0 for p in paths]
@@ -66,6 +85,8 @@ class ArmDriver:
             n = self.arm_dof
             action = np.zeros((self.num_envs, n + 1), np.float32)
             for i, path in enumerate(paths):
+                if path is not None and open_before and t >= len(path) - open_before:
+                    self.gripper[i] = self.robot_hand.action_open
                 if path is not None:
                     action[i, :n] = path[min(t, len(path) - 1)]
                 else:  # holds its last targets
@@ -134,6 +155,7 @@ class ArmDriver:
         path_ok=None,
         on_choice=None,
         planned=None,
+        open_before: int = 0,
     ) -> list[sapien.Pose | None]:
         """Plan and execute one stage in every env that has not failed yet.
 
@@ -150,10 +172,14 @@ class ArmDriver:
             then: with ``option_steps``, ``then(i, k, qpos)``: the steps of the move that
                 follows from where option k's path ends (None: it cannot be planned), added
                 to the option's cost.
-            path_ok: ``path_ok(i, path)``: why env i's planned path is refused ("" when not).
+            path_ok: ``path_ok(i, path)``: why env i's planned path is refused ("" when not);
+                a reason ending in ``START_REFUSED`` refuses the start, which every path
+                shares: no further option or method is planned.
             on_choice: ``on_choice(i, k)``: env i will run option k (before any env moves).
             planned: ``planned(i)``: env i's path, planned already (from where the last stage
                 ended), or None to plan it here.
+            open_before: each env's hand is commanded open this many steps before its path
+                ends (``_execute``).
 
         Returns:
             Per env the pose that was planned to (None where none could be).
@@ -190,7 +216,7 @@ class ArmDriver:
                 return False
             return np.abs(self._qpos()[:, :n] - ends).max() < self.cfg.settle_tolerance
 
-        self._execute(paths, extra_steps=settle, until=arrived if settle else None)
+        self._execute(paths, settle, arrived if settle else None, open_before)
         return chosen
 
     def _choose(self, i, options, qpos, methods, obstacles, option_steps, then, path_ok):
@@ -229,6 +255,8 @@ class ArmDriver:
                     label = "" if len(options) == 1 else f"option {k}: "
                     if path is None:
                         failures.append(f"{label}{how}: {status}")
+                        if status.endswith(START_REFUSED):  # every path starts there
+                            return best, failures
                         continue
                     cost = len(path) + (option_steps or 0) * k
                     if best is not None and (cost, k) > (best[0], best[3]):

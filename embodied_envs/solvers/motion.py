@@ -4,8 +4,9 @@ mplib 0.1.1 (the version ManiSkill 3.0.1 pins) draws its IK restarts from pinocc
 random state and its RRTConnect from OMPL's time-seeded generator, and neither can be seeded
 from Python: the same episode can succeed in one run and fail in the next, and two datasets
 of the same seeds differ. ``SeededPlanner`` keeps mplib for what is deterministic (the robot
-model, forward kinematics, CLIK, FCL collision checks, the screw planner, TOPP-RA time
-parameterisation) and draws everything random from a numpy ``Generator`` the caller seeds:
+model, forward kinematics, CLIK, FCL collision checks, TOPP-RA time parameterisation; its
+screw walk is ``screw.py``'s, timed in closed form) and draws everything random from a numpy
+``Generator`` the caller seeds:
 
 - IK: joint-limited CLIK from the current configuration first, then from configurations drawn
   uniformly within the joint limits; collision-free, distinct solutions, nearest first.
@@ -34,6 +35,8 @@ import sapien
 from mani_skill.utils.geometry.trimesh_utils import get_component_mesh
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
+
+from embodied_envs.solvers.screw import rest_to_rest
 
 STRAIGHT_BLOCKED = "the straight joint line is blocked"  # plan_to_pose(detour=False)
 START_COLLIDES = "the start collides and the straight line is blocked: no detour is searched"
@@ -101,15 +104,7 @@ def straight_line_trajectory(
         return start[None].copy()
     speed = np.min(np.asarray(vel, np.float64)[moving] / span[moving])  # ds/dt at most
     rate = np.min(np.asarray(acc, np.float64)[moving] / span[moving])  # d2s/dt2 at most
-    ramp = min(speed / rate, np.sqrt(1 / rate))  # seconds accelerating (and braking)
-    speed = rate * ramp
-    duration = 1 / speed + ramp
-    t = np.append(np.arange(0.0, duration, time_step), duration)
-    s = np.where(
-        t < ramp,
-        rate * t**2 / 2,
-        np.where(t > duration - ramp, 1 - rate * (duration - t) ** 2 / 2, speed * (t - ramp / 2)),
-    )
+    s = rest_to_rest(speed, rate, time_step)
     return start + s[:, None] * (goal - start)
 
 

@@ -64,7 +64,7 @@ class PlaceFlow:
                     for i in range(self.num_envs)]  # fmt: skip
 
         self._per_env("lower", shifted(-np.maximum(drop, 0.0)), obstacles=False,
-                      settle=self.cfg.settle_steps)  # fmt: skip
+                      settle=self.cfg.settle_steps, open_before=self.cfg.open_before)  # fmt: skip
         self._set_gripper(envs, self.robot_hand.action_open, release=True)
         tcp = self._tcp().raw_pose.cpu().numpy()
         self._per_env("withdraw", shifted(np.full(self.num_envs, self.cfg.approach_offset)),
@@ -145,19 +145,23 @@ class PlaceFlow:
         "" when neither."""
         model = self.planners[i].pinocchio_model
         fingers = self._fingers()[i]
-        base = sapien.Pose(*np.split(self.base.agent.robot.pose.raw_pose[i].cpu().numpy(), [3]))
-        points = []
-        for k, q in enumerate(path):
+        base = self.base.agent.robot.pose.raw_pose[i].cpu().numpy().astype(np.float64)
+        links = np.empty((len(path), 7))
+        for k, q in enumerate(path):  # the planned link's pose (base frame) at each waypoint
             model.compute_forward_kinematics(np.concatenate([q[: self.arm_dof], fingers]))
-            p = model.get_link_pose(self.motion[i].link)
-            tcp = (base * sapien.Pose(p[:3], p[3:]) * self.grasp_in_link).to_transformation_matrix()
-            points.append(tcp[:3] @ np.append(in_hand, 1.0))
-            if held is not None and self.cloud_trees:
-                near, _ = self.cloud_trees[i].query(held @ tcp[:3, :3].T + tcp[:3, 3])
-                if near.min() < self.cfg.carry_clearance:
-                    return f"the held object meets an obstacle at waypoint {k}"
+            links[k] = model.get_link_pose(self.motion[i].link)
+        grasp = self.grasp_in_link.to_transformation_matrix()
+        tcp = _matrices(base[None]) @ _matrices(links) @ grasp  # (T, 4, 4) the grasp frame
+        points = tcp[:, :3] @ np.append(in_hand, 1.0)  # (T, 3) the held object's centre
+        if held is not None and self.cloud_trees:
+            at = np.einsum("tij,vj->tvi", tcp[:, :3, :3], held) + tcp[:, None, :3, 3]
+            bound = self.cfg.carry_clearance  # nearer points only: the tree prunes the rest
+            near, _ = self.cloud_trees[i].query(at.reshape(-1, 3), distance_upper_bound=bound)
+            hit = (near.reshape(len(path), -1) < self.cfg.carry_clearance).any(1)
+            if hit.any():
+                return f"the held object meets an obstacle at waypoint {int(np.argmax(hit))}"
         top = self.base.layout_scene.episodes.top.rows(torch.tensor([i], device=self.base.device))
-        xy = torch.as_tensor(np.array(points)[None, :, :2], dtype=torch.float32)
+        xy = torch.as_tensor(points[None, :, :2], dtype=torch.float32)
         inside = top.contains(xy.to(self.base.device))[0].cpu().numpy()
         return (
             ""
@@ -172,3 +176,14 @@ class PlaceFlow:
         turn = sapien.Pose(q=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
         hand = turn * sapien.Pose(tcp[:3] - obj, tcp[3:])
         return sapien.Pose(goal + hand.p, hand.q)
+
+
+def _matrices(poses: np.ndarray) -> np.ndarray:
+    """``(n, 4, 4)`` transforms of ``poses (n, 7)`` ([x, y, z, qw, qx, qy, qz] each)."""
+    w, x, y, z = poses[:, 3:].T
+    out = np.zeros((len(poses), 4, 4))
+    out[:, 0, :3] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], 1)
+    out[:, 1, :3] = np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], 1)
+    out[:, 2, :3] = np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1)
+    out[:, :3, 3], out[:, 3, 3] = poses[:, :3], 1.0
+    return out
