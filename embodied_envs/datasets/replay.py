@@ -109,8 +109,8 @@ def root_frame_conversion():
     # ManiSkill's conversion module and ours import torch: only when a replay runs
     from mani_skill.trajectory.utils.actions import conversion
 
+    # ours import ManiSkill's conversion module too: only when a replay runs
     from embodied_envs.datasets.ee_actions import joint_pos_to_ee
-    # (both converters are torch and ManiSkill too: imported with them, only for a replay)
     from embodied_envs.datasets.joint_actions import joint_pos_to_joint
 
     to_ee, to_joint = conversion.from_pd_joint_pos_to_ee, conversion.from_pd_joint_pos
