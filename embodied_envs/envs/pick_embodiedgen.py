@@ -246,6 +246,10 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     def _before_control_step(self):
         self.task_reader.before_step()  # the arm's speeds: its displacement over each step
 
+    def set_state_dict(self, state: dict, env_idx=None):
+        super().set_state_dict(state, env_idx)
+        self.task_reader.step_start = None  # a state set from outside: nothing moved it yet
+
     def get_state_dict(self):
         """ManiSkill's, read in one pass on the CPU simulation (``envs/fast_reads.py``)."""
         return super().get_state_dict() if self.gpu_sim_enabled else fast_reads.cpu_state_dict(self)

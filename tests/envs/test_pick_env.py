@@ -280,3 +280,27 @@ def test_instructions_are_the_layouts_task_or_built_from_its_target(layout_dict)
     assert built.instruction == "Pick up a blue soda can with a silver lid and hold it at the goal."
     built = LayoutInfo.from_dict({k: v for k, v in d.items() if k != "objs_desc"})
     assert built.instruction == "Pick up can and hold it at the goal."
+
+
+def test_the_arm_is_static_by_its_displacement_over_the_control_step():
+    """``is_robot_static`` and the reward's static term read each arm joint's displacement over
+    the last control step over its duration (``TaskReader._arm_speed``), not the simulator's
+    reported velocity: nothing moved the arm after a reset or a state set from outside; a
+    step that turns the first joint reads that joint's move over 0.02 s."""
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(default_layout()),
+                   control_mode="pd_joint_pos")  # fmt: skip
+    try:
+        env.reset(seed=0)
+        u = env.unwrapped
+        assert bool(u.evaluate()["is_robot_static"][0])
+        q0 = u.agent.robot.get_qpos()[0].numpy().copy()
+        action = np.r_[q0[:7] + np.array([0.3, 0, 0, 0, 0, 0, 0]), 1.0].astype(np.float32)
+        info = env.step(action)[4]
+        q1 = u.agent.robot.get_qpos()[0].numpy()
+        speed = u._last_rules[0].arm_speed[0]
+        np.testing.assert_allclose(speed, np.abs(q1 - q0)[:7] / u.control_timestep, atol=1e-4)
+        assert speed[0] > 0.2 and not bool(info["is_robot_static"][0])
+        u.set_state_dict(u.get_state_dict())
+        assert bool(u.evaluate()["is_robot_static"][0])
+    finally:
+        env.close()
