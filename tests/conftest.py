@@ -90,3 +90,16 @@ def make_unreadable(path: Path, monkeypatch) -> None:
         return real_open(file, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "open", guarded)
+
+
+def panda_planner():
+    """mplib's planner of ManiSkill's Panda to its TCP (``panda_hand_tcp``), its base at the
+    origin: what the expert plans with, without an env."""
+    # mplib and ManiSkill's robot classes: for the solver tests that use them only
+    import mplib
+    from mani_skill.agents.robots import Panda
+
+    mp = mplib.Planner(urdf=Panda.urdf_path, srdf=Panda.urdf_path.replace(".urdf", ".srdf"),
+                       move_group="panda_hand_tcp")  # fmt: skip
+    mp.set_base_pose([0, 0, 0, 1, 0, 0, 0])
+    return mp

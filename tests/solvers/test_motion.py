@@ -2,10 +2,9 @@
 
 Checked with mplib's own collision queries and forward kinematics, not the planner's."""
 
-import mplib
 import numpy as np
 import pytest
-from mani_skill.agents.robots import Panda
+from conftest import panda_planner
 
 from embodied_envs.robots import PANDA_HAND
 from embodied_envs.solvers.motion import (
@@ -23,12 +22,7 @@ DT = 0.02
 
 @pytest.fixture(scope="module")
 def planner():
-    mp = mplib.Planner(
-        urdf=Panda.urdf_path,
-        srdf=Panda.urdf_path.replace(".urdf", ".srdf"),
-        move_group="panda_hand_tcp",
-    )
-    mp.set_base_pose([0, 0, 0, 1, 0, 0, 0])
+    mp = panda_planner()
     # a wall between the rest pose (y = 0) and the goal (y = 0.35), 50 cm tall
     x, z = np.meshgrid(np.linspace(0.25, 0.9, 66), np.linspace(0.0, 0.5, 51))
     wall = np.stack([x.ravel(), np.full(x.size, 0.16), z.ravel()], 1)
@@ -213,9 +207,7 @@ def test_no_detour_is_searched_from_a_start_that_collides(monkeypatch):
     """Where the start configuration collides and the straight line is blocked, no
     RRT-Connect search runs (one from there cannot grow and would spend all its samples):
     the status says so."""
-    mp = mplib.Planner(urdf=Panda.urdf_path, srdf=Panda.urdf_path.replace(".urdf", ".srdf"),
-                       move_group="panda_hand_tcp")  # fmt: skip
-    mp.set_base_pose([0, 0, 0, 1, 0, 0, 0])
+    mp = panda_planner()
     sp = SeededPlanner(mp)
     mp.pinocchio_model.compute_forward_kinematics(REST)
     hand = mp.pinocchio_model.get_link_pose(sp.link)[:3]

@@ -2,10 +2,9 @@
 
 Checked against mplib's own ``plan_screw`` and forward kinematics."""
 
-import mplib
 import numpy as np
 import pytest
-from mani_skill.agents.robots import Panda
+from conftest import panda_planner
 
 from embodied_envs.robots import PANDA_HAND
 from embodied_envs.solvers.motion import straight_line_trajectory
@@ -18,12 +17,7 @@ VEL, ACC = np.array(PANDA_HAND.joint_vel), np.array(PANDA_HAND.joint_acc)
 
 @pytest.fixture(scope="module")
 def planner():
-    mp = mplib.Planner(
-        urdf=Panda.urdf_path,
-        srdf=Panda.urdf_path.replace(".urdf", ".srdf"),
-        move_group="panda_hand_tcp",
-    )
-    mp.set_base_pose([0, 0, 0, 1, 0, 0, 0])
+    mp = panda_planner()
     mp.joint_vel_limits, mp.joint_acc_limits = VEL, ACC
     return mp
 
