@@ -38,20 +38,15 @@ MAX_SHIFT = 0.1
 
 
 def _mover_offsets(env, ee_name: str) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(m, 3)`` each mover's position minus the end-effector link's (world frame) and ``(m,)``
-    whether the arm grasps it; ``None`` for an env that is not this package's (no movers)."""
-    # here, not at the top: the env modules import this package's datasets through the CLI
-    from embodied_envs.envs.agents import is_grasping
-
+    """``(m, 3)`` each mover's origin minus the end-effector link's (world frame) and ``(m,)``
+    whether the arm grasps it, as the env's task state reads them (``TaskReader``); ``None``
+    for an env that is not this package's (no movers)."""
     u = env.unwrapped
-    scene = getattr(u, "task_scene", None)
-    if scene is None:
+    if getattr(u, "task_reader", None) is None:
         return None
-    agent = u.main_agent
-    ee = agent.robot.links_map[ee_name].pose.p[0].cpu().numpy()
-    pos = np.stack([a.pose.p[0].cpu().numpy() for a in scene.movers]) - ee
-    held = np.array([bool(is_grasping(agent, a, u.robot_entry)[0]) for a in scene.movers])
-    return pos, held
+    state, _ = u._rules()
+    ee = common.to_numpy(u.main_agent.robot.links_map[ee_name].pose.p[0])
+    return common.to_numpy(state.origins[0]) - ee, common.to_numpy(state.grasped[0])
 
 
 def held_shift(ori_env, env, ee_name: str) -> np.ndarray:
