@@ -6,9 +6,13 @@ env (``obs_mode="state"``, ``reward_mode="normalized_dense"``) is reset with a s
 a few times with zero actions; then ``evaluate()`` followed by ``compute_normalized_dense_reward``
 (what every ``step`` computes) is timed over ``--calls`` calls, in alternating rounds so drift
 hits every layout alike. Prints the median microseconds per call and the ratio to the first
-layout (the issue's target: a place task at most 1.2x the pick task).
+layout (the issue's target: a place task at most 1.2x the pick task). ``--clock cpu`` times the
+calls in this thread's CPU time (``time.thread_time``), which leaves out the time other jobs hold
+the cores (wall-clock time, the default, swings by a third on a loaded machine). The ratio is
+the median over rounds of each round's ratio, so drift between rounds cancels.
 
-Usage: python tools/bench/bench_tasks.py [--calls 2000] [--rounds 5] [--layout FILE ...]
+Usage: python tools/bench/bench_tasks.py [--calls 2000] [--rounds 5] [--clock wall|cpu]
+       [--layout FILE ...]
 """
 
 from __future__ import annotations
@@ -40,20 +44,21 @@ def make(path: Path):
     return env
 
 
-def per_call(env, calls: int) -> float:
+def per_call(env, calls: int, clock=time.perf_counter) -> float:
     u = env.unwrapped
     action = torch.zeros(env.action_space.shape)
-    start = time.perf_counter()
+    start = clock()
     for _ in range(calls):
         info = u.evaluate()
         u.compute_normalized_dense_reward(obs=None, action=action, info=info)
-    return (time.perf_counter() - start) / calls * 1e6
+    return (clock() - start) / calls * 1e6
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--calls", type=int, default=2000)
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--clock", choices=("wall", "cpu"), default="wall")
     ap.add_argument("--layout", type=Path, nargs="+", default=None)
     args = ap.parse_args()
     layouts = args.layout or [default_layout()] + [
@@ -61,15 +66,17 @@ def main() -> None:
     ]
     envs = [make(p) for p in layouts]
     times = [[] for _ in envs]
-    for _ in range(args.rounds):
-        for env, t in zip(envs, times, strict=True):
-            t.append(per_call(env, args.calls))
-    base = statistics.median(times[0])
+    clock = time.thread_time if args.clock == "cpu" else time.perf_counter
+    for r in range(args.rounds):  # the order rotated per round: no layout always first
+        for i in range(len(envs)):
+            k = (i + r) % len(envs)
+            times[k].append(per_call(envs[k], args.calls, clock))
     for path, env, t in zip(layouts, envs, times, strict=True):
         us = statistics.median(t)
         kind = env.unwrapped.tasks[0].kind
-        print(f"{path.stem:12s} {kind:5s} evaluate + reward {us:7.1f} us per step, "
-              f"{us / base:.2f}x {layouts[0].stem}")  # fmt: skip
+        ratio = statistics.median(x / b for x, b in zip(t, times[0], strict=True))
+        print(f"{path.stem:12s} {kind:5s} evaluate + reward {us:7.1f} us per step ({args.clock}), "
+              f"{ratio:.2f}x {layouts[0].stem}")  # fmt: skip
         env.close()
 
 

@@ -37,7 +37,7 @@ from embodied_envs.layout.placement.rules import array_module
 TOUCH = 0.01  # m: a lowest point this close above a support surface touches it
 MAX_REWARD = STAGES  # the dense reward on success (its staged reward's maximum)
 EDGE_TOLERANCE = 1e-9  # m: a centre this close outside the footprint's edge is over it
-numbers = number_set(TOUCH=TOUCH, DROP_GAP=DROP_GAP)
+numbers = number_set(GAPS=(TOUCH, DROP_GAP))
 
 
 @dataclass(frozen=True)
@@ -78,9 +78,10 @@ def in_pose(s: TaskState):
         b = Bounds.of(s.footprint, s.rim, s.is_in, s.rec_is_table, s.table_z)
     xy = s.in_receptacle[..., :2]
     over = every(total(xy[:, :, None, :] * b.normals) >= b.offsets)
-    top = xp.where(s.rec_is_table, s.table_z, s.rec_top)[:, None]  # the surface's height
+    top = xp.where(s.rec_is_table, s.table_z, s.rec_top)[:, None, None]  # the surface's height
+    low = s.bottom[..., None] <= top + c.GAPS  # (n, m, 2): within TOUCH, within DROP_GAP of it
     pose = over & (s.bottom >= b.floor) & (s.in_receptacle[..., 2] < b.rim)
-    return pose & (s.bottom <= top + c.TOUCH), over & (s.bottom <= top + c.DROP_GAP)
+    return pose & low[..., 0], over & low[..., 1]
 
 
 def evaluate(s: TaskState) -> dict:

@@ -273,31 +273,36 @@ class TaskReader:
         return dest
 
     def _read(self):
+        """The TCP, the robot's joint positions, the raw poses ``(n, m + 1, 7)`` of the movers
+        and then the receptacle, the movers' velocities and grasp flags."""
         agent, movers, rec = self.env.main_agent, self.ts.movers, self.ts.receptacle
         entry = self.env.robot_entry
         if self.gpu:
-            poses = torch.stack([a.pose.raw_pose for a in movers], 1)
+            poses = torch.stack([a.pose.raw_pose for a in movers] + [rec.pose.raw_pose], 1)
             return (
                 tcp_pose(agent, entry).p, agent.robot.get_qpos(), poses,
                 torch.stack([a.linear_velocity for a in movers], 1),
                 torch.stack([a.angular_velocity for a in movers], 1),
-                rec.pose.raw_pose,
                 torch.stack([is_grasping(agent, a, entry) for a in movers], 1),
             )  # fmt: skip
         robot = agent.robot._objs[0]
-        poses = [a._objs[0].pose for a in movers]
-        bodies = [a._bodies[0] for a in movers]
-        rp = rec._objs[0].pose
         if entry.grasp_check is not None:  # one walk over the contacts for every mover
             grasped = grasped_cpu(agent, movers, entry.grasp_check)[None]
         else:
             grasped = np.array([[bool(is_grasping(agent, a, entry)[0]) for a in movers]])
+        # every pose and velocity in one array: numpy's cost is per call, not per value
+        parts = []
+        for actor in (*movers, rec):
+            pose = actor._objs[0].pose
+            parts += (pose.p, pose.q)
+        for actor in movers:
+            body = actor._bodies[0]
+            parts += (body.linear_velocity, body.angular_velocity)
+        flat, k = np.concatenate(parts), 7 * (len(movers) + 1)
+        vel = flat[k:].reshape(1, len(movers), 2, 3)
         return (
-            tcp_position_cpu(agent, entry), robot.qpos[None],
-            np.array([[np.concatenate([p.p, p.q]) for p in poses]]),
-            np.array([[b.linear_velocity for b in bodies]]),
-            np.array([[b.angular_velocity for b in bodies]]),
-            np.concatenate([rp.p, rp.q])[None], grasped,
+            tcp_position_cpu(agent, entry), robot.qpos[None], flat[:k].reshape(1, -1, 7),
+            vel[:, :, 0], vel[:, :, 1], grasped,
         )  # fmt: skip
 
     def _arm_speed(self, arm_qpos):
@@ -313,13 +318,11 @@ class TaskReader:
 
     def state(self, goal) -> TaskState:
         """The state now; ``goal (n, 3)`` the pick goal (same array type as the reads)."""
-        tcp, qpos, poses, lin, ang, rec, grasped = self._read()
-        origin, m = poses[..., :3], poses.shape[1]
-        if self.gpu:
-            rot, rec_rot = quat_matrix(poses[..., 3:]), quat_matrix(rec[:, 3:])
-        else:  # one call for the movers and the receptacle: numpy's cost is per call
-            rots = quat_matrix(np.concatenate([poses[..., 3:], rec[:, None, 3:]], 1))
-            rot, rec_rot = rots[:, :m], rots[:, m]
+        tcp, qpos, poses, lin, ang, grasped = self._read()
+        m = poses.shape[1] - 1
+        origin, rec = poses[:, :m, :3], poses[:, m]
+        rots = quat_matrix(poses[..., 3:])  # the movers' and the receptacle's, in one call
+        rot, rec_rot = rots[:, :m], rots[:, m]
         p = origin + (rot @ self.centres[..., None])[..., 0]  # the movers' centres
         low = (rot[..., 2:3, :] @ self.hulls_t)[..., 0, :]  # (n, m, V)
         bottom = origin[..., 2] + (low.min(-1) if not self.gpu else low.amin(-1))
