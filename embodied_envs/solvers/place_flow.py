@@ -57,7 +57,7 @@ class PlaceFlow:
         withdraw the hand straight up."""
         st = self._task_state()
         drop = st["movers"][:, self.slot, 2] - self._release_height(st)
-        tcp = self._tcp().raw_pose.cpu().numpy()
+        tcp = self._hand_pose()
 
         def shifted(dz):
             return [sapien.Pose(tcp[i, :3] + [0, 0, dz[i]], tcp[i, 3:]) if envs[i] else None
@@ -66,7 +66,7 @@ class PlaceFlow:
         self._per_env("lower", shifted(-np.maximum(drop, 0.0)), obstacles=False,
                       settle=self.cfg.settle_steps, open_before=self.cfg.open_before)  # fmt: skip
         self._set_gripper(envs, self.robot_hand.action_open, release=True)
-        tcp = self._tcp().raw_pose.cpu().numpy()
+        tcp = self._hand_pose()
         self._per_env("withdraw", shifted(np.full(self.num_envs, self.cfg.approach_offset)),
                       obstacles=False)  # fmt: skip
 
@@ -79,7 +79,7 @@ class PlaceFlow:
         where no carry plans, the hand first rises ``rise_clearance`` above the highest
         obstacle point and carries from there."""
         goal = self._carry_goal()
-        hand = self._in_hand()
+        hand = self._in_planned_hand()
         # the held object kept off the obstacles where it is to be put down (a pick goal may
         # lie next to an obstacle: the object is held there, and the check would refuse it)
         held = [h if r else None for h, r in zip(self._held_points(), self.releases, strict=True)]
@@ -88,7 +88,7 @@ class PlaceFlow:
         base = self.base.agent.robot.pose.raw_pose[:, :2].cpu().numpy()
 
         def targets(yaws, todo):
-            tcp = self._tcp().raw_pose.cpu().numpy()
+            tcp = self._hand_pose()
             st = self._task_state()  # the point the goal is for: centre, or origin (pick)
             obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
             out = []
@@ -111,7 +111,7 @@ class PlaceFlow:
         if high.any():  # over the obstacles: straight up, then the carry from there
             for i in np.flatnonzero(high):  # the carry from above may still plan
                 self.reports[i].plan_failures.clear()
-            tcp = self._tcp().raw_pose.cpu().numpy()
+            tcp = self._hand_pose()
             up = [
                 sapien.Pose(
                     [
@@ -127,6 +127,25 @@ class PlaceFlow:
             self._per_env("rise", up, obstacles=False)
             self._per_env("carry", targets(self.cfg.carry_yaws, high), path_ok=over, **how)
         self._per_env("settle", targets((0.0,), envs), obstacles=False)
+        for _ in range(self.cfg.settle_rounds if self.robot_hand.drifts else 0):
+            # a hand that drifts: again while the object is off the goal (the jaw's push on
+            # the arm changes as it moves)
+            st = self._task_state()
+            obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
+            off = np.linalg.norm(obj - goal, axis=1) > self.cfg.goal_tolerance
+            off &= envs & np.array([not r.plan_failures for r in self.reports])
+            if not off.any() or self.ended:
+                break
+            self._per_env("settle", targets((0.0,), off), obstacles=False)
+
+    def _in_planned_hand(self) -> np.ndarray:
+        """Per env, the target's position in the grasp frame where moves are planned from
+        (``_hand_pose``: the measured frame, ``_in_hand``, but for a hand that drifts)."""
+        if not self.robot_hand.drifts:
+            return self._in_hand()
+        tcp = _matrices(self._hand_pose())
+        obj = self.target.pose.p.cpu().numpy()
+        return np.einsum("nij,ni->nj", tcp[:, :3, :3], obj - tcp[:, :3, 3])
 
     def _held_points(self) -> np.ndarray:
         """Per env, the current mover's collision points ``(V, 3)`` in the TCP's frame now."""
