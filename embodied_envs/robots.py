@@ -300,7 +300,7 @@ ROBOTS: dict[str, Robot] = {
         Robot(
             uid="koch-v1.1", names=("koch", "koch_v1.1", "koch-v1.1"),
             rest_qpos=(0.0, 2.2, 1.6, 2.0, 0.0, 1.6),
-            noise_joints=tuple(range(5)), reach=(0.12, 0.26), goal_inset=0.04,
+            noise_joints=tuple(range(5)), reach=(0.12, 0.24), goal_inset=0.03,
             goal_height=(0.04, 0.10),  # the expert reaches these holding a block
             gripper=Gripper(joints=1, open_qpos=1.6, closed_qpos=0.0, max_opening=0.078,
                             action_index=5, action_kind="delta"),
