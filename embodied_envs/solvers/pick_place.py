@@ -115,7 +115,8 @@ class SolverConfig:
     # space, turned the can's carry into 150-180 steps of joint travel on place_two)
     release_carry_option_steps: int | None = 10  # and the shortest of the turns wins
     settle_rounds: int = 3  # a hand that drifts (robots.Hand.drifts): corrections at the goal
-    goal_tolerance: float = 0.01  # m, while the object is this far off it
+    goal_tolerance: float = 0.01  # m, while the object is this far off it, each a move of
+    settle_max_steps: int = 40  # control steps at most
     release_surround: float = 0.08  # m, obstacles this far around the mover over its
     # destination are cleared too when it is carried there (``_carry_goal``)
     carry_clearance: float = 0.01  # m, the held object's collision points at least this far
@@ -393,12 +394,13 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         if missed.any():  # open and back off upwards, for the next attempt
             self._set_gripper(missed, self.robot_hand.action_open)
             tcp = self._hand_pose()
-            back = [
-                sapien.Pose(tcp[i, :3] + np.array([0, 0, cfg.approach_offset]), tcp[i, 3:])
+            back = [  # or stay: the lift rose already (a five-joint arm may not rise further)
+                [sapien.Pose(tcp[i, :3] + np.array([0, 0, cfg.approach_offset]), tcp[i, 3:]),
+                 sapien.Pose(tcp[i, :3], tcp[i, 3:])]
                 if missed[i]
                 else None
                 for i in range(self.num_envs)
-            ]
+            ]  # fmt: skip
             self._per_env("retreat", back, obstacles=False)
         return held
 

@@ -87,7 +87,7 @@ class PlaceFlow:
 
         base = self.base.agent.robot.pose.raw_pose[:, :2].cpu().numpy()
 
-        def targets(yaws, todo):
+        def targets(yaws, todo, pitches=(), turn=False):
             tcp = self._hand_pose()
             st = self._task_state()  # the point the goal is for: centre, or origin (pick)
             obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
@@ -95,10 +95,13 @@ class PlaceFlow:
             for i in range(self.num_envs):
                 turns = list(yaws)
                 # first the turn of the base joint (a planar hand's only way to another side)
-                if (self.releases[i] or self.robot_hand.planar) and len(yaws) > 1:
+                if (self.releases[i] or self.robot_hand.planar) and (len(yaws) > 1 or turn):
                     a, b = goal[i, :2] - base[i], obj[i, :2] - base[i]
                     turns.insert(0, np.arctan2(a[1], a[0]) - np.arctan2(b[1], b[0]))
                 poses = [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in turns]
+                out_ = np.append(goal[i, :2] - base[i], 0.0)
+                across = np.cross([0.0, 0.0, 1.0], out_) / max(np.linalg.norm(out_), 1e-9)
+                poses = [_pitched(p, goal[i], across, a) for a in pitches for p in poses] or poses
                 out.append(poses if todo[i] else None)
             return out
 
@@ -108,6 +111,15 @@ class PlaceFlow:
                        option_steps=self.cfg.release_carry_option_steps)  # fmt: skip
         chosen = self._per_env("carry", targets(self.cfg.carry_yaws, envs), path_ok=over, **how)
         high = envs & np.array([c is None for c in chosen])
+        if high.any() and self.robot_hand.planar:  # a five-joint arm: the hand pitched in its
+            # plane at the goal, about the object (straight down it reaches a goal's height
+            # only at some distances: Koch seeds 11, 20)
+            for i in np.flatnonzero(high):
+                self.reports[i].plan_failures.clear()
+            pitches = np.deg2rad(self.cfg.planar_lift_turns)
+            chosen = self._per_env("carry", targets(self.cfg.carry_yaws, high, pitches),
+                                   path_ok=over, **how)  # fmt: skip
+            high &= np.array([c is None for c in chosen])
         if high.any():  # over the obstacles: straight up, then the carry from there
             for i in np.flatnonzero(high):  # the carry from above may still plan
                 self.reports[i].plan_failures.clear()
@@ -126,17 +138,29 @@ class PlaceFlow:
             ]
             self._per_env("rise", up, obstacles=False)
             self._per_env("carry", targets(self.cfg.carry_yaws, high), path_ok=over, **how)
-        self._per_env("settle", targets((0.0,), envs), obstacles=False)
-        for _ in range(self.cfg.settle_rounds if self.robot_hand.drifts else 0):
-            # a hand that drifts: again while the object is off the goal (the jaw's push on
-            # the arm changes as it moves)
-            st = self._task_state()
-            obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
-            off = np.linalg.norm(obj - goal, axis=1) > self.cfg.goal_tolerance
-            off &= envs & np.array([not r.plan_failures for r in self.reports])
+        if not self.robot_hand.drifts:
+            self._per_env("settle", targets((0.0,), envs), obstacles=False)
+            return
+        # a hand that drifts: the settle repeated while the object is off the goal (the jaw's
+        # push on the arm changes as it moves), each a short move (the hand turned with the
+        # base first), or none: the object then stays where it is
+        short = lambda i, path: (  # noqa: E731
+            "" if len(path) <= self.cfg.settle_max_steps else f"{len(path)} steps, too long")
+        off = envs.copy()
+        for _ in range(1 + self.cfg.settle_rounds):
+            off &= np.array([not r.plan_failures for r in self.reports])
             if not off.any() or self.ended:
                 break
-            self._per_env("settle", targets((0.0,), off), obstacles=False)
+            self._per_env("settle", targets((0.0,), off, turn=True), obstacles=False,
+                          path_ok=short)  # fmt: skip
+            for i in np.flatnonzero(off):  # unplanned: it holds still, the episode goes on
+                if self.reports[i].plan_failures[-1:] and self.reports[i].plan_failures[
+                        -1].startswith("settle:"):  # fmt: skip
+                    self.reports[i].plan_failures.pop()
+                    off[i] = False
+            st = self._task_state()
+            obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
+            off &= np.linalg.norm(obj - goal, axis=1) > self.cfg.goal_tolerance
 
     def _in_planned_hand(self) -> np.ndarray:
         """Per env, the target's position in the grasp frame where moves are planned from
@@ -195,6 +219,13 @@ class PlaceFlow:
         turn = sapien.Pose(q=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
         hand = turn * sapien.Pose(tcp[:3] - obj, tcp[3:])
         return sapien.Pose(goal + hand.p, hand.q)
+
+
+def _pitched(pose: sapien.Pose, centre: np.ndarray, axis: np.ndarray, angle: float):
+    """``pose`` turned by ``angle`` about the line through ``centre`` along ``axis`` (unit)."""
+    turn = sapien.Pose(q=[np.cos(angle / 2), *(np.sin(angle / 2) * axis)])
+    rot = turn.to_transformation_matrix()[:3, :3]
+    return sapien.Pose(centre + rot @ (pose.p - centre), (turn * sapien.Pose(q=pose.q)).q)
 
 
 def _matrices(poses: np.ndarray) -> np.ndarray:
