@@ -243,7 +243,9 @@ SO100_HAND = Hand(
 # The moving jaw is slanted when open (its face furthest out at its tip), so the gap per angle
 # is measured at the object's top (0.015 above the origin: grasp_depth): 0.0445 m at 1.0 rad;
 # above 1.25 rad its tip no longer reaches down there. Palm: link_5 and the jaws' roots above.
-# Its pd_joint_pos drives the jaw with stiffness 100, damping 1 (1 mrad: about 3 N on an object)
+# Its pd_joint_pos drives the jaw with stiffness 100, damping 1 (1 mrad: about 3 N on an object);
+# the jaw, slanted by its angle, holds a 2 cm block (0.33 rad) with a squeeze of 0.01 rad, and
+# the arm gives way under it (drifts: docs/robots.md, "The Koch")
 KOCH_HAND = Hand(
     link="link_6", grasp_in_link=(0.0136, 0.0, -0.058, 0.0, 0.7071068, 0.7071068, 0.0),
     boxes=(("opening", 0.045), ("finger_width", 0.03), ("finger_thickness", 0.015),

@@ -90,7 +90,8 @@ class SolverConfig:
     # (robots.py) approaches from straight down toward the far side of its arm's plane, in
     # order (the SO-100 reaches a box's top 0.27 m away tilted 15-60 degrees, not straight down)
     planar_lift_turns: tuple[float, ...] = (15.0, -15.0, 30.0, -30.0)  # deg, a planar hand's
-    # lifts turned in its arm's plane, tried after the grasp's own orientation
+    # lifts turned in its arm's plane, tried after the grasp's own orientation; and its carry's
+    # pitches at the goal where no carry keeping the hand's orientation plans
     option_steps: int = 10  # a grasp one rank lower is taken when its approach is this many
     # steps shorter
     grasp_attempts: int = 3  # grasp, check, lift rounds per episode (a miss opens and retries)

@@ -76,8 +76,10 @@ class PlaceFlow:
         the hand may arrive turned about the vertical (``carry_yaws``, tried in order): a wrist
         near its joint limit would otherwise flip over on the way. A path that takes the
         object out over the table's edge is refused (the episode would end in ``fail``);
-        where no carry plans, the hand first rises ``rise_clearance`` above the highest
-        obstacle point and carries from there."""
+        where no carry plans, a planar hand's is tried pitched in its arm's plane about the
+        object (``planar_lift_turns``), then the hand rises ``rise_clearance`` above the
+        highest obstacle point and carries from there. A hand that drifts settles at the goal
+        in short moves, again while the object is off it (``settle_rounds``)."""
         goal = self._carry_goal()
         hand = self._in_planned_hand()
         # the held object kept off the obstacles where it is to be put down (a pick goal may
@@ -144,8 +146,9 @@ class PlaceFlow:
         # a hand that drifts: the settle repeated while the object is off the goal (the jaw's
         # push on the arm changes as it moves), each a short move (the hand turned with the
         # base first), or none: the object then stays where it is
-        short = lambda i, path: (  # noqa: E731
-            "" if len(path) <= self.cfg.settle_max_steps else f"{len(path)} steps, too long")
+        def short(i, path) -> str:
+            return "" if len(path) <= self.cfg.settle_max_steps else f"{len(path)} steps, too long"
+
         off = envs.copy()
         for _ in range(1 + self.cfg.settle_rounds):
             off &= np.array([not r.plan_failures for r in self.reports])
@@ -154,9 +157,9 @@ class PlaceFlow:
             self._per_env("settle", targets((0.0,), off, turn=True), obstacles=False,
                           path_ok=short)  # fmt: skip
             for i in np.flatnonzero(off):  # unplanned: it holds still, the episode goes on
-                if self.reports[i].plan_failures[-1:] and self.reports[i].plan_failures[
-                        -1].startswith("settle:"):  # fmt: skip
-                    self.reports[i].plan_failures.pop()
+                failures = self.reports[i].plan_failures
+                if failures and failures[-1].startswith("settle:"):
+                    failures.pop()
                     off[i] = False
             st = self._task_state()
             obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
