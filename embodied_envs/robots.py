@@ -298,7 +298,8 @@ ROBOTS: dict[str, Robot] = {
         # Koch v1.1: turned +90 deg as ManiSkill's keyframes; its hand pointing down, the jaws'
         # tips 0.10 m above the table 0.12 m out (ManiSkill's rest keyframe, folded, holds
         # them 0.02 m above it, where the expert's planner finds the start colliding), jaw
-        # opened to its limit (1.6 rad: 0.078 m between gripper_tcp and gripper_tcp2; 0: shut)
+        # opened to its limit (1.6 rad: 0.078 m between gripper_tcp and gripper_tcp2; 0: shut);
+        # reach to 0.24 m (blocks 0.25-0.26 m out off to the side had no grasp with IK)
         Robot(
             uid="koch-v1.1", names=("koch", "koch_v1.1", "koch-v1.1"),
             rest_qpos=(0.0, 2.2, 1.6, 2.0, 0.0, 1.6),
