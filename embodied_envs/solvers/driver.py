@@ -54,6 +54,31 @@ class ArmDriver:
             return None, f"{len(res['position'])} steps, over max_path_steps"
         return res["position"], ""
 
+    def _plan_start(self) -> np.ndarray:
+        """Per env, the configuration plans start from: the measured joints; for a hand that
+        drifts (``robots.Hand.drifts``) the arm's last joint targets, which its paths go on
+        from (the arm stands off them while the jaw squeezes)."""
+        qpos = self._qpos()
+        if self.robot_hand.drifts:
+            qpos[:, : self.arm_dof] = self.command
+        return qpos
+
+    def _hand_pose(self) -> np.ndarray:
+        """Per env, the grasp frame's pose ``(n, 7)`` moves are planned from: where it is; for
+        a hand that drifts, where the arm's joint targets put it (forward kinematics)."""
+        if not self.robot_hand.drifts:
+            return self._tcp().raw_pose.cpu().numpy()
+        base = self.base.agent.robot.pose.raw_pose.cpu().numpy().astype(np.float64)
+        out = np.empty((self.num_envs, 7))
+        for i, fingers in enumerate(self._fingers()):
+            model = self.planners[i].pinocchio_model
+            model.compute_forward_kinematics(np.concatenate([self.command[i], fingers]))
+            link = model.get_link_pose(self.motion[i].link)
+            pose = sapien.Pose(base[i, :3], base[i, 3:]) * sapien.Pose(link[:3], link[3:])
+            pose = pose * self.grasp_in_link
+            out[i] = [*pose.p, *pose.q]
+        return out
+
     def _screw(self, i: int, target: np.ndarray, qpos: np.ndarray, obstacles: bool) -> dict:
         """mplib's screw motion of env i's planned link to ``target`` (world), timed in closed
         form at the planner's joint limits (``solvers/screw.py``): {"status", "position"}."""
@@ -184,7 +209,7 @@ class ArmDriver:
         Returns:
             Per env the pose that was planned to (None where none could be).
         """
-        qpos = self._qpos()
+        qpos = self._plan_start()
         paths, chosen = [], []
         self.stages += 1
         for i, target in enumerate(targets):

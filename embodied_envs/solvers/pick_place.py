@@ -90,7 +90,8 @@ class SolverConfig:
     # (robots.py) approaches from straight down toward the far side of its arm's plane, in
     # order (the SO-100 reaches a box's top 0.27 m away tilted 15-60 degrees, not straight down)
     planar_lift_turns: tuple[float, ...] = (15.0, -15.0, 30.0, -30.0)  # deg, a planar hand's
-    # lifts turned in its arm's plane, tried after the grasp's own orientation
+    # lifts turned in its arm's plane, tried after the grasp's own orientation; and its carry's
+    # pitches at the goal where no carry keeping the hand's orientation plans
     option_steps: int = 10  # a grasp one rank lower is taken when its approach is this many
     # steps shorter
     grasp_attempts: int = 3  # grasp, check, lift rounds per episode (a miss opens and retries)
@@ -114,6 +115,9 @@ class SolverConfig:
     # shortest straight joint line over every hand turn first (a screw path, straight in
     # space, turned the can's carry into 150-180 steps of joint travel on place_two)
     release_carry_option_steps: int | None = 10  # and the shortest of the turns wins
+    settle_rounds: int = 3  # a hand that drifts (robots.Hand.drifts): corrections at the goal
+    goal_tolerance: float = 0.01  # m, while the object is this far off it, each a move of
+    settle_max_steps: int = 40  # control steps at most
     release_surround: float = 0.08  # m, obstacles this far around the mover over its
     # destination are cleared too when it is carried there (``_carry_goal``)
     carry_clearance: float = 0.01  # m, the held object's collision points at least this far
@@ -390,13 +394,14 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
             self.reports[i].misses.append(f"{'moved' if moved[i] else 'grasp'} (attempt {attempt})")
         if missed.any():  # open and back off upwards, for the next attempt
             self._set_gripper(missed, self.robot_hand.action_open)
-            tcp = self._tcp().raw_pose.cpu().numpy()
-            back = [
-                sapien.Pose(tcp[i, :3] + np.array([0, 0, cfg.approach_offset]), tcp[i, 3:])
+            tcp = self._hand_pose()
+            back = [  # or stay: the lift rose already (a five-joint arm may not rise further)
+                [sapien.Pose(tcp[i, :3] + np.array([0, 0, cfg.approach_offset]), tcp[i, 3:]),
+                 sapien.Pose(tcp[i, :3], tcp[i, 3:])]
                 if missed[i]
                 else None
                 for i in range(self.num_envs)
-            ]
+            ]  # fmt: skip
             self._per_env("retreat", back, obstacles=False)
         return held
 

@@ -57,7 +57,7 @@ class PlaceFlow:
         withdraw the hand straight up."""
         st = self._task_state()
         drop = st["movers"][:, self.slot, 2] - self._release_height(st)
-        tcp = self._tcp().raw_pose.cpu().numpy()
+        tcp = self._hand_pose()
 
         def shifted(dz):
             return [sapien.Pose(tcp[i, :3] + [0, 0, dz[i]], tcp[i, 3:]) if envs[i] else None
@@ -66,7 +66,7 @@ class PlaceFlow:
         self._per_env("lower", shifted(-np.maximum(drop, 0.0)), obstacles=False,
                       settle=self.cfg.settle_steps, open_before=self.cfg.open_before)  # fmt: skip
         self._set_gripper(envs, self.robot_hand.action_open, release=True)
-        tcp = self._tcp().raw_pose.cpu().numpy()
+        tcp = self._hand_pose()
         self._per_env("withdraw", shifted(np.full(self.num_envs, self.cfg.approach_offset)),
                       obstacles=False)  # fmt: skip
 
@@ -76,10 +76,12 @@ class PlaceFlow:
         the hand may arrive turned about the vertical (``carry_yaws``, tried in order): a wrist
         near its joint limit would otherwise flip over on the way. A path that takes the
         object out over the table's edge is refused (the episode would end in ``fail``);
-        where no carry plans, the hand first rises ``rise_clearance`` above the highest
-        obstacle point and carries from there."""
+        where no carry plans, a planar hand's is tried pitched in its arm's plane about the
+        object (``planar_lift_turns``), then the hand rises ``rise_clearance`` above the
+        highest obstacle point and carries from there. A hand that drifts settles at the goal
+        in short moves, again while the object is off it (``settle_rounds``)."""
         goal = self._carry_goal()
-        hand = self._in_hand()
+        hand = self._in_planned_hand()
         # the held object kept off the obstacles where it is to be put down (a pick goal may
         # lie next to an obstacle: the object is held there, and the check would refuse it)
         held = [h if r else None for h, r in zip(self._held_points(), self.releases, strict=True)]
@@ -87,18 +89,21 @@ class PlaceFlow:
 
         base = self.base.agent.robot.pose.raw_pose[:, :2].cpu().numpy()
 
-        def targets(yaws, todo):
-            tcp = self._tcp().raw_pose.cpu().numpy()
+        def targets(yaws, todo, pitches=(), turn=False):
+            tcp = self._hand_pose()
             st = self._task_state()  # the point the goal is for: centre, or origin (pick)
             obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
             out = []
             for i in range(self.num_envs):
                 turns = list(yaws)
                 # first the turn of the base joint (a planar hand's only way to another side)
-                if (self.releases[i] or self.robot_hand.planar) and len(yaws) > 1:
+                if (self.releases[i] or self.robot_hand.planar) and (len(yaws) > 1 or turn):
                     a, b = goal[i, :2] - base[i], obj[i, :2] - base[i]
                     turns.insert(0, np.arctan2(a[1], a[0]) - np.arctan2(b[1], b[0]))
                 poses = [self._turned(goal[i], tcp[i], obj[i], yaw) for yaw in turns]
+                out_ = np.append(goal[i, :2] - base[i], 0.0)
+                across = np.cross([0.0, 0.0, 1.0], out_) / max(np.linalg.norm(out_), 1e-9)
+                poses = [_pitched(p, goal[i], across, a) for a in pitches for p in poses] or poses
                 out.append(poses if todo[i] else None)
             return out
 
@@ -108,10 +113,19 @@ class PlaceFlow:
                        option_steps=self.cfg.release_carry_option_steps)  # fmt: skip
         chosen = self._per_env("carry", targets(self.cfg.carry_yaws, envs), path_ok=over, **how)
         high = envs & np.array([c is None for c in chosen])
+        if high.any() and self.robot_hand.planar:  # a five-joint arm: the hand pitched in its
+            # plane at the goal, about the object (straight down it reaches a goal's height
+            # only at some distances: Koch seeds 11, 20)
+            for i in np.flatnonzero(high):
+                self.reports[i].plan_failures.clear()
+            pitches = np.deg2rad(self.cfg.planar_lift_turns)
+            chosen = self._per_env("carry", targets(self.cfg.carry_yaws, high, pitches),
+                                   path_ok=over, **how)  # fmt: skip
+            high &= np.array([c is None for c in chosen])
         if high.any():  # over the obstacles: straight up, then the carry from there
             for i in np.flatnonzero(high):  # the carry from above may still plan
                 self.reports[i].plan_failures.clear()
-            tcp = self._tcp().raw_pose.cpu().numpy()
+            tcp = self._hand_pose()
             up = [
                 sapien.Pose(
                     [
@@ -126,7 +140,39 @@ class PlaceFlow:
             ]
             self._per_env("rise", up, obstacles=False)
             self._per_env("carry", targets(self.cfg.carry_yaws, high), path_ok=over, **how)
-        self._per_env("settle", targets((0.0,), envs), obstacles=False)
+        if not self.robot_hand.drifts:
+            self._per_env("settle", targets((0.0,), envs), obstacles=False)
+            return
+        # a hand that drifts: the settle repeated while the object is off the goal (the jaw's
+        # push on the arm changes as it moves), each a short move (the hand turned with the
+        # base first), or none: the object then stays where it is
+        def short(i, path) -> str:
+            return "" if len(path) <= self.cfg.settle_max_steps else f"{len(path)} steps, too long"
+
+        off = envs.copy()
+        for _ in range(1 + self.cfg.settle_rounds):
+            off &= np.array([not r.plan_failures for r in self.reports])
+            if not off.any() or self.ended:
+                break
+            self._per_env("settle", targets((0.0,), off, turn=True), obstacles=False,
+                          path_ok=short)  # fmt: skip
+            for i in np.flatnonzero(off):  # unplanned: it holds still, the episode goes on
+                failures = self.reports[i].plan_failures
+                if failures and failures[-1].startswith("settle:"):
+                    failures.pop()
+                    off[i] = False
+            st = self._task_state()
+            obj = np.where(self.releases[:, None], st["movers"], st["origins"])[:, self.slot]
+            off &= np.linalg.norm(obj - goal, axis=1) > self.cfg.goal_tolerance
+
+    def _in_planned_hand(self) -> np.ndarray:
+        """Per env, the target's position in the grasp frame where moves are planned from
+        (``_hand_pose``: the measured frame, ``_in_hand``, but for a hand that drifts)."""
+        if not self.robot_hand.drifts:
+            return self._in_hand()
+        tcp = _matrices(self._hand_pose())
+        obj = self.target.pose.p.cpu().numpy()
+        return np.einsum("nij,ni->nj", tcp[:, :3, :3], obj - tcp[:, :3, 3])
 
     def _held_points(self) -> np.ndarray:
         """Per env, the current mover's collision points ``(V, 3)`` in the TCP's frame now."""
@@ -176,6 +222,13 @@ class PlaceFlow:
         turn = sapien.Pose(q=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
         hand = turn * sapien.Pose(tcp[:3] - obj, tcp[3:])
         return sapien.Pose(goal + hand.p, hand.q)
+
+
+def _pitched(pose: sapien.Pose, centre: np.ndarray, axis: np.ndarray, angle: float):
+    """``pose`` turned by ``angle`` about the line through ``centre`` along ``axis`` (unit)."""
+    turn = sapien.Pose(q=[np.cos(angle / 2), *(np.sin(angle / 2) * axis)])
+    rot = turn.to_transformation_matrix()[:3, :3]
+    return sapien.Pose(centre + rot @ (pose.p - centre), (turn * sapien.Pose(q=pose.q)).q)
 
 
 def _matrices(poses: np.ndarray) -> np.ndarray:

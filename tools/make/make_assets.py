@@ -279,8 +279,8 @@ def block() -> Asset:
 
 
 def small_block() -> Asset:
-    """A 3 cm wooden block: what the Koch's jaw holds (docs/robots.md)."""
-    e = 0.03
+    """A 2 cm wooden block: what the Koch's jaw holds (docs/robots.md)."""
+    e = 0.02
     colour = (0.2, 0.55, 0.3)
     return Asset("small_block", [Part(box([e, e, e], [0, 0, e / 2]), colour)], mass=0.02)
 

@@ -174,7 +174,7 @@ LAYOUTS = [
         },
         robot="so100",
     ),
-    # the Koch's layout: a 3 cm block its low-friction jaw holds, within its reach
+    # the Koch's layout: a 2 cm block its low-friction, slanted jaw holds, within its reach
     LayoutSpec(
         name="koch_block",
         context="table",
@@ -185,7 +185,7 @@ LAYOUTS = [
             "background": TASK_ROOM["background"],
             "table": TASK_ROOM["table"],
             "koch": TASK_ROOM[ROBOT],
-            "small_block": [-0.254, 0.098, 0.775, 0.0, 0.0, 0.0, 1.0],
+            "small_block": [-0.254, 0.098, 0.77, 0.0, 0.0, 0.0, 1.0],
             "can": [-0.242, 0.218, 0.82, 0.0, 0.0, 0.2549, 0.967],
         },
         robot="koch",
