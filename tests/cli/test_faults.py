@@ -100,9 +100,10 @@ def test_one_collect_at_a_time_per_out_and_no_dataset_replaced(tmp_path):
     replaced by another shard; the first run's dataset is whole."""
     out = tmp_path / "out"
     env = {**os.environ, "MS_SKIP_ASSET_DOWNLOAD_PROMPT": "1"}
-    # 30 demos (about 6 s of episodes here): the second run's start-up and refusal (2-3 s)
-    # must fall within the first run's work even on a loaded machine
-    first = subprocess.Popen(collect_cmd(out, "--num", "30"), env=env, text=True,
+    # 60 demos (about 12 s of episodes here): the second run's start-up and refusal (2-3 s,
+    # 10 s and more on a loaded machine: 30 demos were done before it once) must fall within
+    # the first run's work
+    first = subprocess.Popen(collect_cmd(out, "--num", "60"), env=env, text=True,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
     deadline = time.time() + 120
     while not list(out.glob(".collect-*")) and time.time() < deadline:
@@ -115,12 +116,12 @@ def test_one_collect_at_a_time_per_out_and_no_dataset_replaced(tmp_path):
     assert first.poll() is None, "refused while the first run works, not after it"
     assert "being written by another embodied-envs collect" in second.stdout
     stdout, _ = first.communicate(timeout=300)
-    assert first.returncode == 0 and "default.json: 30 demonstrations" in stdout
+    assert first.returncode == 0 and "default.json: 60 demonstrations" in stdout
     before = snapshot(out)
     shard = subprocess.run(collect_cmd(out, "--seed", "100"), env=env, capture_output=True,
                            text=True, timeout=300)  # fmt: skip
     assert shard.returncode == 1
-    assert "already holds a dataset of" in shard.stdout and "episode seeds 0-29" in shard.stdout
+    assert "already holds a dataset of" in shard.stdout and "episode seeds 0-59" in shard.stdout
     assert "merge_trajectory" in shard.stdout
     assert snapshot(out) == before, "the first dataset is untouched"
 
