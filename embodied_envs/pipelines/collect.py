@@ -29,8 +29,8 @@ from pathlib import Path
 
 import gymnasium as gym
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
-from mani_skill.utils.wrappers.record import RecordEpisode
 
+from embodied_envs.datasets.recorder import EpisodeRecorder
 from embodied_envs.datasets.records import RECORD_KEY, scene_record
 from embodied_envs.paths import atomic_output
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode
@@ -138,7 +138,8 @@ class LayoutSummary:
 
 
 def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name: str) -> list:
-    """One worker's block of seeds: one env recorded by ManiSkill's RecordEpisode into
+    """One worker's block of seeds: one env recorded by ManiSkill's RecordEpisode
+    (``datasets/recorder.py``: its files, cheaper per step) into
     ``out_dir/name.h5``; a record per episode is reported (the parent's progress bar) and all
     are returned."""
     env = gym.make(
@@ -151,7 +152,7 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         render_mode=film_mode(plan.files) if plan.video else None,
         sim_backend="physx_cpu",
     )
-    env = RecordEpisode(
+    env = EpisodeRecorder(
         env,
         output_dir=out_dir,
         trajectory_name=name,
