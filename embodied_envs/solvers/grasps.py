@@ -350,21 +350,26 @@ def widest_height(vertices: np.ndarray, closing: np.ndarray, z: float, top: floa
     middle of its widest band of sections when that lies above ``z`` (fingers closing below
     the equator of a ball or of a cylinder on its side squeeze it up and out); else ``z`` (a
     box, a can, a bottle's neck, a round body widest at ``z`` or below)."""
-    import trimesh  # only where grasps are posed
+    from scipy.spatial import ConvexHull  # only where grasps are posed
 
     if top <= z:
         return z
-    hull = trimesh.convex.convex_hull(vertices)
-    a, b = hull.vertices[hull.edges_unique].transpose(1, 0, 2)  # (e, 3) each
-    bottom = hull.vertices[:, 2].min()
+    points = np.asarray(vertices, dtype=np.float64)
+    faces = ConvexHull(points, qhull_options="Qt").simplices  # triangles: any triangulation
+    # of the hull's faces gives the same sections' extremes (they lie on the hull's edges)
+    edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
+                                              faces[:, [2, 0]]]), 1), axis=0)  # fmt: skip
+    a, b = points[edges].transpose(1, 0, 2)  # (e, 3) each
+    bottom = points[:, 2].min()
     heights = np.linspace(bottom, top, max(2, int(np.ceil((top - bottom) / 0.001)) + 1))
     lo, hi = np.minimum(a[:, 2], b[:, 2]), np.maximum(a[:, 2], b[:, 2])
-    widths = np.zeros(len(heights))
-    for k, h in enumerate(heights):  # the slice's corners: where edges cross the plane
-        cross = (lo <= h) & (hi >= h) & (hi > lo)
-        t = (h - a[cross, 2]) / (b[cross, 2] - a[cross, 2])
-        along = (a[cross] + t[:, None] * (b[cross] - a[cross])) @ closing
-        widths[k] = np.ptp(along) if len(along) else 0.0
+    # every slice at once (heights x edges): its corners, where edges cross its plane
+    h = heights[:, None]
+    cross = (lo <= h) & (hi >= h) & (hi > lo)
+    rise = np.where(hi > lo, b[:, 2] - a[:, 2], 1.0)  # edges in no slice: any nonzero
+    along = a @ closing + (h - a[:, 2]) / rise * ((b - a) @ closing)
+    most = np.where(cross, along, -np.inf).max(1)
+    widths = np.where(cross.any(1), most - np.where(cross, along, np.inf).min(1), 0.0)
     if widths[-1] >= widths.max() - ROUND_BULGE:
         return z  # as wide at the top: no bulge
     band = heights[widths >= widths.max() - WIDEST_BAND]  # contiguous: a convex body's

@@ -15,6 +15,7 @@ from embodied_envs.solvers.grasps import (
     _compute,
     asset_grasps,
     posed_grasps,
+    widest_height,
 )
 from embodied_envs.solvers.gripper import GripperModel, box_clearance, to_tcp
 
@@ -214,3 +215,27 @@ def test_a_dropped_object_is_grasped_again():
 
 
 SHAPE_DROPPED, SEED_DROPPED = "slab", 0  # a seed whose plans repeat run to run
+
+
+def test_widest_height_closes_round_bodies_at_their_equator():
+    """A ball and a cylinder lying on its side are grasped at their widest section, whatever
+    their pose; a box or an upright can at the height asked for."""
+    import trimesh  # shapes for this test only
+
+    rng = np.random.default_rng(3)
+    closing = np.array([1.0, 0.0, 0.0])
+    for _ in range(5):
+        centre = rng.uniform(0.02, 0.05)
+        ball = trimesh.creation.icosphere(3, 0.03).vertices + [0, 0, centre]
+        z = centre - 0.02  # below the equator
+        assert abs(widest_height(ball, closing, z, centre + 0.025) - centre) < 0.002
+        turn = trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0])[:3, :3]
+        axis = trimesh.transformations.rotation_matrix(rng.uniform(0, np.pi), [0, 0, 1])[:3, :3]
+        lying = trimesh.creation.cylinder(0.025, 0.1, sections=48).vertices @ turn.T @ axis.T
+        lying = lying + [0, 0, centre]
+        assert abs(widest_height(lying, closing, z, centre + 0.02) - centre) < 0.002
+        box = trimesh.creation.box((0.04, 0.05, 0.08)).vertices + [0, 0, 0.04]
+        assert widest_height(box, closing, 0.02, 0.07) == 0.02
+        can = trimesh.creation.cylinder(0.03, 0.12, sections=48).vertices + [0, 0, 0.06]
+        assert widest_height(can, closing, 0.03, 0.11) == 0.03
+    assert widest_height(ball, closing, 0.05, 0.04) == 0.05  # top below z
