@@ -94,12 +94,14 @@ class _Part:
     def __init__(self, ctrl, cols: slice):
         self.ctrl, self.cols = ctrl, cols
 
-    def set(self, action: torch.Tensor, a: np.ndarray, qpos: np.ndarray) -> None:
-        self.ctrl.set_action(action[:, self.cols])  # ManiSkill's
+    def set(self, action: torch.Tensor, x: np.ndarray, qpos: np.ndarray) -> None:
+        """The controller's ``set_action``: here ManiSkill's, on its columns of ``action``
+        (``x``: the agent's action scaled as each part's controller scales it)."""
+        self.ctrl.set_action(action[:, self.cols])
 
 
 class _Passive(_Part):
-    def set(self, action, a, qpos) -> None:
+    def set(self, action, x, qpos) -> None:
         pass  # PassiveController.set_action
 
 
@@ -110,27 +112,15 @@ class _Joints(_Part):
         super().__init__(ctrl, cols)
         self.px = [joint._objs[0] for joint in ctrl.joints]
         self.idx = _indices(ctrl.active_joint_indices)
-        self.center = self.half = None
-        self.finite = True
+        self.scaling = None  # (clip low, clip high, centre, half range) of its columns
         if ctrl._normalize_action:  # gym_utils.clip_and_scale_action, its constants once
             low, high = ctrl.action_space_low.cpu().numpy(), ctrl.action_space_high.cpu().numpy()
             with np.errstate(invalid="ignore"):  # infinite limits give NaN, as in torch
-                self.center, self.half = HALF * (high + low), HALF * (high - low)
-            self.finite = bool(np.isfinite(self.center).all() and np.isfinite(self.half).all())
+                self.scaling = (-ONE, ONE, HALF * (high + low), HALF * (high - low))
         cfg = ctrl.config
         self.delta, self.target, self.interpolate = (
             bool(getattr(cfg, flag, False)) for flag in CONFIG_FLAGS
         )
-
-    def scaled(self, a: np.ndarray) -> np.ndarray:
-        """``_preprocess_action``: the columns clipped to [-1, 1] and scaled, if normalised."""
-        x = a[:, self.cols]
-        if self.center is None:
-            return x
-        if not self.finite:  # the Fetch's pd_joint_pos_vel: its continuous joints' NaN targets
-            with np.errstate(invalid="ignore"):
-                return self.center + self.half * np.clip(x, -ONE, ONE)
-        return self.center + self.half * np.clip(x, -ONE, ONE)
 
     def write_targets(self, targets: np.ndarray) -> None:
         for joint, value in zip(self.px, targets[0].tolist(), strict=True):
@@ -167,13 +157,13 @@ class _Joints(_Part):
 class _JointPos(_Joints):
     """``PDJointPosController.set_action``."""
 
-    def set(self, action, a, qpos) -> None:
+    def set(self, action, x, qpos) -> None:
         held = None
         if self.delta and self.target:
             held = self.own_target()
             if held is None:
-                return super().set(action, a, qpos)
-        x = self.scaled(a)
+                return super().set(action, x, qpos)
+        x = x[:, self.cols]
         start = self.start(qpos)
         if self.delta:
             target = (held if self.target else start) + x
@@ -194,11 +184,11 @@ class _Mimic(_Joints):
         self.multiplier = ctrl._multiplier.cpu().numpy()[None, :]
         self.offset = ctrl._offset.cpu().numpy()[None, :]
 
-    def set(self, action, a, qpos) -> None:
+    def set(self, action, x, qpos) -> None:
         target = self.own_target()
         if target is None:
-            return super().set(action, a, qpos)
-        x = self.scaled(a)
+            return super().set(action, x, qpos)
+        x = x[:, self.cols]
         start = self.start(qpos)
         if self.delta and self.target:
             target[:, self.control] = target[:, self.control] + x
@@ -213,13 +203,13 @@ class _Mimic(_Joints):
 class _JointPosVel(_Joints):
     """``PDJointPosVelController.set_action``: positions, then velocities."""
 
-    def set(self, action, a, qpos) -> None:
+    def set(self, action, x, qpos) -> None:
         held = None
         if self.delta and self.target:
             held = self.own_target()
             if held is None:
-                return super().set(action, a, qpos)
-        x = self.scaled(a)
+                return super().set(action, x, qpos)
+        x = x[:, self.cols]
         nq = x.shape[1] // 2
         start = self.start(qpos)
         if self.delta:
@@ -236,20 +226,25 @@ class _JointPosVel(_Joints):
 class _JointVel(_Joints):
     """``PDJointVelController.set_action``."""
 
-    def set(self, action, a, qpos) -> None:
-        self.write_velocities(self.scaled(a))
+    def set(self, action, x, qpos) -> None:
+        self.write_velocities(x[:, self.cols])
 
 
 class _BaseForwardVel(_Joints):
     """``PDBaseForwardVelController.set_action``: the forward speed turned by the base's yaw
     (its third joint). ManiSkill multiplies the 2x2 rotation by ``(forward, 0)`` in torch's
     ``bmm``, which sums each row from zero: ``(0 + r0 * a0) + r1 * 0``, kept here for the
-    zeros' signs."""
+    zeros' signs. The yaw's cosine and sine are kept while the yaw stays the same float."""
 
-    def set(self, action, a, qpos) -> None:
-        x = self.scaled(a)
-        yaw = _tensor(qpos[self.idx[2:3]])
-        cos, sin = torch.cos(yaw).numpy()[0], torch.sin(yaw).numpy()[0]
+    yaw = cos_sin = None
+
+    def set(self, action, x, qpos) -> None:
+        x = x[:, self.cols]
+        yaw = qpos[self.idx[2]]
+        if yaw != self.yaw or self.cos_sin is None:  # NaN != NaN: computed anew
+            turn = _tensor(qpos[self.idx[2:3]])
+            self.yaw, self.cos_sin = yaw, (torch.cos(turn).numpy()[0], torch.sin(turn).numpy()[0])
+        cos, sin = self.cos_sin
         forward = x[0, 0]
         vx = (ZERO + cos * forward) + (-sin) * ZERO
         vy = (ZERO + sin * forward) + cos * ZERO
@@ -284,6 +279,24 @@ class _Plan:
             ]
         else:
             self.parts = [_part(controller, slice(0, dim))]
+        # every normalised column clipped and scaled in one pass; the others kept as they are
+        # (-0.0 + 1 * x is x, signed zeros too)
+        self.low, self.high = np.full(self.shape, -np.inf, F32), np.full(self.shape, np.inf, F32)
+        self.center, self.half = np.full(self.shape, -0.0, F32), np.ones(self.shape, F32)
+        for part in self.parts:
+            if getattr(part, "scaling", None) is not None:
+                for array, value in zip(
+                    (self.low, self.high, self.center, self.half), part.scaling, strict=True
+                ):
+                    array[0, part.cols] = value
+        self.finite = bool(np.isfinite(self.center).all() and np.isfinite(self.half).all())
+
+    def scale(self, a: np.ndarray) -> np.ndarray:
+        """Each part's ``_preprocess_action`` (``gym_utils.clip_and_scale_action``), at once."""
+        if not self.finite:  # the Fetch's pd_joint_pos_vel: its continuous joints' NaN targets
+            with np.errstate(invalid="ignore"):
+                return self.center + self.half * np.minimum(np.maximum(a, self.low), self.high)
+        return self.center + self.half * np.minimum(np.maximum(a, self.low), self.high)
 
     @property
     def covered(self) -> list[str]:
@@ -312,16 +325,16 @@ class FastSetAction:
         plan = self.plan()
         if (
             type(action) is not torch.Tensor or action.dtype != torch.float32
-            or action.device.type != "cpu" or action.requires_grad
-            or tuple(action.shape) != plan.shape
+            or not action.is_cpu or action.requires_grad or action.shape != plan.shape
         ):  # fmt: skip
             return BaseAgent.set_action(self.agent, action)
         a = action.numpy()
         if np.isnan(a).any():  # BaseAgent.set_action's check, its message
             raise ValueError("Action cannot be NaN. Environment received:", action)
+        x = plan.scale(a)
         qpos = self.px.qpos  # read once: writing drive targets does not move the joints
         for part in plan.parts:
-            part.set(action, a, qpos)
+            part.set(action, x, qpos)
 
 
 def install(agent) -> bool:

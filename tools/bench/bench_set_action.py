@@ -60,7 +60,8 @@ def main() -> None:
                 if which == "fast":
                     agent.set_action = fast
                 times[which].append(per_call_us(agent, actions))
-        ratio = statistics.median(f / m for f, m in zip(times["fast"], times["maniskill"]))
+        pairs = zip(times["fast"], times["maniskill"], strict=True)
+        ratio = statistics.median(f / m for f, m in pairs)
         fast_us, ms_us = (statistics.median(times[k]) for k in ("fast", "maniskill"))
         print(
             f"{uid:16s} {agent.control_mode:22s} ManiSkill {ms_us:7.1f} us  fast {fast_us:6.1f} us"
