@@ -222,6 +222,29 @@ def test_uncovered_controllers_keep_maniskills_set_action(panda_pair):
         assert getattr(fast, "error", None) == getattr(slow, "error", None)
 
 
+def test_two_arms_each_get_the_fast_path_with_maniskills_results():
+    """ManiSkill's multi-agent env: each arm's set_action is the fast one, with its results."""
+    envs = [gym.make("PickEmbodiedGen-v1", obs_mode="none", robot_uids=("panda", "so100"))]
+    envs.append(gym.make("PickEmbodiedGen-v1", obs_mode="none", robot_uids=("panda", "so100")))
+    arms = [e.unwrapped.agent.agents for e in envs]
+    assert all(fast_control.installed(a) for a in arms[0] + arms[1])
+    for a in arms[1]:
+        fast_control.uninstall(a)
+    for e in envs:
+        e.reset(seed=1)
+    rng = np.random.default_rng(0)
+    spaces = envs[0].unwrapped.single_action_space.spaces
+    for k in range(STEPS):
+        action = {u: rng.uniform(-1.3, 1.3, s.shape).astype(np.float32) for u, s in spaces.items()}
+        for e in envs:
+            e.step({u: v.copy() for u, v in action.items()})
+        for fast, slow in zip(*arms, strict=True):
+            assert drives(fast) == drives(slow), k
+            assert controller_state(fast) == controller_state(slow), k
+    for e in envs:
+        e.close()
+
+
 def test_install_skips_the_gpu_and_batched_scenes():
     for gpu, n in ((True, 1), (False, 4)):
         fake = types.SimpleNamespace(scene=types.SimpleNamespace(gpu_sim_enabled=gpu, num_envs=n))
