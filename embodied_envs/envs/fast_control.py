@@ -30,13 +30,17 @@ Any other type (the end-effector controllers ``PDEEPosController``, ``PDEEPoseCo
 of the action as ``CombinedController`` calls it; so does an action that is not a float32 CPU
 tensor of the controller's shape (a dict for ``DictController``), a controller whose
 ``_target_qpos`` is not a float32 ``(1, n)`` tensor (a state set from float64 data), and an
-agent class with its own ``set_action``. ``before_simulation_step``, ``reset``, ``get_state``
-and ``set_state`` stay ManiSkill's, reading the state this module sets.
+agent class with its own ``set_action``. ``before_simulation_step`` (an interpolating
+controller's per-joint writes), ``reset``, ``get_state`` and ``set_state`` stay ManiSkill's,
+reading the state this module sets. Where ManiSkill's targets are NaN (the Fetch's
+``pd_joint_pos_vel`` scales its continuous joints' infinite limits), the NaNs' sign bits may
+differ.
 
 It reads ManiSkill internals: ``ArticulationJoint._objs`` and ``Articulation._objs`` (in
 ``envs/fast_reads.PRIVATE_ATTRIBUTES``) and each covered controller's attributes in
 :data:`CONTROLLER_ATTRIBUTES`; ``tests/envs/test_fast_reads.py`` checks them all, so an upgrade
-that renames one fails there.
+that renames one fails there, and one that changes the controllers' arithmetic fails
+``tests/envs/test_fast_control.py``.
 """
 
 from __future__ import annotations
