@@ -16,6 +16,9 @@ retypes one fails there, naming it. Two other modules read the same internals fo
 reason, and the same test covers what they use: ``envs/contacts.py`` (``Link._bodies``,
 ``Link._objs``, ``Actor._bodies``: the fingers' contacts) and ``envs/tasks/scene.py``
 (``Articulation._objs``, ``Link._objs``, ``Actor._objs``, ``Actor._bodies``: the task state).
+``envs/fast_control.py`` (ManiSkill's ``set_action`` in numpy) writes drive targets through
+``ArticulationJoint._objs`` and reads the controllers' attributes it lists in its
+``CONTROLLER_ATTRIBUTES``; the same test checks those.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ PRIVATE_ATTRIBUTES = (
     ("Link", "_objs", "PhysxArticulationLinkComponent"),  # entity_pose
     ("Link", "_bodies", "PhysxArticulationLinkComponent"),  # velocities, contacts
     ("Articulation", "_objs", "PhysxArticulation"),  # qpos, qvel
+    ("ArticulationJoint", "_objs", "PhysxArticulationJoint"),  # drive targets (fast_control)
 )
 
 

@@ -16,7 +16,7 @@ from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
 from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP, SUPPORTED_ROBOTS, CameraSpec
-from embodied_envs.envs import agents, fast_reads, keywords
+from embodied_envs.envs import agents, fast_control, fast_reads, keywords
 from embodied_envs.envs.arguments import check_quaternion
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.rendering import HybridRendering, render_camera, robot_camera
@@ -166,6 +166,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     def _load_agent(self, options: dict):
         placed = [sapien.Pose(p=[0.0, 0.0, 0.0]) for _ in self.robot_entries]  # per episode
         super()._load_agent(options, placed if len(placed) > 1 else placed[0])
+        for agent in agents.all_agents(self):  # ManiSkill's set_action in numpy (CPU only)
+            fast_control.install(agent)
 
     @property
     def main_agent(self):

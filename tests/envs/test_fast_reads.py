@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 import sapien
 import torch
+from mani_skill.agents.controllers.passive_controller import PassiveController
 from mani_skill.envs.sapien_env import BaseEnv
-from mani_skill.utils.structs import Actor, Articulation, Link
+from mani_skill.utils.structs import Actor, Articulation, ArticulationJoint, Link
 
 import embodied_envs  # noqa: F401
-from embodied_envs.envs import fast_reads
+from embodied_envs.envs import fast_control, fast_reads
 
 PHYSX = sapien.physx
 ITEM_TYPES = {  # the names fast_reads.PRIVATE_ATTRIBUTES gives, as classes
@@ -21,15 +22,19 @@ ITEM_TYPES = {  # the names fast_reads.PRIVATE_ATTRIBUTES gives, as classes
     "PhysxRigidBodyComponent": PHYSX.PhysxRigidBodyComponent,
     "PhysxArticulationLinkComponent": PHYSX.PhysxArticulationLinkComponent,
     "PhysxArticulation": PHYSX.PhysxArticulation,
+    "PhysxArticulationJoint": PHYSX.PhysxArticulationJoint,
 }
-STRUCTS = {"Actor": Actor, "Link": Link, "Articulation": Articulation}
+STRUCTS = {
+    "Actor": Actor, "Link": Link, "Articulation": Articulation,
+    "ArticulationJoint": ArticulationJoint,
+}  # fmt: skip
 
 
 def relied_on(what: str) -> str:
     return (
-        f"{what}: embodied_envs/envs/fast_reads.py relies on it, and ManiSkill "
-        f"{mani_skill.__version__} lacks it or changed its type; update the CPU reads there "
-        "(and in envs/contacts.py, envs/tasks/scene.py) to this version"
+        f"{what}: embodied_envs/envs/fast_reads.py (or fast_control.py) relies on it, and "
+        f"ManiSkill {mani_skill.__version__} lacks it or changed its type; update the CPU "
+        "reads there (and in envs/contacts.py, envs/tasks/scene.py) to this version"
     )
 
 
@@ -44,7 +49,10 @@ def env():
 def structs(env):
     """One of each ManiSkill struct the reads meet: the target object, a robot link, the robot."""
     u = env.unwrapped
-    return {"Actor": u.obj, "Link": u.agent.finger1_link, "Articulation": u.agent.robot}
+    return {
+        "Actor": u.obj, "Link": u.agent.finger1_link, "Articulation": u.agent.robot,
+        "ArticulationJoint": u.agent.controller.controllers["arm"].joints[0],
+    }  # fmt: skip
 
 
 @pytest.mark.parametrize("struct,name,item", fast_reads.PRIVATE_ATTRIBUTES)
@@ -93,6 +101,32 @@ def test_what_the_reads_call_on_those_objects_exists(env):
     assert all(isinstance(b.kinematic, bool) for b in px.rigid_dynamic_components), relied_on(
         "PhysxRigidDynamicComponent.kinematic (a bool)"
     )
+
+
+def test_the_controller_attributes_fast_control_reads_exist():
+    """Each controller class ``fast_control`` does the ``set_action`` of, met in the Fetch's
+    joint control modes (all but the passive one), has the attributes it reads and sets."""
+    e = gym.make("PickEmbodiedGen-v1", obs_mode="none", robot_uids="fetch")
+    agent, met = e.unwrapped.agent, set()
+    for mode in [m for m in agent.supported_control_modes if "joint" in m]:
+        agent.set_control_mode(mode)
+        agent.controller.reset()
+        for c in agent.controller.controllers.values():
+            names = fast_control.CONTROLLER_ATTRIBUTES.get(type(c))
+            if names is None:
+                continue
+            met.add(type(c))
+            for name in names:
+                assert hasattr(c, name), relied_on(f"{type(c).__name__}.{name}")
+            if c._normalize_action:
+                for name in fast_control.NORMALIZED_ATTRIBUTES:
+                    assert isinstance(getattr(c, name, None), torch.Tensor), relied_on(name)
+            if "_target_qpos" in names:
+                assert isinstance(c._target_qpos, torch.Tensor), relied_on("_target_qpos")
+                for flag in fast_control.CONFIG_FLAGS:
+                    assert isinstance(getattr(c.config, flag), bool), relied_on(flag)
+    e.close()
+    assert set(fast_control.CONTROLLER_ATTRIBUTES) - met == {PassiveController}
 
 
 def test_the_reads_give_what_maniskill_gives(env):
