@@ -84,6 +84,11 @@ def test_robot_resets_reproducibly_and_stands_at_the_layouts_spot(robot_env):
     assert float((tcp[:2] - spot[:2]) @ ahead) > 0.05
     # the task's every-step CPU read of it (from SAPIEN; the SO-100's its jaw tips' midpoint)
     np.testing.assert_array_equal(agents.tcp_position_cpu(u.agent, entry)[0], tcp)
+    # and the whole pose the observation reads is the agent's, bit for bit
+    theirs = u.agent.robot.links_map[entry.tcp_link].pose if entry.tcp_link else u.agent.tcp_pose
+    mine = agents.tcp_pose(u.agent, entry).raw_pose
+    assert mine.dtype == theirs.raw_pose.dtype and mine.shape == theirs.raw_pose.shape
+    np.testing.assert_array_equal(mine.numpy(), theirs.raw_pose.numpy())
     target = u.obj.pose.p[0].cpu().numpy()
     assert entry.reach[0] < np.linalg.norm(target[:2] - spot[:2]) < entry.reach[1]
     assert (u.placement_limits.reach_min, u.placement_limits.reach_max) == entry.reach
