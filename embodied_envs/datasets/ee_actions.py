@@ -130,7 +130,8 @@ def joint_pos_to_ee(
     farther than one controller step, up to ``substeps`` steps are taken toward it. A demo
     ends at the first step its task succeeds, with the arm still slowing down and the object
     just inside the goal; the converted arm lags a little behind it, so after the last action
-    it holds the last target until the task succeeds, for at most ``settle`` steps.
+    it holds the last target until the task succeeds, for at most ``settle`` steps; once the
+    hand stops closing its gap to that target (``STALL``) it holds the measured pose instead.
 
     Returns:
         The last step's info.
