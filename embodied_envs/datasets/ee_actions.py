@@ -20,6 +20,7 @@ the mover's offset from the hand in the two runs (:func:`held_shift`).
 from __future__ import annotations
 
 import numpy as np
+import sapien
 import torch
 from mani_skill.utils import common
 from mani_skill.utils.geometry.rotation_conversions import (
@@ -35,6 +36,11 @@ SETTLE_STEPS = 20
 # metres at most that a held mover's shift moves the hand's target: a grasp this different from
 # the recorded one is not corrected (the shifts seen on a default demo's end: 5-7 mm)
 MAX_SHIFT = 0.1
+# a settle step keeps chasing the last target while the hand's distance to it shrinks to at
+# most this part of the step before's; otherwise the arm holds where it is (a lagging arm
+# closes ~18 % of its gap a step; a wrist joint at its limit leaves the hand short of the
+# target, and chasing it turns the arm on at 0.4 rad/s, never static: default seed 114)
+STALL = 0.95
 
 
 def _mover_offsets(env, ee_name: str) -> tuple[np.ndarray, np.ndarray] | None:
@@ -124,7 +130,8 @@ def joint_pos_to_ee(
     farther than one controller step, up to ``substeps`` steps are taken toward it. A demo
     ends at the first step its task succeeds, with the arm still slowing down and the object
     just inside the goal; the converted arm lags a little behind it, so after the last action
-    it holds the last target until the task succeeds, for at most ``settle`` steps.
+    it holds the last target until the task succeeds, for at most ``settle`` steps; once the
+    hand stops closing its gap to that target (``STALL``) it holds the measured pose instead.
 
     Returns:
         The last step's info.
@@ -165,9 +172,17 @@ def joint_pos_to_ee(
         for _ in range(substeps):
             if not toward(target, ori["gripper"]):
                 break
+    gap, hold = np.inf, False
     for _ in range(settle if len(ori_actions) else 0):
         if bool(torch.as_tensor(info["success"]).all()):
             break
         target.p = goal + held_shift(ori_env, env, arm.ee_link.name)
-        toward(target, ori["gripper"])
+        now = arm.ee_pose_at_base
+        hand = common.to_numpy(now.p[0])
+        hold = hold or float(np.linalg.norm(target.p - hand)) > STALL * gap
+        gap = float(np.linalg.norm(target.p - hand))
+        if hold:  # the measured pose: a delta controller's zero, the absolute one's pose now
+            toward(sapien.Pose(hand, common.to_numpy(now.q[0])), ori["gripper"])
+        else:
+            toward(target, ori["gripper"])
     return info
