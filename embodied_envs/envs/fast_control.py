@@ -162,12 +162,17 @@ class _JointPos(_Joints):
     """``PDJointPosController.set_action``."""
 
     def set(self, action, x, qpos) -> None:
+        if not self.positions(x[:, self.cols], qpos):
+            super().set(action, x, qpos)
+
+    def positions(self, x: np.ndarray, qpos: np.ndarray) -> bool:
+        """The position targets from ``x`` (this controller's scaled position columns), set and
+        written as ``set_action`` does; False (nothing set) where ManiSkill's must do it."""
         held = None
         if self.delta and self.target:
             held = self.own_target()
             if held is None:
-                return super().set(action, x, qpos)
-        x = x[:, self.cols]
+                return False
         start = self.start(qpos)
         if self.delta:
             target = (held if self.target else start) + x
@@ -175,6 +180,7 @@ class _JointPos(_Joints):
             target = np.array(x)  # ``broadcast_to(action, shape).clone()``
         self.ctrl._target_qpos = _tensor(target)
         self.finish(start, target)
+        return True
 
 
 class _Mimic(_Joints):
@@ -204,24 +210,14 @@ class _Mimic(_Joints):
         self.finish(start, target)
 
 
-class _JointPosVel(_Joints):
+class _JointPosVel(_JointPos):
     """``PDJointPosVelController.set_action``: positions, then velocities."""
 
     def set(self, action, x, qpos) -> None:
-        held = None
-        if self.delta and self.target:
-            held = self.own_target()
-            if held is None:
-                return super().set(action, x, qpos)
         x = x[:, self.cols]
         nq = x.shape[1] // 2
-        start = self.start(qpos)
-        if self.delta:
-            target = (held if self.target else start) + x[:, :nq]
-        else:
-            target = np.array(x[:, :nq])
-        self.ctrl._target_qpos = _tensor(target)
-        self.finish(start, target)
+        if not self.positions(x[:, :nq], qpos):
+            return _Part.set(self, action, x, qpos)
         velocities = np.array(x[:, nq:])
         self.ctrl._target_qvel = _tensor(velocities)
         self.write_velocities(velocities)
