@@ -1,5 +1,5 @@
-"""Joint-target actions (``pd_joint_pos``) as another joint controller's, for an arm with one
-controller.
+"""Joint-target actions (``pd_joint_pos``) as another joint controller's: for an arm with one
+controller, and ``pd_joint_vel`` for any arm.
 
 ManiSkill 3.0.1's converter (``mani_skill.trajectory.utils.actions.conversion
 .from_pd_joint_pos``) reads an agent whose controller is combined from an ``arm`` and a
@@ -8,17 +8,31 @@ jaw included, and the converter stops with ``AttributeError``. :func:`joint_pos_
 for such an arm as ManiSkill's converter does for a combined one, on the whole controller (the
 SO-100 and the Koch have no ``pd_joint_vel``), and hands combined controllers to ManiSkill's.
 ``embodied-envs replay -c`` uses it.
+
+``pd_joint_vel`` follows the recorded run's measured joints, not its targets
+(:func:`follow_recorded`). The expert's targets lead the arm by the PD drive's lag
+(``solvers/follow.py``: 0.1 s of the joint's speed, 0.08 rad at its 0.8 rad/s), and at a move's
+end they overshoot its last waypoint and come back. ManiSkill's converter asks the velocity
+controller to reach each target in one step, so its arm runs up to 0.07 rad ahead of the
+recorded one along that overshoot, clipped at 1 rad/s, and a held banana slips in the hand: on
+round_table ``--fixed-hand`` 7 of 50 demos end with it 3-4.5 cm lower in the hand than recorded
+(outside the goal's 2.5 cm) or with the arm still moving (0.2 rad/s).
 """
 
 from __future__ import annotations
 
 import numpy as np
+import torch
 from mani_skill.utils import common, gym_utils
+
+from embodied_envs.datasets.ee_actions import SETTLE_STEPS
 
 # what each mode's action is relative to: the joints now, or the controller's last target
 RELATIVE_TO = {"pd_joint_delta_pos": "qpos", "pd_joint_target_delta_pos": "target"}
 # control steps at most toward one recorded target (ManiSkill's converter takes 2)
 TRIES = 2
+# modes converted by following the recorded run's joints (:func:`follow_recorded`)
+FOLLOWED = ("pd_joint_vel",)
 
 
 def mode_action(controller, target: np.ndarray, mode: str) -> np.ndarray:
@@ -58,6 +72,8 @@ def joint_pos_to_joint(
     Returns:
         The last step's info.
     """
+    if output_mode in FOLLOWED:
+        return follow_recorded(output_mode, ori_actions, ori_env, env, render, pbar)
     if not one_controller(env) or "ee" in output_mode:
         return combined(output_mode, ori_actions, ori_env, env, render, pbar, verbose)
     if output_mode not in RELATIVE_TO:
@@ -83,4 +99,75 @@ def joint_pos_to_joint(
                 env.render_human()
             if not clipped:
                 break
+    return info
+
+
+def _arm(env):
+    """``env``'s arm controller: the ``arm`` of a combined controller, or the one controller."""
+    controller = env.unwrapped.agent.controller
+    return controller.controllers["arm"] if hasattr(controller, "to_action_dict") else controller
+
+
+def velocity_action(arm, qpos: np.ndarray) -> np.ndarray:
+    """The normalised ``pd_joint_vel`` action of ``arm`` that moves its joints to ``qpos`` in
+    one control step, unclipped (ManiSkill's ``qpos_to_pd_joint_vel`` with per-joint bounds)."""
+    cfg = arm.config
+    qvel = (qpos - arm.qpos.cpu().numpy()[0]) * arm._control_freq
+    low, high = np.asarray(cfg.lower, np.float32), np.asarray(cfg.upper, np.float32)
+    return gym_utils.inv_scale_action(qvel, low, high)
+
+
+def follow_recorded(
+    output_mode: str,
+    ori_actions,
+    ori_env,
+    env,
+    render: bool = False,
+    pbar=None,
+    settle: int = SETTLE_STEPS,
+) -> dict:
+    """Replay ``pd_joint_pos`` actions in ``env``'s ``pd_joint_vel``: each step, the velocity
+    that takes the arm to where the recorded run's arm (``ori_env``, stepped with the recorded
+    action) is now, in up to ``TRIES`` steps where it is farther than one step allows; the
+    gripper gets the recorded action. After the last action both runs hold it, for at most
+    ``settle`` steps, until the task succeeds.
+
+    Returns:
+        The last step's info.
+    """
+    if output_mode not in FOLLOWED:
+        raise NotImplementedError(f"following the recorded joints in {output_mode}")
+    controller, arm, ori_arm = env.unwrapped.agent.controller, _arm(env), _arm(ori_env)
+    ori_controller = ori_env.unwrapped.agent.controller
+    combined = hasattr(controller, "to_action_dict")
+    device = env.unwrapped.device
+    info: dict = {}
+
+    def follow(action) -> None:
+        nonlocal info
+        ori_env.step(action)
+        goal = ori_arm.qpos.cpu().numpy()[0]
+        rest = ori_controller.to_action_dict(action) if combined else {}
+        for _ in range(TRIES):
+            arm_action = velocity_action(arm, goal)
+            clipped = np.max(np.abs(arm_action)) > 1 + 1e-3
+            parts = common.to_tensor({**rest, "arm": np.clip(arm_action, -1, 1)}, device=device)
+            _, _, _, _, info = env.step(
+                controller.from_action_dict(parts) if combined else parts["arm"]
+            )
+            if render:
+                env.render_human()
+            if not clipped:
+                break
+
+    if pbar is not None:
+        pbar.reset(total=len(ori_actions))
+    for t in range(len(ori_actions)):
+        if pbar is not None:
+            pbar.update()
+        follow(ori_actions[t])
+    for _ in range(settle if len(ori_actions) else 0):
+        if bool(torch.as_tensor(info["success"]).all()):
+            break
+        follow(ori_actions[-1])
     return info
