@@ -141,7 +141,7 @@ def test_a_collected_dataset_records_it_and_maniskill_replays_it(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MS_SKIP_ASSET_DOWNLOAD_PROMPT": "1"}
     res = subprocess.run(
         [sys.executable, "-m", "embodied_envs.cli.main", "collect", "--layout",
-         str(DEFAULT_LAYOUT), "--num", "1", "--seed", "5", "--obs-mode", "state", "--out", "out",
+         str(DEFAULT_LAYOUT), "--num", "1", "--seed", "5", "--out", "out",
          "--config", "hand_down.yaml"],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600,
     )  # fmt: skip
@@ -150,15 +150,16 @@ def test_a_collected_dataset_records_it_and_maniskill_replays_it(tmp_path):
     traj = tmp_path / "out" / "default" / "trajectory.h5"
     meta = json.loads(traj.with_suffix(".json").read_text())
     assert meta["env_info"]["env_kwargs"]["robot_init_qpos"] == HAND_DOWN
-    with h5py.File(traj) as f:
-        qpos = f["traj_0"]["obs"]["agent"]["qpos"][0]
+    with h5py.File(traj) as f:  # the articulation's state: pose, velocities, qpos, qvel
+        qpos = f["traj_0"]["env_states"]["articulations"]["panda"][0, 13:22]
     assert np.abs(qpos - HAND_DOWN).max() < 0.02 * 6
     res = subprocess.run(
         [sys.executable, "-m", "mani_skill.trajectory.replay_trajectory", "--traj-path",
-         str(traj), "--save-traj", "-o", "state"],
+         str(traj), "--save-traj"],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert "1/1=100.00% demos saved" in res.stdout + res.stderr, res.stdout + res.stderr
-    out = traj.with_name("trajectory.state.pd_joint_pos.physx_cpu.h5")
-    with h5py.File(out) as f:
-        np.testing.assert_allclose(f["traj_0"]["obs"]["agent"]["qpos"][0], qpos, atol=1e-5)
+    out = traj.with_name("trajectory.none.pd_joint_pos.physx_cpu.h5")
+    with h5py.File(out) as f:  # re-created from the seed and env_kwargs: the same start
+        replayed = f["traj_0"]["env_states"]["articulations"]["panda"][0, 13:22]
+    np.testing.assert_allclose(replayed, qpos, atol=1e-6)
