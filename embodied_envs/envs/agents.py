@@ -107,24 +107,28 @@ def arm_bases(entries, spots: np.ndarray, top, margin: float, floor_z: float, de
     return arm_spots, bases
 
 
-def reset_arms(arms, entries, bases, env_idx: torch.Tensor, noise: float, joint_noise) -> None:
+def reset_arms(
+    arms, entries, bases, rests, env_idx: torch.Tensor, noise: float, joint_noise
+) -> None:
     """Stand each arm at its base pose ``bases (n, 7)`` for the envs ``env_idx`` at its rest
-    joints (:func:`rest_qpos`) plus ``noise`` times ``joint_noise (b, J)`` (standard normal
-    draws) on its entry's ``noise_joints``; the fingers stay open."""
-    for agent, entry, base in zip(arms, entries, bases, strict=True):
+    joints ``rests`` (one array per arm: ``robot_init_qpos``, else :func:`default_rest`) plus
+    ``noise`` times ``joint_noise (b, J)`` (standard normal draws) on its entry's
+    ``noise_joints``; the fingers stay open."""
+    for agent, entry, base, rest in zip(arms, entries, bases, rests, strict=True):
         agent.robot.set_root_pose(Pose.create(base[env_idx]))
-        rest = rest_qpos(agent, entry)
         qpos = torch.as_tensor(rest, dtype=torch.float32).repeat(len(env_idx), 1)
         noisy = list(entry.noise_joints)  # the fingers stay open
         qpos[:, noisy] += noise * joint_noise[:, : len(noisy)]
         agent.reset(qpos)
 
 
-def rest_qpos(agent, entry: robots.Robot) -> np.ndarray:
-    """The entry's rest joint positions, or the agent's first keyframe's."""
+def default_rest(entry: robots.Robot) -> np.ndarray:
+    """The entry's rest joint positions, or its agent class's first keyframe's (the rest an
+    env without ``robot_init_qpos`` starts from)."""
     if entry.rest_qpos is not None:
         return np.asarray(entry.rest_qpos, dtype=np.float64)
-    return np.asarray(next(iter(type(agent).keyframes.values())).qpos, dtype=np.float64)
+    keyframes = REGISTERED_AGENTS[entry.uid].agent_cls.keyframes
+    return np.asarray(next(iter(keyframes.values())).qpos, dtype=np.float64)
 
 
 def tcp_pose(agent, entry: robots.Robot):

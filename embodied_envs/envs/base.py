@@ -67,6 +67,9 @@ class CheckedEnv(BaseEnv):
         # re-creates the env from any working directory
         if spec is not None:
             kwargs = self.env_kwargs(**spec.kwargs)
+            for key, value in kwargs.items():  # an array given directly: JSON's list
+                if isinstance(value, np.ndarray):
+                    kwargs[key] = value.tolist()
             if kwargs.get("layout_file") is not None:  # a set: its files, spelled out
                 files = self.__dict__.get("layout_file", kwargs["layout_file"])
                 kwargs["layout_file"] = (

@@ -4,10 +4,16 @@ Types come from the constructor's annotations (``CheckedEnv.check_keyword``); th
 the ranges and the structured values (:func:`check_value`, which config files' values pass
 through too), what a layout set could meet mid-simulation, refused at construction
 (:func:`one_robot`, :func:`check_layout_set`), and the values the keywords resolve to: the
-arms (:func:`robot_arms`), the placement limits and goal region (:func:`limits_and_goals`).
+arms (:func:`robot_arms`), their rest joints (:func:`rest_joints`, :func:`check_rest_limits`),
+the placement limits and goal region (:func:`limits_and_goals`).
 """
 
 from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
 
 from embodied_envs import robots
 from embodied_envs.config import CameraSpec, resolve_robot
@@ -42,6 +48,80 @@ def check_value(name: str, value) -> None:
         CameraSpec.from_cfg(value)
     elif name == "init_3dgs_quat":
         check_quaternion(name, value)
+    elif name == "robot_init_qpos" and value is not None:
+        joint_values(value)
+
+
+REST_HELP = (
+    "robot_init_qpos is the robot's rest joint positions (arm + gripper, one per active "
+    "joint, rad or m), e.g. the Panda's hand-down rest [0, 0.3927, 0, -1.9635, 0, 2.3562, "
+    "0.7854, 0.04, 0.04]; None: the robot entry's rest (robots.py)"
+)
+
+
+def joint_values(value, robot: str = "", dof: int = 0) -> tuple[float, ...]:
+    """``robot_init_qpos``: a non-empty list of finite numbers (not booleans), as floats;
+    ``robot`` and its ``dof`` (when known) are named in the error.
+
+    Raises:
+        ValueError: naming the keyword, the value, the robot (when given) and what it takes.
+    """
+    if isinstance(value, np.ndarray):
+        value = value.tolist() if value.ndim == 1 else None
+    ok = isinstance(value, list | tuple) and len(value) > 0
+    ok = ok and all(isinstance(v, numbers.Real) and not isinstance(v, bool) for v in value)
+    if not ok or not all(math.isfinite(v) for v in value):
+        who = f" for robot {robot!r} ({dof} active joints)" if robot else ""
+        count = f"{dof} " if dof else ""
+        raise ValueError(
+            f"robot_init_qpos={value!r}{who} must be a list of {count}finite numbers; {REST_HELP}"
+        )
+    return tuple(float(v) for v in value)
+
+
+def rest_joints(robot_init_qpos, entries) -> tuple[np.ndarray, ...]:
+    """Each arm's rest joints: ``robot_init_qpos`` for the first arm (a second keeps its
+    entry's rest), else the entries' (:func:`agents.default_rest`). Its length is checked
+    against the first arm's joints; the joint limits later (:func:`check_rest_limits`).
+
+    Raises:
+        ValueError: naming the keyword, the robot, the expected length and the fix.
+    """
+    rests = [agents.default_rest(e) for e in entries]
+    if robot_init_qpos is None:
+        return tuple(rests)
+    uid, dof = entries[0].uid, len(rests[0])
+    value = joint_values(robot_init_qpos, uid, dof)
+    if len(value) != dof:
+        raise ValueError(
+            f"robot_init_qpos has {len(value)} values; robot {uid!r} has {dof} active joints "
+            f"(arm + gripper). Fix: give {dof} joint positions, e.g. its rest "
+            f"{[round(v, 4) for v in rests[0]]}"
+            + (" (the first arm's; the second keeps its rest)" if len(entries) > 1 else "")
+        )
+    return (np.array(value), *rests[1:])
+
+
+def check_rest_limits(rest: np.ndarray, agent, uid: str) -> None:
+    """``robot_init_qpos`` within the joint limits of the loaded agent's articulation.
+
+    Raises:
+        ValueError: naming each joint outside its limits, the limits and the fix.
+    """
+    limits = agent.robot.get_qlimits()[0].cpu().numpy().astype(np.float64)  # (dof, 2)
+    names = [j.name for j in agent.robot.get_active_joints()]
+    tol = 1e-6
+    bad = [
+        f"joint {i} ({names[i]}) = {v:.4f} is outside [{lo:.4f}, {hi:.4f}]"
+        for i, (v, (lo, hi)) in enumerate(zip(rest, limits, strict=True))
+        if not lo - tol <= v <= hi + tol
+    ]
+    if bad:
+        raise ValueError(
+            f"robot_init_qpos={[round(float(v), 4) for v in rest]}: robot {uid!r}: "
+            f"{'; '.join(bad)} (its articulation's joint limits). Fix: give every joint a value "
+            "within its limits"
+        )
 
 
 def robot_defaults(entry: robots.Robot) -> tuple[dict, dict]:

@@ -47,8 +47,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
       ``env.unwrapped.instructions``), then its table yaw, robot spot and background yaw
     - per episode (the reset envs): every object on the table, within the placement limits;
       the goal, uniform over the table top within the robot's reach (``goal_region``); the arm
-      joints, the robot entry's ``rest_qpos`` plus N(0, ``robot_init_qpos_noise``) on its
-      ``noise_joints``, fingers open
+      joints, ``robot_init_qpos`` (default: the robot entry's ``rest_qpos``; with two arms
+      it sets the first's) plus N(0, ``robot_init_qpos_noise``) on its ``noise_joints``
 
     **Success Conditions:** by the env's task kind, ``envs/tasks/<kind>.py``. **Fail
     Conditions:** a mover, or a receptacle object, off the table: more than ``fail_drop`` below
@@ -94,6 +94,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         replace_objs: bool = True,
         robot_uids: str | list | tuple | None = None,  # one uid, or two (two arms)
         robot_init_qpos_noise: float = 0.02,
+        # the rest joints (arm + gripper) instead of the robot entry's; two arms: the first's
+        robot_init_qpos: list[float] | tuple[float, ...] | None = None,
         init_3dgs_quat: tuple[float, float, float, float] = SPLAT_Y_UP_TO_Z_UP,
         objs_z_offset: float = 0.002,
         robot_z_offset: float = 0.002,
@@ -119,6 +121,9 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         self.robot_entry = self.robot_entries[0]  # the arm the task's TCP and grasp follow
         if len(self.robot_entries) > 1:  # ManiSkill's multi-agent env (warns if not listed)
             self.SUPPORTED_ROBOTS = [*SUPPORTED_ROBOTS, robot]
+        # each arm's rest joints (robot_init_qpos: its length now, its limits once loaded)
+        self.robot_rests = keywords.rest_joints(robot_init_qpos, self.robot_entries)
+        self.robot_init_qpos = None if robot_init_qpos is None else self.robot_rests[0].tolist()
         # reach and goals follow the robot, for each field the user did not set
         self.placement_limits, self.goal_region = keywords.limits_and_goals(
             self.robot_entry, placement_limits, goal_region
@@ -166,6 +171,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     def _load_agent(self, options: dict):
         placed = [sapien.Pose(p=[0.0, 0.0, 0.0]) for _ in self.robot_entries]  # per episode
         super()._load_agent(options, placed if len(placed) > 1 else placed[0])
+        if self.robot_init_qpos is not None:  # before anything is simulated
+            keywords.check_rest_limits(self.robot_rests[0], self.main_agent, self.robot_entry.uid)
         for agent in agents.all_agents(self):  # ManiSkill's set_action in numpy (CPU only)
             fast_control.install(agent)
 
@@ -217,8 +224,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         start = ls.episodes.draw(env_idx, self._batched_episode_rng)
         with torch.device(self.device):
             agents.reset_arms(
-                agents.all_agents(self), self.robot_entries, self.robot_bases, env_idx,
-                self.robot_init_qpos_noise, start.joint_noise,
+                agents.all_agents(self), self.robot_entries, self.robot_bases, self.robot_rests,
+                env_idx, self.robot_init_qpos_noise, start.joint_noise,
             )  # fmt: skip
             ls.set_episode_poses(env_idx, start.objects if self.replace_objs else {})
             dest = self.task_reader.begin_episode(env_idx, start.goal)

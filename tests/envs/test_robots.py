@@ -78,7 +78,7 @@ def test_robot_resets_reproducibly_and_stands_at_the_layouts_spot(robot_env):
     # the arm starts at its rest joints (plus the default 0.02 rad noise), facing the table:
     # its TCP lies ahead of the spot, and the target within the robot's reach of it
     qpos = u.agent.robot.get_qpos()[0].cpu().numpy()
-    assert np.abs(qpos - agents.rest_qpos(u.agent, entry)).max() < 0.02 * 6
+    assert np.abs(qpos - agents.default_rest(entry)).max() < 0.02 * 6
     ahead = np.array([math.cos(heading), math.sin(heading)])
     tcp = agents.tcp_pose(u.agent, entry).p[0].cpu().numpy()
     assert float((tcp[:2] - spot[:2]) @ ahead) > 0.05
