@@ -8,8 +8,9 @@ step's values as they come and folds a whole episode into ManiSkill's buffer, on
 leaf, before anything reads the buffer (``flush_trajectory``, ``reset``, ``close``); the arrays,
 the ``.h5`` and the ``.json`` are ManiSkill's (``tests/datasets/test_recorder.py`` compares them
 file against file). Values that a later step could change in place (the action the caller
-passes, the controller's state) are copied when they are kept. A recorder that films
-(``save_video``) records through ManiSkill's own ``step``.
+passes, the controller's state, the observation: a camera's image can be a view of its render
+buffer) are copied when they are kept. A recorder that films (``save_video``) or runs on the GPU
+simulation records through ManiSkill's own ``step``.
 """
 
 from __future__ import annotations
@@ -32,8 +33,8 @@ class EpisodeRecorder(RecordEpisode):
         self._pending: list[tuple] = []  # one tuple of FIELDS per step not yet in the buffer
 
     def step(self, action):
-        if self.save_video or not self.save_trajectory:
-            self._fold()
+        if self.save_video or not self.save_trajectory or self.base_env.gpu_sim_enabled:
+            self._fold()  # GPU tensors go to the host at once, as ManiSkill's step sends them
             return super().step(action)
         obs, rew, terminated, truncated, info = self.env.step(action)
         state = None
@@ -42,7 +43,7 @@ class EpisodeRecorder(RecordEpisode):
             if "controller" in state:  # the controller's targets change in place
                 state = {**state, "controller": _copied(state["controller"])}
         self._pending.append((
-            state, obs, _copied(action), rew if self.record_reward else None, terminated,
+            state, _copied(obs), _copied(action), rew if self.record_reward else None, terminated,
             truncated, terminated | truncated, info.get("success"), info.get("fail"),
         ))  # fmt: skip
         self._elapsed_record_steps += 1

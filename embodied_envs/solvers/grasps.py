@@ -350,13 +350,17 @@ def widest_height(vertices: np.ndarray, closing: np.ndarray, z: float, top: floa
     middle of its widest band of sections when that lies above ``z`` (fingers closing below
     the equator of a ball or of a cylinder on its side squeeze it up and out); else ``z`` (a
     box, a can, a bottle's neck, a round body widest at ``z`` or below)."""
-    from scipy.spatial import ConvexHull  # only where grasps are posed
+    from scipy.spatial import ConvexHull, QhullError  # only where grasps are posed
 
     if top <= z:
         return z
     points = np.asarray(vertices, dtype=np.float64)
-    faces = ConvexHull(points, qhull_options="Qt").simplices  # triangles: any triangulation
-    # of the hull's faces gives the same sections' extremes (they lie on the hull's edges)
+    # triangles: any triangulation of the hull's faces gives the same sections' extremes (they
+    # lie on the hull's edges)
+    try:
+        faces = ConvexHull(points, qhull_options="Qt").simplices
+    except QhullError:  # flat or degenerate points: joggled, as trimesh retries
+        faces = ConvexHull(points, qhull_options="QJ").simplices
     edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
                                               faces[:, [2, 0]]]), 1), axis=0)  # fmt: skip
     a, b = points[edges].transpose(1, 0, 2)  # (e, 3) each

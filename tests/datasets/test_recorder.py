@@ -49,7 +49,11 @@ def _record(cls, out, obs_mode: str, control_mode: str) -> tuple[dict, dict]:
 
 @pytest.mark.parametrize(
     "obs_mode, control_mode",
-    [("none", "pd_joint_pos"), ("state_dict", "pd_joint_target_delta_pos")],
+    [
+        ("none", "pd_joint_pos"),
+        ("state_dict", "pd_joint_target_delta_pos"),
+        ("rgb", "pd_joint_pos"),
+    ],
 )
 def test_same_files_as_record_episode(tmp_path, obs_mode, control_mode):
     ours, ours_json = _record(EpisodeRecorder, tmp_path / "ours", obs_mode, control_mode)
@@ -63,6 +67,9 @@ def test_same_files_as_record_episode(tmp_path, obs_mode, control_mode):
         np.testing.assert_array_equal(ours[name], value, err_msg=name)
     assert len(ours["traj_0/actions"]) == 25 and len(ours["traj_1/actions"]) == 30
     assert not (ours["traj_0/actions"] == 7.0).any()
+    if obs_mode == "rgb":  # every step's own image, not the last one's
+        frames = ours["traj_1/obs/sensor_data/base_camera/rgb"]
+        assert len(frames) == 31 and (frames[0] != frames[-1]).any()
     if control_mode == "pd_joint_target_delta_pos":  # the controller's targets are recorded
         assert any("controller" in k for k in ours)
     assert ours_json["episodes"] == theirs_json["episodes"]

@@ -239,3 +239,6 @@ def test_widest_height_closes_round_bodies_at_their_equator():
         can = trimesh.creation.cylinder(0.03, 0.12, sections=48).vertices + [0, 0, 0.06]
         assert widest_height(can, closing, 0.03, 0.11) == 0.03
     assert widest_height(ball, closing, 0.05, 0.04) == 0.05  # top below z
+    # a flat (upright, zero-thickness) plate: qhull's degenerate case, retried joggled
+    plate = np.array([[x, 0.0, z] for x in (-0.03, 0.03) for z in (0.0, 0.1)] + [[0, 0, 0.05]])
+    assert widest_height(plate, closing, 0.02, 0.09) == 0.02
