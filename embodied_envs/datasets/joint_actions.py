@@ -1,5 +1,5 @@
 """Joint-target actions (``pd_joint_pos``) as another joint controller's: for an arm with one
-controller, and ``pd_joint_vel`` for any arm.
+controller, and ``pd_joint_vel`` and ``pd_joint_delta_pos`` for any arm.
 
 ManiSkill 3.0.1's converter (``mani_skill.trajectory.utils.actions.conversion
 .from_pd_joint_pos``) reads an agent whose controller is combined from an ``arm`` and a
@@ -17,6 +17,11 @@ controller to reach each target in one step, so its arm runs up to 0.07 rad ahea
 recorded one along that overshoot, clipped at 1 rad/s, and a held banana slips in the hand: on
 round_table ``--fixed-hand`` 7 of 50 demos end with it 3-4.5 cm lower in the hand than recorded
 (outside the goal's 2.5 cm) or with the arm still moving (0.2 rad/s).
+
+``pd_joint_delta_pos`` asks the recorded targets, as ManiSkill's converter, and both modes then
+hold the last action until the task succeeds (``JOINT_SETTLE_STEPS``): on place_bowl a banana let
+go in the bowl still rocks at the recorded run's last step, and replayed it may turn faster than
+``REST_ANG`` there (2 of 50 demos lost without the hold, the arm on the recorded joints).
 """
 
 from __future__ import annotations
@@ -25,14 +30,16 @@ import numpy as np
 import torch
 from mani_skill.utils import common, gym_utils
 
-from embodied_envs.datasets.ee_actions import SETTLE_STEPS
-
 # what each mode's action is relative to: the joints now, or the controller's last target
 RELATIVE_TO = {"pd_joint_delta_pos": "qpos", "pd_joint_target_delta_pos": "target"}
 # control steps at most toward one recorded target (ManiSkill's converter takes 2)
 TRIES = 2
-# modes converted by following the recorded run's joints (:func:`follow_recorded`)
-FOLLOWED = ("pd_joint_vel",)
+# modes converted by :func:`follow_recorded`: ``pd_joint_vel`` follows the recorded run's joints,
+# ``pd_joint_delta_pos`` its targets (as ManiSkill's converter), both then settle
+FOLLOWED = ("pd_joint_vel", "pd_joint_delta_pos")
+# control steps at most that both runs hold the last action, until the task succeeds: a banana
+# let go in place_bowl's bowl rocks past REST_ANG for up to 29 steps (measured, 2026-11-25)
+JOINT_SETTLE_STEPS = 50
 
 
 def mode_action(controller, target: np.ndarray, mode: str) -> np.ndarray:
@@ -124,13 +131,16 @@ def follow_recorded(
     env,
     render: bool = False,
     pbar=None,
-    settle: int = SETTLE_STEPS,
+    settle: int = JOINT_SETTLE_STEPS,
 ) -> dict:
-    """Replay ``pd_joint_pos`` actions in ``env``'s ``pd_joint_vel``: each step, the velocity
-    that takes the arm to where the recorded run's arm (``ori_env``, stepped with the recorded
-    action) is now, in up to ``TRIES`` steps where it is farther than one step allows; the
-    gripper gets the recorded action. After the last action both runs hold it, for at most
-    ``settle`` steps, until the task succeeds.
+    """Replay ``pd_joint_pos`` actions in ``env``'s ``pd_joint_vel`` or ``pd_joint_delta_pos``:
+    each step, the action that takes the arm to where the recorded run's arm (``ori_env``,
+    stepped with the recorded action) is now (``pd_joint_vel``), or to the recorded target
+    (``pd_joint_delta_pos``, as ManiSkill's converter), in up to ``TRIES`` steps where it is
+    farther than one step allows; the gripper gets the recorded action. After the last action
+    both runs hold it, for at most ``settle`` steps, until the task succeeds: an object let go
+    may still rock at the recorded run's last step (a banana in place_bowl's bowl), faster than
+    ``REST_ANG`` in the converted run.
 
     Returns:
         The last step's info.
@@ -146,10 +156,15 @@ def follow_recorded(
     def follow(action) -> None:
         nonlocal info
         ori_env.step(action)
+        parts = ori_controller.to_action_dict(action) if combined else {"arm": action}
+        rest = {k: v for k, v in parts.items() if k != "arm"}
+        target = np.asarray(parts["arm"], np.float32)
         goal = ori_arm.qpos.cpu().numpy()[0]
-        rest = ori_controller.to_action_dict(action) if combined else {}
         for _ in range(TRIES):
-            arm_action = velocity_action(arm, goal)
+            if output_mode == "pd_joint_vel":
+                arm_action = velocity_action(arm, goal)
+            else:
+                arm_action = mode_action(arm, target, output_mode)
             clipped = np.max(np.abs(arm_action)) > 1 + 1e-3
             parts = common.to_tensor({**rest, "arm": np.clip(arm_action, -1, 1)}, device=device)
             _, _, _, _, info = env.step(
