@@ -35,8 +35,8 @@ RELATIVE_TO = {"pd_joint_delta_pos": "qpos", "pd_joint_target_delta_pos": "targe
 # control steps at most toward one recorded target (ManiSkill's converter takes 2)
 TRIES = 2
 # modes converted by :func:`follow_recorded`: ``pd_joint_vel`` follows the recorded run's joints,
-# ``pd_joint_delta_pos`` its targets (as ManiSkill's converter), both then settle
-FOLLOWED = ("pd_joint_vel", "pd_joint_delta_pos")
+# the delta modes its targets (as ManiSkill's converter), all then settle
+FOLLOWED = ("pd_joint_vel", *RELATIVE_TO)
 # control steps at most that both runs hold the last action, until the task succeeds: a banana
 # let go in place_bowl's bowl rocks past REST_ANG for up to 29 steps (measured, 2026-11-25)
 JOINT_SETTLE_STEPS = 50
@@ -70,11 +70,10 @@ def joint_pos_to_joint(
 ) -> dict:
     """Replay ``pd_joint_pos`` actions in ``env``'s joint controller ``output_mode``.
 
-    The signature is ManiSkill's ``from_pd_joint_pos``; ``combined`` is that function, which
-    converts for an agent with combined controllers (and to end-effector modes). For one
-    controller, each recorded target is turned into the mode's action for every joint; a
-    target farther than one step allows takes up to ``TRIES`` steps. ``ori_env`` steps
-    alongside, as in ManiSkill's converter.
+    The signature is ManiSkill's ``from_pd_joint_pos``; ``combined`` is that function. The
+    joint modes (``FOLLOWED``) are converted by :func:`follow_recorded`, for every arm (one
+    controller, or an ``arm`` of combined ones); ``combined`` converts the rest (the
+    end-effector modes) of an agent with combined controllers.
 
     Returns:
         The last step's info.
@@ -83,30 +82,10 @@ def joint_pos_to_joint(
         return follow_recorded(output_mode, ori_actions, ori_env, env, render, pbar)
     if not one_controller(env) or "ee" in output_mode:
         return combined(output_mode, ori_actions, ori_env, env, render, pbar, verbose)
-    if output_mode not in RELATIVE_TO:
-        raise NotImplementedError(
-            f"converting pd_joint_pos to {output_mode} for a one-controller arm: one of "
-            f"{sorted(RELATIVE_TO)}"
-        )
-    controller = env.unwrapped.agent.controller
-    info: dict = {}
-    if pbar is not None:
-        pbar.reset(total=len(ori_actions))
-    for t in range(len(ori_actions)):
-        if pbar is not None:
-            pbar.update()
-        target = np.asarray(ori_actions[t], dtype=np.float32)
-        ori_env.step(target)
-        for _ in range(TRIES):
-            action = mode_action(controller, target, output_mode)
-            clipped = np.max(np.abs(action)) > 1 + 1e-3
-            action = common.to_tensor(np.clip(action, -1, 1), device=env.unwrapped.device)
-            _, _, _, _, info = env.step(action)
-            if render:
-                env.render_human()
-            if not clipped:
-                break
-    return info
+    raise NotImplementedError(
+        f"converting pd_joint_pos to {output_mode} for a one-controller arm: one of "
+        f"{sorted(RELATIVE_TO)}"
+    )
 
 
 def _arm(env):
