@@ -74,6 +74,13 @@ class FingerGrasp:
 
 PANDA_GRASP = FingerGrasp()  # Panda.is_grasping
 JAW_GRASP = FingerGrasp(max_angle=110.0)  # SO100.is_grasping, Koch.is_grasping
+
+# the control modes the scripted expert records in (``collect --control-mode``): it commands
+# joint targets (pd_joint_pos), turned into the others' actions step by step (solvers/modes.py)
+EXPERT_MODES = (
+    "pd_joint_pos", "pd_joint_delta_pos", "pd_joint_target_delta_pos", "pd_joint_vel",
+    "pd_ee_delta_pos", "pd_ee_delta_pose", "pd_ee_pose",
+)  # fmt: skip
 FETCH_GRASP = FingerGrasp(opening=(-1.0, 1.0))  # Fetch.is_grasping: its left finger's -y opens
 
 

@@ -19,6 +19,7 @@ from embodied_envs.cli.args import (
     seed_int,
     writable_dir,
 )
+from embodied_envs.robots import EXPERT_MODES
 
 # env keywords collect sets itself: a --config file may not set them
 OWNED_KEYS = {
@@ -26,7 +27,7 @@ OWNED_KEYS = {
     "obs_mode": "--obs-mode",
     "hybrid_obs": "--hybrid-obs",
     "render_mode": "--video",
-    "control_mode": "the solver records pd_joint_pos; convert with embodied-envs replay",
+    "control_mode": "--control-mode",
     "num_envs": "--workers: one env per process",
     "sim_backend": "one CPU env per process",
 }
@@ -70,6 +71,13 @@ def add_parser(sub) -> None:
         action="store_true",
         help="grasp top-down at the hand's start orientation and carry without turning it: "
         "demos that convert to pd_ee_delta_pos, which cannot turn the hand",
+    )
+    p.add_argument(
+        "--control-mode",
+        choices=EXPERT_MODES,
+        default="pd_joint_pos",
+        help="the controller the demos act in, recorded as the expert runs (no conversion "
+        "afterwards); default pd_joint_pos. pd_joint_delta_pos is the env's default",
     )
     add_config_argument(p)
     p.set_defaults(func=cmd_collect, builds_env=True)
@@ -121,6 +129,7 @@ def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
         workers=workers,
         video=args.video,
         fixed_hand=args.fixed_hand,
+        control_mode=args.control_mode,
         env_kwargs=config,
     )
     with tqdm(total=plan.attempts(), desc=label, unit="episode") as bar:

@@ -74,7 +74,7 @@ def held_shift(ori_env, env, ee_name: str) -> np.ndarray:
     return rot.T @ shift
 
 
-def _root_pose_of_target(pin_model, qpos: np.ndarray, ee_index: int):
+def root_pose_of_target(pin_model, qpos: np.ndarray, ee_index: int):
     """The end-effector pose relative to the robot root for joint positions ``qpos``."""
     pin_model.compute_forward_kinematics(qpos)
     return pin_model.get_link_pose(ee_index)  # sapien.Pose in the root frame
@@ -85,15 +85,16 @@ def ee_action(arm, target_p: np.ndarray, target_q: np.ndarray) -> tuple[torch.Te
 
     Args:
         arm: the env's ``PDEEPoseController`` / ``PDEEPosController`` (root-frame config).
-        target_p, target_q: the wanted pose relative to the root (wxyz quaternion).
+        target_p, target_q: the wanted pose relative to the root (wxyz quaternion), ``(3,)``
+            and ``(4,)`` or one per env, ``(n, 3)`` and ``(n, 4)``.
 
     Returns:
-        The action ``(1, d)`` and whether it had to be clipped (the target is farther than one
+        The action ``(n, d)`` and whether it had to be clipped (the target is farther than one
         step of the controller allows).
     """
     device = arm.device
-    p = torch.as_tensor(target_p, dtype=torch.float32, device=device)[None]
-    q = torch.as_tensor(target_q, dtype=torch.float32, device=device)[None]
+    p = torch.as_tensor(target_p, dtype=torch.float32, device=device).reshape(-1, 3)
+    q = torch.as_tensor(target_q, dtype=torch.float32, device=device).reshape(-1, 4)
     cfg = arm.config
     pos_only = not hasattr(cfg, "rot_lower")
     if not cfg.use_delta:  # absolute pose: position and XYZ euler angles of the root frame
@@ -165,7 +166,7 @@ def joint_pos_to_ee(
         )
         qpos = robot.get_qpos()[0].cpu().numpy().astype(np.float64)
         qpos[arm_joints] = common.to_numpy(ori["arm"]).reshape(-1)
-        target = _root_pose_of_target(pin_model, qpos, arm.ee_link.index)
+        target = root_pose_of_target(pin_model, qpos, arm.ee_link.index)
         goal = target.p
         target.p = goal + held_shift(ori_env, env, arm.ee_link.name)
         ori_env.step(ori_actions[t])

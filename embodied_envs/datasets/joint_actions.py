@@ -44,11 +44,13 @@ JOINT_SETTLE_STEPS = 50
 
 def mode_action(controller, target: np.ndarray, mode: str) -> np.ndarray:
     """The normalised action of ``controller`` (in ``mode``) that moves every joint's target to
-    ``target``, unclipped, as ManiSkill's ``qpos_to_pd_joint_*`` compute it (its bounds may be
-    lists here, one per joint, which ManiSkill's functions do not take)."""
+    ``target`` (``(d,)`` for the first env, or ``(n, d)`` one per env), unclipped, as
+    ManiSkill's ``qpos_to_pd_joint_*`` compute it (its bounds may be lists here, one per joint,
+    which ManiSkill's functions do not take)."""
     cfg = controller.config
     now = controller._target_qpos if RELATIVE_TO[mode] == "target" else controller.qpos
-    delta = target - now.cpu().numpy()[0]
+    now = now.cpu().numpy()
+    delta = target - (now[0] if np.ndim(target) == 1 else now)
     low, high = np.asarray(cfg.lower, np.float32), np.asarray(cfg.upper, np.float32)
     return gym_utils.inv_scale_action(delta, low, high)
 

@@ -48,8 +48,8 @@ SOURCE_DESC = (
     "it reaches soonest (IK and a collision-free plan, lower ranks "
     "costing steps); seeded plans (straight joint lines, screw motions, RRT-Connect) approach, "
     "grasp, lift and carry it: to the goal and hold still (pick), or over its destination, "
-    "lowered and released (place, move); a missed or slipped grasp is made again; pd_joint_pos "
-    "actions"
+    "lowered and released (place, move); a missed or slipped grasp is made again; its joint "
+    "targets recorded as the dataset's control mode's actions (embodied_envs/solvers/modes.py)"
 )
 FIXED_HAND_DESC = (
     "; every grasp top-down at the hand's start orientation, carried without turning it "
@@ -79,6 +79,8 @@ class CollectPlan:
         video: also write one MP4 per kept episode.
         fixed_hand: the expert keeps the hand's orientation (``SolverConfig.fixed_hand``): demos
             that ``pd_ee_delta_pos`` replays.
+        control_mode: the mode the expert's actions are recorded in (``solvers/modes.py``):
+            each step's joint targets as that mode's action, graded on the run they make.
         env_kwargs: further ``gym.make`` keywords (from ``--config`` files), recorded with the
             dataset's ``env_kwargs``.
     """
@@ -94,6 +96,7 @@ class CollectPlan:
     workers: int = 1
     video: bool = False
     fixed_hand: bool = False
+    control_mode: str = "pd_joint_pos"
     env_kwargs: dict = field(default_factory=dict)
 
     @property
@@ -148,7 +151,7 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         layout_file=plan.env_layout,
         obs_mode=plan.obs_mode,
         hybrid_obs=plan.hybrid_obs,
-        control_mode="pd_joint_pos",
+        control_mode=plan.control_mode,
         render_mode=film_mode(plan.files) if plan.video else None,
         sim_backend="physx_cpu",
     )

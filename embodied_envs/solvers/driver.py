@@ -54,19 +54,27 @@ class ArmDriver:
             return None, f"{len(res['position'])} steps, over max_path_steps"
         return res["position"], ""
 
+    @property
+    def plans_from_targets(self) -> bool:
+        """Whether moves are planned from the arm's last joint targets, not from where it
+        stands: for a hand that drifts (``robots.Hand.drifts``), and in a mode that keeps the
+        hand's orientation (``pd_ee_delta_pos``: its IK takes the arm to the targets' hand
+        position, turned as it is; planned from there, a carry would first turn it back)."""
+        return self.robot_hand.drifts or self.mode_actions.keeps_orientation
+
     def _plan_start(self) -> np.ndarray:
         """Per env, the configuration plans start from: the measured joints; for a hand that
         drifts (``robots.Hand.drifts``) the arm's last joint targets, which its paths go on
         from (the arm stands off them while the jaw squeezes)."""
         qpos = self._qpos()
-        if self.robot_hand.drifts:
+        if self.plans_from_targets:
             qpos[:, : self.arm_dof] = self.command
         return qpos
 
     def _hand_pose(self) -> np.ndarray:
         """Per env, the grasp frame's pose ``(n, 7)`` moves are planned from: where it is; for
         a hand that drifts, where the arm's joint targets put it (forward kinematics)."""
-        if not self.robot_hand.drifts:
+        if not self.plans_from_targets:
             return self._tcp().raw_pose.cpu().numpy()
         base = self.base.agent.robot.pose.raw_pose.cpu().numpy().astype(np.float64)
         out = np.empty((self.num_envs, 7))
@@ -143,8 +151,7 @@ class ArmDriver:
             dt = self.base.control_timestep
             lead = q + self.follow.lag * np.gradient(q, dt, axis=0)
             lead[-1] = q[-1]  # the path ends at rest there
-            space = self.base.single_action_space
-            lead = np.clip(lead, space.low[:n], space.high[:n])
+            lead = np.clip(lead, *self.target_bounds)
         if not self.cfg.convertible:
             return lead
         return rate_limited(lead, self.command[i], self.follow.step)
@@ -152,12 +159,20 @@ class ArmDriver:
     def _bounded(self, arm: np.ndarray) -> np.ndarray:
         """The arm targets ``arm`` (per env) moved at most ``follow.step`` from the last ones
         and leading the measured joints by at most ``follow.lead`` (a joint lagging its target
-        more than planned, e.g. the lag building up as it starts, slows the targets down)."""
+        more than planned, e.g. the lag building up as it starts, slows the targets down). An
+        end-effector mode drives the hand to where the targets put it, by joints of its IK's
+        choosing (``solvers/modes.py``): the lead is the hand's, not bounded here."""
         arm = self.command + shortened(arm - self.command, self.follow.step)
+        if not self.mode_actions.joint_targets:  # the hand's pose follows them, not the joints
+            return arm
         q = self._qpos()[:, : self.arm_dof]
         return q + shortened(arm - q, self.follow.lead)
 
     def _step(self, action: np.ndarray) -> None:
+        """One control step of every env: ``action`` holds the arm's joint targets and the
+        hand's action (``pd_joint_pos``), given to the env in its control mode
+        (``solvers/modes.py``)."""
+        action = self.mode_actions(action)
         a = action if self._batched_actions else action[0]
         _, _, terminated, truncated, info = self.env.step(a)
         self.last_info = info
@@ -239,7 +254,7 @@ class ArmDriver:
         def arrived() -> bool:
             if self.steps < start + moving:
                 return False
-            return np.abs(self._qpos()[:, :n] - ends).max() < self.cfg.settle_tolerance
+            return self.mode_actions.arrived(ends, self.cfg.settle_tolerance)
 
         self._execute(paths, settle, arrived if settle else None, open_before)
         return chosen

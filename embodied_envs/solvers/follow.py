@@ -32,7 +32,7 @@ MARGIN = 0.9  # part of each controller's limit the expert's targets use at most
 SPEED_SHARE = 0.8  # part of those limits the plans' joint speeds use: below MARGIN, so that a
 # target can get ahead of its path by the lag while moving with it
 JOINT_MODES = ("pd_joint_delta_pos", "pd_joint_vel")  # whose limits bound the targets
-RECORDED_MODE = "pd_joint_pos"  # what the expert records (its PD gains give the lag)
+RECORDED_MODE = "pd_joint_pos"  # what the expert commands (its PD gains give the lag)
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from embodied_envs.solvers.grasp_choice import GraspChoice
 from embodied_envs.solvers.grasps import GraspConfig, hull_points
 from embodied_envs.solvers.gripper import GripperModel
 from embodied_envs.solvers.jaws import Jaws
+from embodied_envs.solvers.modes import ModeActions, target_bounds
 from embodied_envs.solvers.motion import (
     MotionConfig,
     SeededPlanner,
@@ -236,13 +237,12 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         # the grasp frame (z approach, y closing) in the planned link's frame, and back
         self.grasp_in_link = sapien.Pose(hand.grasp_in_link[:3], hand.grasp_in_link[3:])
         self.link_in_grasp = self.grasp_in_link.inv()
-        if self.base.control_mode != "pd_joint_pos":
-            raise ValueError(
-                f"the solver drives control_mode='pd_joint_pos', got {self.base.control_mode!r}"
-            )
         base_poses = self.base.agent.robot.pose.raw_pose.cpu().numpy()
         self.planners = _planners(self.base)
         self.arm_dof = len(self.planners[0].move_group_joint_indices)  # the gripper's after them
+        # joint targets as the env's control mode's actions; their bounds (pd_joint_pos's)
+        self.mode_actions = ModeActions(self.base, self.arm_dof)
+        self.target_bounds = target_bounds(self.base.agent, self.arm_dof)
         # the joint targets' bounds, so that other controllers replay them (solvers/follow.py)
         self.follow = follow_limits(self.base.agent, 1 / self.base.control_timestep, self.arm_dof)
         vel = np.asarray(self.cfg.joint_vel_limits, dtype=np.float64)

@@ -140,7 +140,7 @@ class PlaceFlow:
             ]
             self._per_env("rise", up, obstacles=False)
             self._per_env("carry", targets(self.cfg.carry_yaws, high), path_ok=over, **how)
-        if not self.robot_hand.drifts:
+        if not self.plans_from_targets:
             self._per_env("settle", targets((0.0,), envs), obstacles=False)
             return
         # a hand that drifts: the settle repeated while the object is off the goal (the jaw's
@@ -168,7 +168,7 @@ class PlaceFlow:
     def _in_planned_hand(self) -> np.ndarray:
         """Per env, the target's position in the grasp frame where moves are planned from
         (``_hand_pose``: the measured frame, ``_in_hand``, but for a hand that drifts)."""
-        if not self.robot_hand.drifts:
+        if not self.plans_from_targets:
             return self._in_hand()
         tcp = _matrices(self._hand_pose())
         obj = self.target.pose.p.cpu().numpy()

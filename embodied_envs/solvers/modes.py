@@ -1,0 +1,166 @@
+"""The expert's joint targets as actions of the env's control mode (``collect --control-mode``).
+
+The expert plans joint paths and commands joint targets each step (the arm's targets and the
+hand's ``pd_joint_pos`` action: ``ArmDriver._execute``). In any other mode :class:`ModeActions`
+turns each step's targets into that mode's action from the state the env is in at that step, so
+a dataset records the actions the env ran, graded on the run they made: nothing is lost to a
+conversion afterwards.
+
+- ``pd_joint_delta_pos``: the targets minus the joints now (the controller adds its action to
+  them): the drive targets of ``pd_joint_pos`` itself, while within the controller's 0.1 rad
+  (``solvers/follow.py`` keeps the expert's targets there).
+- ``pd_joint_target_delta_pos``: the targets minus the controller's last targets.
+- ``pd_joint_vel``: the velocity whose drive force is ``pd_joint_pos``'s at the step's start: a
+  position drive pushes with ``k (target - q) - d qd``, a velocity drive with ``d_v (v - qd)``,
+  so ``v = k / d_v (target - q)`` (the same arm damping: the same force).
+- the end-effector modes (``pd_ee_delta_pose``, ``pd_ee_delta_pos``, ``pd_ee_pose``): the
+  hand's pose the targets give (forward kinematics, the robot's root frame) as the controller's
+  action (``datasets/ee_actions.ee_action``); the arm has arrived when the hand has
+  (:meth:`ModeActions.arrived`). ``pd_ee_delta_pos`` keeps the hand's orientation (ManiSkill's
+  IK solves for the orientation it has): the expert then plans on from its own joint targets
+  (``ArmDriver.plans_from_targets``), and the hand takes the planned positions turned as it
+  started.
+
+The hand's action passes as it is where the mode's gripper controller is ``pd_joint_pos``'s (the
+Panda's in every mode); on an arm with one controller for every joint (the SO-100, the Koch) the
+jaw's target is turned into the mode's action with the arm's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from mani_skill.utils import gym_utils
+
+from embodied_envs.datasets.ee_actions import ee_action, root_pose_of_target
+from embodied_envs.datasets.joint_actions import mode_action
+from embodied_envs.robots import EXPERT_MODES
+from embodied_envs.solvers.follow import RECORDED_MODE, _per_joint, arm_config
+
+JOINT_VEL = "pd_joint_vel"
+EE_MODES = tuple(m for m in EXPERT_MODES if m.startswith("pd_ee"))
+
+
+# m: an end-effector mode's hand this close to where the path's last targets put it has arrived
+# (the joint modes: ``SolverConfig.settle_tolerance`` rad on every joint; 0.01 rad on the
+# Panda's shoulder moves its hand about 8 mm); rad, the same for its orientation (pose modes)
+EE_ARRIVED = 0.005
+
+
+class ModeError(ValueError):
+    """A control mode the expert cannot drive (names the modes it can)."""
+
+
+def drivable_modes(agent) -> list[str]:
+    """The robot's control modes the expert records natively."""
+    return [m for m in EXPERT_MODES if m in agent._controller_configs]
+
+
+def target_bounds(agent, arm_dof: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(low, high)`` of the arm's ``pd_joint_pos`` targets: its config's bounds, or the
+    joints' limits where it has none (ManiSkill's action space in that mode)."""
+    config = arm_config(agent._controller_configs, RECORDED_MODE, arm_dof)
+    if config.lower is not None:
+        return _per_joint(config.lower, arm_dof), _per_joint(config.upper, arm_dof)
+    names = [j.name for j in agent.robot.get_active_joints()]
+    index = [names.index(n) for n in config.joint_names[:arm_dof]]
+    limits = agent.robot.get_qlimits()[0].cpu().numpy().astype(np.float64)[index]
+    return limits[:, 0], limits[:, 1]
+
+
+class ModeActions:
+    """Turns the expert's ``(n, arm_dof + 1)`` joint-target actions into the env's control
+    mode's ``(n, d)`` actions, one step at a time (every env at once)."""
+
+    def __init__(self, base, arm_dof: int):
+        agent, mode = base.agent, base.control_mode
+        self.mode, self.arm_dof = mode, arm_dof
+        configs = agent._controller_configs
+        if mode not in EXPERT_MODES:
+            raise ModeError(
+                f"control_mode={mode!r}: the expert records {drivable_modes(agent)} for "
+                f"{type(agent).__name__}. Fix: collect in one of them, or record pd_joint_pos "
+                "and convert (embodied-envs replay -c)"
+            )
+        controller = agent.controller
+        self.combined = hasattr(controller, "to_action_dict")
+        self.controller = controller
+        self.arm = controller.controllers["arm"] if self.combined else controller
+        if self.combined and mode != RECORDED_MODE:
+            ours, theirs = configs[RECORDED_MODE]["gripper"], configs[mode]["gripper"]
+            if ours != theirs:
+                raise ModeError(
+                    f"control_mode={mode!r}: {type(agent).__name__}'s gripper controller "
+                    "differs from its pd_joint_pos one, whose actions the expert gives. Fix: "
+                    "record pd_joint_pos and convert (embodied-envs replay -c)"
+                )
+        self.gain = None
+        if mode == JOINT_VEL:  # k / d_v per joint of the velocity controller
+            pos, vel = configs[RECORDED_MODE], configs[mode]
+            pos, vel = (pos["arm"], vel["arm"]) if self.combined else (pos, vel)
+            dof = len(vel.joint_names)
+            self.gain = _per_joint(pos.stiffness, dof) / _per_joint(vel.damping, dof)
+        self.robot = agent.robot
+        if mode in EE_MODES:
+            self.model = agent.robot.create_pinocchio_model()
+            self.arm_joints = self.arm.active_joint_indices.cpu().numpy()
+
+    @property
+    def joint_targets(self) -> bool:
+        """Whether the mode's controller drives the arm's joints to targets (not the hand)."""
+        return self.mode not in EE_MODES
+
+    @property
+    def keeps_orientation(self) -> bool:
+        """Whether the mode moves the hand without turning it (``pd_ee_*_pos``)."""
+        return self.mode in EE_MODES and not hasattr(self.arm.config, "rot_lower") and (
+            self.arm.config.use_delta
+        )
+
+    def arrived(self, ends: np.ndarray, tolerance: float) -> bool:
+        """Whether every env's arm is where the joint targets ``ends`` ``(n, arm_dof)`` put it:
+        each joint within ``tolerance`` rad; in an end-effector mode, the hand within
+        ``EE_ARRIVED`` of their hand pose (its position only, where the mode keeps the hand's
+        orientation as it is)."""
+        qpos = self.robot.get_qpos().cpu().numpy().astype(np.float64)
+        if self.joint_targets:
+            return bool(np.abs(qpos[:, : self.arm_dof] - ends).max() < tolerance)
+        p, q = self._hand(qpos, ends)
+        now = self.arm.ee_pose_at_base
+        far = np.linalg.norm(p - now.p.cpu().numpy(), axis=1).max() > EE_ARRIVED
+        if hasattr(self.arm.config, "rot_lower"):  # the pose modes turn the hand too
+            dot = np.abs(np.sum(q * now.q.cpu().numpy(), axis=1)).clip(max=1.0)
+            far |= bool((2 * np.arccos(dot)).max() > EE_ARRIVED)
+        return not far
+
+    def __call__(self, action: np.ndarray) -> np.ndarray:
+        if self.mode == RECORDED_MODE:
+            return action
+        n = self.arm_dof
+        if not self.combined:  # one controller: every joint's target, the jaw's last
+            return self._joint(self.controller, action.astype(np.float64))
+        targets = action[:, :n].astype(np.float64)
+        arm = self._ee(targets) if self.mode in EE_MODES else self._joint(self.arm, targets)
+        return np.concatenate([arm, action[:, n:]], axis=1).astype(np.float32)
+
+    def _joint(self, controller, targets: np.ndarray) -> np.ndarray:
+        if self.mode == JOINT_VEL:
+            cfg = controller.config
+            qvel = self.gain * (targets - controller.qpos.cpu().numpy())
+            low, high = np.asarray(cfg.lower, np.float32), np.asarray(cfg.upper, np.float32)
+            out = gym_utils.inv_scale_action(qvel, low, high)
+        else:
+            out = mode_action(controller, targets, self.mode)
+        return np.clip(out, -1, 1).astype(np.float32)
+
+    def _hand(self, qpos: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per env, the hand's pose (root frame) with the arm's joints at ``targets``."""
+        qpos = qpos.copy()
+        qpos[:, self.arm_joints] = targets
+        poses = [root_pose_of_target(self.model, q, self.arm.ee_link.index) for q in qpos]
+        return np.array([pose.p for pose in poses]), np.array([pose.q for pose in poses])
+
+    def _ee(self, targets: np.ndarray) -> np.ndarray:
+        qpos = self.robot.get_qpos().cpu().numpy().astype(np.float64)
+        out, _ = ee_action(self.arm, *self._hand(qpos, targets))
+        return torch.as_tensor(out).cpu().numpy()
