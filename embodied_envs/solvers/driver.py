@@ -14,6 +14,7 @@ import sapien
 import torch
 
 from embodied_envs.solvers.follow import rate_limited, shortened
+from embodied_envs.solvers.modes import CATCH_UP
 from embodied_envs.solvers.motion import STRAIGHT_BLOCKED
 from embodied_envs.solvers.screw import polyline_trajectory, screw_waypoints
 
@@ -171,8 +172,14 @@ class ArmDriver:
     def _step(self, action: np.ndarray) -> None:
         """One control step of every env: ``action`` holds the arm's joint targets and the
         hand's action (``pd_joint_pos``), given to the env in its control mode
-        (``solvers/modes.py``)."""
-        action = self.mode_actions(action)
+        (``solvers/modes.py``); while that mode's action had to be clipped, up to
+        ``modes.CATCH_UP`` steps more toward the same targets."""
+        for _ in range(1 + CATCH_UP):
+            self._step_once(self.mode_actions(action))
+            if self.ended or not self.mode_actions.clipped:
+                return
+
+    def _step_once(self, action: np.ndarray) -> None:
         a = action if self._batched_actions else action[0]
         _, _, terminated, truncated, info = self.env.step(a)
         self.last_info = info

@@ -47,6 +47,11 @@ EE_MODES = tuple(m for m in EXPERT_MODES if m.startswith("pd_ee"))
 EE_ARRIVED = 0.005
 
 
+# control steps more at most toward the same targets while the mode's action had to be
+# clipped (a jump one step of the controller cannot make: the SO-100's jaw closing at once)
+CATCH_UP = 4
+
+
 class ModeError(ValueError):
     """A control mode the expert cannot drive (names the modes it can)."""
 
@@ -101,6 +106,7 @@ class ModeActions:
             dof = len(vel.joint_names)
             self.gain = _per_joint(pos.stiffness, dof) / _per_joint(vel.damping, dof)
         self.robot = agent.robot
+        self.clipped = False  # whether the last action had to be clipped, in any env
         if mode in EE_MODES:
             self.model = agent.robot.create_pinocchio_model()
             self.arm_joints = self.arm.active_joint_indices.cpu().numpy()
@@ -134,6 +140,7 @@ class ModeActions:
         return not far
 
     def __call__(self, action: np.ndarray) -> np.ndarray:
+        """The mode's actions; ``clipped`` says whether one had to be clipped."""
         if self.mode == RECORDED_MODE:
             return action
         n = self.arm_dof
@@ -151,6 +158,7 @@ class ModeActions:
             out = gym_utils.inv_scale_action(qvel, low, high)
         else:
             out = mode_action(controller, targets, self.mode)
+        self.clipped = bool(np.abs(out).max() > 1 + 1e-6)
         return np.clip(out, -1, 1).astype(np.float32)
 
     def _hand(self, qpos: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -162,5 +170,5 @@ class ModeActions:
 
     def _ee(self, targets: np.ndarray) -> np.ndarray:
         qpos = self.robot.get_qpos().cpu().numpy().astype(np.float64)
-        out, _ = ee_action(self.arm, *self._hand(qpos, targets))
+        out, self.clipped = ee_action(self.arm, *self._hand(qpos, targets))
         return torch.as_tensor(out).cpu().numpy()

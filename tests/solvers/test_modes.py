@@ -1,0 +1,86 @@
+"""The expert in other control modes (`solvers/modes.py`, `collect --control-mode`): the same
+run as its joint targets make, or one graded on its own; refused modes say which work."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from conftest import DATA, DEFAULT_LAYOUT
+
+from embodied_envs.pipelines.episodes import expert, run_episode
+from embodied_envs.registration import ENV_ID
+from embodied_envs.robots import EXPERT_MODES
+from embodied_envs.solvers.modes import ModeError
+from embodied_envs.solvers.pick_place import PickPlaceSolver
+
+
+def expert_run(mode: str, seed: int = 0, layout=DEFAULT_LAYOUT, robot: str = "panda"):
+    """The expert's episode in ``mode``: (episode, final joints, final mover position)."""
+    env = gym.make(ENV_ID, layout_file=str(layout), control_mode=mode, robot_uids=robot)
+    try:
+        episode = run_episode(env, seed, expert)
+        u = env.unwrapped
+        qpos = u.agent.robot.get_qpos()[0].numpy()
+        mover = u.task_scene.movers[0].pose.p[0].numpy()
+        return episode, qpos, mover
+    finally:
+        env.close()
+
+
+@pytest.fixture(scope="module")
+def joint_pos_run():
+    return expert_run("pd_joint_pos")
+
+
+@pytest.mark.parametrize("mode", ["pd_joint_delta_pos", "pd_joint_target_delta_pos"])
+def test_joint_delta_modes_make_the_joint_target_run(joint_pos_run, mode):
+    """A delta of the targets from the joints (or the last targets) is the same drive target:
+    the same steps, the same end, to float rounding."""
+    (ref, ref_q, ref_mover), (ep, q, mover) = joint_pos_run, expert_run(mode)
+    assert ref.success and ep.success
+    assert ep.steps == ref.steps
+    np.testing.assert_allclose(q, ref_q, atol=1e-4)
+    np.testing.assert_allclose(mover, ref_mover, atol=1e-4)
+
+
+def test_joint_velocity_mode_pushes_as_the_position_drive(joint_pos_run):
+    """pd_joint_vel at ``k / d (target - q)``: the position drive's force at each step's start;
+    the episode succeeds in about as many steps and leaves the can within 1 cm of the other."""
+    (ref, _, ref_mover), (ep, _, mover) = joint_pos_run, expert_run("pd_joint_vel")
+    assert ep.success
+    assert abs(ep.steps - ref.steps) <= 0.1 * ref.steps
+    assert np.linalg.norm(mover - ref_mover) < 0.01
+
+
+@pytest.mark.parametrize("mode", ["pd_ee_delta_pos", "pd_ee_delta_pose"])
+def test_end_effector_modes_grade_their_own_run(mode):
+    """The hand driven to where the targets put it succeeds on seeds the joint run succeeds
+    on; pd_ee_delta_pos keeps the 45-degree pitched hand of the rest pose the whole way."""
+    for seed in (0, 3):
+        ep, q, _ = expert_run(mode, seed)
+        assert ep.success, (mode, seed, ep.plan_failures)
+        assert ep.steps < 300
+
+
+def test_one_controller_arm_catches_up_with_targets_a_step_cannot_reach():
+    """The SO-100 (one controller, the jaw's target with the arm's; its expert plans at 1.5
+    rad/s, past pd_joint_delta_pos's 0.1 rad a step) in pd_joint_delta_pos: each clipped step
+    is followed by up to CATCH_UP more toward the same targets, and the episode succeeds (it
+    fails without them: 418 steps, the jaw closed late)."""
+    layout = DATA / "layouts" / "so100_block.json"
+    ref = expert_run("pd_joint_pos", 0, layout, "so100")
+    ep = expert_run("pd_joint_delta_pos", 0, layout, "so100")
+    assert ref[0].success and ep[0].success, ep[0].plan_failures
+    assert ref[0].steps < ep[0].steps < 500  # the catch-up steps
+
+
+def test_a_mode_the_expert_cannot_drive_is_refused_with_those_it_can():
+    env = gym.make(ENV_ID, layout_file=str(DEFAULT_LAYOUT), control_mode="pd_joint_pos_vel")
+    try:
+        env.reset(seed=0)
+        with pytest.raises(ModeError) as e:
+            PickPlaceSolver(env)
+        msg = str(e.value)
+        assert "control_mode='pd_joint_pos_vel'" in msg and "embodied-envs replay -c" in msg
+        assert all(m in msg for m in EXPERT_MODES)  # the Panda has every one of them
+    finally:
+        env.close()
