@@ -99,6 +99,29 @@ def check_replayable(traj_path: str | Path) -> list[str]:
     return []
 
 
+# the modes ManiSkill's replay_trajectory converts from (ours too: root_frame_conversion)
+CONVERTED_FROM = ("pd_joint_pos", "pd_joint_delta_pos")
+
+
+def check_conversion(traj_path: str | Path, target: str | None) -> None:
+    """Refuse a conversion ManiSkill's ``replay_trajectory`` cannot make, before it starts: from
+    a mode other than ``CONVERTED_FROM`` (a dataset ``collect --control-mode`` recorded in it).
+
+    Raises:
+        DatasetError: names the dataset's mode, the target and the fix.
+    """
+    meta_path = Path(traj_path).with_suffix(".json")
+    mode = json.loads(meta_path.read_text())["env_info"]["env_kwargs"].get("control_mode")
+    if target is None or mode is None or target == mode or mode in CONVERTED_FROM:
+        return
+    raise DatasetError(
+        f"{meta_path}: its actions are {mode} (env_info.env_kwargs.control_mode); -c {target} "
+        f"converts from {' or '.join(CONVERTED_FROM)} only. Fix: collect the demos in "
+        f"{target} (embodied-envs collect --control-mode {target}), or in pd_joint_pos and "
+        "convert those"
+    )
+
+
 @contextlib.contextmanager
 def root_frame_conversion():
     """ManiSkill's ``replay_trajectory`` takes no converter argument and looks its converters
@@ -131,5 +154,6 @@ def replay(options) -> None:
 
     for note in check_replayable(options.traj_path):  # a dataset that cannot replay: one line
         print(note)
+    check_conversion(options.traj_path, options.target_control_mode)
     with root_frame_conversion():
         replay_trajectory.main(options)

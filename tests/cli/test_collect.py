@@ -274,3 +274,32 @@ def test_fixed_hand_demos_convert_to_position_only_control(tmp_path):
     assert "collect --fixed-hand" in meta["source_desc"]
     res = run(["replay", "--traj-path", str(traj), "-c", "pd_ee_delta_pos"], tmp_path)
     assert "1/1=" in res.stdout, res.stdout[-2000:]
+
+
+@pytest.mark.parametrize("mode", ["pd_ee_delta_pos", "pd_joint_vel"])
+def test_native_control_mode_datasets_replay_in_maniskill(tmp_path, mode):
+    """`collect --control-mode` records the mode's actions (no conversion afterwards); the
+    dataset says so, and ManiSkill's own replay_trajectory, replaying the actions alone (no
+    env states), keeps every demo."""
+    args = ["--num", "2", "--seed", "3", "--only-success", "--control-mode", mode, "--out", "out"]
+    res = run(["collect", *args], tmp_path, check=False)
+    assert "default.json: 2 demonstrations (2/2 successful" in res.stdout, res.stdout[-2000:]
+    traj = tmp_path / "out" / "default" / "trajectory.h5"
+    meta = json.loads(traj.with_suffix(".json").read_text())
+    assert meta["env_info"]["env_kwargs"]["control_mode"] == mode
+    assert "control mode's actions" in meta["source_desc"]
+    dims = {"pd_ee_delta_pos": 4, "pd_joint_vel": 8}[mode]
+    with h5py.File(traj) as f:
+        for key in f:
+            actions = f[key]["actions"][:]
+            assert actions.shape[1] == dims and np.abs(actions).max() <= 1.0
+    replay = [sys.executable, "-m", "mani_skill.trajectory.replay_trajectory", "--traj-path",
+              str(traj), "-b", "physx_cpu"]  # fmt: skip
+    res = subprocess.run(replay, cwd=tmp_path, env=ENV, capture_output=True, text=True,
+                         timeout=600)  # fmt: skip
+    assert "Replayed 2 episodes, 2/2=100.00% demos saved" in res.stdout, res.stdout + res.stderr
+    if mode == "pd_ee_delta_pos":  # ManiSkill's converter takes pd_joint_pos or delta actions
+        res = run(["replay", "--traj-path", str(traj), "-c", "pd_joint_vel"], tmp_path, False)
+        assert res.returncode == 1 and "Traceback" not in res.stdout + res.stderr
+        assert "its actions are pd_ee_delta_pos" in res.stdout + res.stderr
+        assert "collect --control-mode pd_joint_vel" in res.stdout + res.stderr
