@@ -5,13 +5,16 @@ In one run, interleaved, each timed as a whole command (start-up, planning, phys
 
 - ManiSkill's ``python -m mani_skill.examples.motionplanning.panda.run -e PickCube-v1
   -n NUM --only-count-success -b cpu`` (one process, observations ``none``);
-- ``embodied-envs collect --num NUM --only-success --workers 1`` on each layout (observations
-  ``none``, as ManiSkill's demos), and with ``--workers 2`` on the default layout.
+- ``embodied-envs collect --num NUM --only-success --workers 1 --control-mode MODE`` on each
+  layout (observations ``none``, as ManiSkill's demos; MODE by default ``pd_joint_delta_pos``,
+  the env's default controller, recorded natively: demos in the controller learners use, with
+  no conversion after), and with ``--workers 2`` on the default layout.
 
-Prints successful demonstrations per minute, the ratio to PickCube's runner (the issue's target
-is >= 0.6 with one worker) and MB per 100 demonstrations.
+Prints successful demonstrations per minute, the ratio to PickCube's runner (issue 34's target:
+>= 1.0 in the default controller) and MB per 100 demonstrations.
 
 Usage: python tools/bench/bench_collect.py [--num 20] [--repeats 1] [--layout FILE ...]
+       [--control-mode pd_joint_delta_pos]
 """
 
 from __future__ import annotations
@@ -45,12 +48,12 @@ def pickcube(num: int) -> float:
         return num / timed(cmd, tmp)
 
 
-def ours(num: int, layout: Path, workers: int) -> tuple[float, float]:
+def ours(num: int, layout: Path, workers: int, mode: str) -> tuple[float, float]:
     """Demonstrations per minute and MB per 100 demonstrations."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "embodied_envs.cli.main", "collect", "--layout",
                str(layout), "--num", str(num), "--only-success", "--workers", str(workers),
-               "--out", "out"]  # fmt: skip
+               "--control-mode", mode, "--out", "out"]  # fmt: skip
         rate = num / timed(cmd, tmp)
         size = sum(p.stat().st_size for p in (Path(tmp) / "out" / layout.stem).iterdir())
     return rate, size / 1e6 / num * 100
@@ -63,6 +66,7 @@ def main() -> None:
     ap.add_argument("--num", type=int, default=20)
     ap.add_argument("--repeats", type=int, default=1, help="pairs per case (median ratio)")
     ap.add_argument("--layout", type=Path, nargs="+", default=None)
+    ap.add_argument("--control-mode", default="pd_joint_delta_pos", help="collect's mode")
     args = ap.parse_args()
     runs = [(path.resolve(), 1) for path in args.layout or shipped_layouts()]  # cwd: a temp dir
     runs.append((default_layout(), 2))
@@ -70,11 +74,12 @@ def main() -> None:
         pairs = []
         for _ in range(args.repeats):  # each pair back to back: the machine drifts
             base = pickcube(args.num)
-            pairs.append((*ours(args.num, path, workers), base))
+            pairs.append((*ours(args.num, path, workers, args.control_mode), base))
         rate, mb, base = (statistics.median(x) for x in zip(*pairs, strict=True))
         ratio = statistics.median(r / b for r, _, b in pairs)
         print(
-            f"{path.name:18s} {workers} worker(s): {rate:5.1f} successful demonstrations/min; "
+            f"{path.name:18s} {workers} worker(s), {args.control_mode}: {rate:5.1f} successful "
+            "demonstrations/min; "
             f"PickCube-v1 runner (1 process) {base:5.1f}/min; median ratio {ratio:.2f} of "
             f"{args.repeats} pair(s) {[round(r / b, 2) for r, _, b in pairs]}; "
             f"{mb:.1f} MB per 100 demonstrations (obs none)",
