@@ -1,11 +1,15 @@
 """The expert in other control modes (`solvers/modes.py`, `collect --control-mode`): the same
 run as its joint targets make, or one graded on its own; refused modes say which work."""
 
+from types import SimpleNamespace
+
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 from conftest import DATA, DEFAULT_LAYOUT
 
+from embodied_envs.datasets.joint_actions import mode_action
 from embodied_envs.pipelines.episodes import expert, run_episode
 from embodied_envs.registration import ENV_ID
 from embodied_envs.robots import EXPERT_MODES
@@ -84,3 +88,21 @@ def test_a_mode_the_expert_cannot_drive_is_refused_with_those_it_can():
         assert all(m in msg for m in EXPERT_MODES)  # the Panda has every one of them
     finally:
         env.close()
+
+
+def test_mode_actions_are_computed_for_every_env_at_once():
+    """A delta mode's action over 3 envs (a GPU simulation's batch) is each env's own: the
+    targets minus that env's joints (or last targets), scaled by the bounds, row by row."""
+    rng = np.random.default_rng(0)
+    qpos, last = (torch.as_tensor(rng.normal(size=(3, 7)), dtype=torch.float32) for _ in "ab")
+    config = SimpleNamespace(lower=[-0.1] * 7, upper=[0.1] * 7)
+    controller = SimpleNamespace(config=config, qpos=qpos, _target_qpos=last)
+    targets = qpos.numpy() + rng.uniform(-0.1, 0.1, size=(3, 7))
+    for mode, base in (("pd_joint_delta_pos", qpos), ("pd_joint_target_delta_pos", last)):
+        out = mode_action(controller, targets, mode)
+        assert out.shape == (3, 7)
+        np.testing.assert_allclose(out, (targets - base.numpy()) / 0.1, rtol=1e-5, atol=1e-5)
+        for i in range(3):  # the first env's alone, as the converters ask it
+            row = base[i : i + 1]
+            single = SimpleNamespace(config=config, qpos=row, _target_qpos=row)
+            np.testing.assert_allclose(mode_action(single, targets[i], mode), out[i], atol=1e-6)
