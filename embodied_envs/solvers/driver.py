@@ -64,17 +64,18 @@ class ArmDriver:
         return self.robot_hand.drifts or self.mode_actions.keeps_orientation
 
     def _plan_start(self) -> np.ndarray:
-        """Per env, the configuration plans start from: the measured joints; for a hand that
-        drifts (``robots.Hand.drifts``) the arm's last joint targets, which its paths go on
-        from (the arm stands off them while the jaw squeezes)."""
+        """Per env, the configuration plans start from: the measured joints; where moves are
+        planned from targets (:attr:`plans_from_targets`) the arm's last joint targets, which
+        its paths go on from (the Koch's arm stands off them while the jaw squeezes)."""
         qpos = self._qpos()
         if self.plans_from_targets:
             qpos[:, : self.arm_dof] = self.command
         return qpos
 
     def _hand_pose(self) -> np.ndarray:
-        """Per env, the grasp frame's pose ``(n, 7)`` moves are planned from: where it is; for
-        a hand that drifts, where the arm's joint targets put it (forward kinematics)."""
+        """Per env, the grasp frame's pose ``(n, 7)`` moves are planned from: where it is; where
+        moves are planned from targets, where the arm's joint targets put it (forward
+        kinematics)."""
         if not self.plans_from_targets:
             return self._tcp().raw_pose.cpu().numpy()
         base = self.base.agent.robot.pose.raw_pose.cpu().numpy().astype(np.float64)

@@ -143,7 +143,8 @@ class PlaceFlow:
         if not self.plans_from_targets:
             self._per_env("settle", targets((0.0,), envs), obstacles=False)
             return
-        # a hand that drifts: the settle repeated while the object is off the goal (the jaw's
+        # planned from targets (a hand that drifts; a hand that cannot turn, held off where the
+        # plans put it): the settle repeated while the object is off the goal (the jaw's
         # push on the arm changes as it moves), each a short move (the hand turned with the
         # base first), or none: the object then stays where it is
         def short(i, path) -> str:
@@ -167,7 +168,8 @@ class PlaceFlow:
 
     def _in_planned_hand(self) -> np.ndarray:
         """Per env, the target's position in the grasp frame where moves are planned from
-        (``_hand_pose``: the measured frame, ``_in_hand``, but for a hand that drifts)."""
+        (``_hand_pose``: the measured frame, ``_in_hand``, but where moves are planned from
+        targets)."""
         if not self.plans_from_targets:
             return self._in_hand()
         tcp = _matrices(self._hand_pose())
