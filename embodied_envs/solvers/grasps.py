@@ -48,6 +48,7 @@ from embodied_envs.solvers.gripper import (
     point_clearance,
     tcp_axes,
 )
+from embodied_envs.solvers.store import cached, result_name
 
 
 class GraspError(RuntimeError):
@@ -324,7 +325,7 @@ def asset_grasps(
     spec: AssetSpec, cfg: GraspConfig | None = None, gripper: GripperModel | None = None
 ) -> Grasps:
     """The grasps of an asset in its own frame, best first; computed once per file version
-    (``ASSET_FILES``) and configuration.
+    (``ASSET_FILES``) and configuration, and kept between runs (``store.py``).
 
     Raises:
         GraspError: naming the asset, when no grasp fits the gripper.
@@ -333,9 +334,21 @@ def asset_grasps(
     annot = annotation_path(spec.urdf_path)
     version = FileVersion.of(annot) if annot else None
     key = ("grasps", FileVersion.of(spec.collision.path), version, spec.collision, cfg, gripper)
-    return ASSET_FILES.get(
-        key, lambda: with_annotations(_compute(spec, cfg, gripper), annot, cfg, gripper)
-    )
+    mesh = spec.collision
+    settings = (mesh.path.suffix.lower(), mesh.xyz, mesh.rpy, mesh.scale, cfg, gripper)
+
+    def compute() -> Grasps:
+        name = result_name("grasps", (mesh.path, annot), settings, STORED_BY)
+        return cached(name, lambda: with_annotations(_compute(spec, cfg, gripper), annot, cfg,
+                                                     gripper), Grasps)  # fmt: skip
+
+    return ASSET_FILES.get(key, compute)
+
+
+# the modules whose code determines an asset's grasps (store.py names them by their source)
+STORED_BY = (__name__, "embodied_envs.solvers.gripper", "embodied_envs.solvers.annotated",
+             "embodied_envs.solvers.store", "embodied_envs.layout.affordance",
+             "embodied_envs.layout.assets", "embodied_envs.layout.collision")  # fmt: skip
 
 
 ROUND_BULGE = 0.002  # m: a body this much narrower at its top than at its widest section
