@@ -116,7 +116,7 @@ def _seed(spec: AssetSpec) -> int:
 def hull_points(spec: AssetSpec, n: int) -> np.ndarray:
     """About ``n`` points on the convex hulls of an asset's collision parts, in its own frame
     (the obstacle cloud the planner keeps clear of); sampled once per file version, seeded by
-    the asset's content."""
+    the asset's content, and kept between runs (``store.py``)."""
 
     def sample() -> np.ndarray:
         import trimesh  # only where clouds are sampled (the CLI starts without it)
@@ -133,7 +133,10 @@ def hull_points(spec: AssetSpec, n: int) -> np.ndarray:
         return np.concatenate(points)
 
     key = ("hull points", FileVersion.of(spec.collision.path), spec.collision, n)
-    return ASSET_FILES.get(key, sample)
+    mesh = spec.collision
+    settings = (mesh.path.suffix.lower(), mesh.xyz, mesh.rpy, mesh.scale, n)
+    name = lambda: result_name("hull-points", (mesh.path,), settings, STORED_BY)  # noqa: E731
+    return ASSET_FILES.get(key, lambda: cached(name(), sample, np.ndarray))
 
 
 def _outer_surface(parts, n: int, rng: np.random.Generator):

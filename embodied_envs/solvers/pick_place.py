@@ -18,8 +18,10 @@ The solver is cut in rooms: the grasp choice (``grasp_choice.py``), planning and
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import weakref
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import mplib
 import numpy as np
@@ -32,7 +34,7 @@ from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers.driver import ArmDriver
 from embodied_envs.solvers.follow import follow_limits
-from embodied_envs.solvers.grasp_choice import GraspChoice
+from embodied_envs.solvers.grasp_choice import GraspChoice, asset_spec
 from embodied_envs.solvers.grasps import GraspConfig, hull_points
 from embodied_envs.solvers.gripper import GripperModel
 from embodied_envs.solvers.jaws import Jaws
@@ -40,9 +42,11 @@ from embodied_envs.solvers.motion import (
     MotionConfig,
     SeededPlanner,
     joint_levers,
+    link_points,
 )
 from embodied_envs.solvers.place_flow import PlaceFlow
 from embodied_envs.solvers.planner_urdf import planner_urdf
+from embodied_envs.solvers.store import cached, result_name
 
 
 @dataclass(frozen=True)
@@ -161,10 +165,26 @@ _LEVERS: dict[str, np.ndarray] = {}
 
 
 def _levers(base) -> np.ndarray:
-    """The levers of ``base``'s (an unwrapped env's) robot's arm joints."""
+    """The levers of ``base``'s (an unwrapped env's) robot's arm joints, measured once per
+    robot and kept between runs (``store.py``: named by the planner's URDF and SRDF, the
+    links' collision vertices and the code)."""
     if base.agent.urdf_path not in _LEVERS:
-        _LEVERS[base.agent.urdf_path] = joint_levers(base.agent.robot, _planners(base)[0])
+        robot, planner = base.agent.robot, _planners(base)[0]
+        names, points = link_points(robot)
+        shapes = hashlib.sha256(repr(names).encode())
+        for p in points:
+            shapes.update(np.ascontiguousarray(p).tobytes())
+        urdf = planner_urdf(base.agent.urdf_path)
+        srdf = Path(urdf).with_suffix(".srdf")
+        name = result_name("levers", (urdf, srdf if srdf.is_file() else None),
+                           (shapes.hexdigest(), planner.move_group), LEVERS_BY)  # fmt: skip
+        _LEVERS[base.agent.urdf_path] = cached(
+            name, lambda: joint_levers(robot, planner), np.ndarray
+        )
     return _LEVERS[base.agent.urdf_path]
+
+
+LEVERS_BY = ("embodied_envs.solvers.motion", "embodied_envs.solvers.store")  # their code
 
 
 def _planners(base) -> list[mplib.Planner]:
@@ -261,7 +281,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         self._batched_actions = len(self.env.action_space.shape) == 2
         self.gripper = np.full(self.num_envs, self.robot_hand.action_open)
         self.clouds: list[np.ndarray] = []  # per env, the obstacle surface points (world)
-        self.cloud_trees: list[cKDTree] = []  # and their KD-trees
+        self._trees: dict[int, cKDTree] = {}  # their KD-trees, made where asked (cloud_tree)
         self.slot = 0  # the mover slot being taken (``env.task_scene.movers``)
         self.command = self._qpos()[:, : self.arm_dof]  # per env, the arm's last joint targets
         self._set_obstacles()
@@ -290,24 +310,30 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
 
     def _set_obstacles(self) -> None:
         """Every object but the mover being taken, where it stands now, is an obstacle."""
-        self.clouds, self.cloud_trees = [], []
+        self.clouds, self._trees = [], {}
         for i, layout in enumerate(self.base.layouts):
             actors = self.base.env_actors[f"env{i}"]
             clouds = []
             for node, actor in actors.items():
                 if node == self._node(i):
                     continue
-                points = hull_points(layout.asset_spec(node), self.cfg.obstacle_points)
+                points = hull_points(asset_spec(layout, node), self.cfg.obstacle_points)
                 pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
                 clouds.append(pose.transform_points(points))
             cloud = np.concatenate(clouds)
             self.clouds.append(cloud)
-            self.cloud_trees.append(cKDTree(cloud))
             base = self.base.layout_scene.robot_poses[i, :3].cpu().numpy()
             near_base = (
                 np.linalg.norm(cloud[:, :2] - base[:2], axis=1) < self.cfg.base_clearance
             ) & (cloud[:, 2] < base[2] + self.cfg.base_clearance_height)
             self.planners[i].update_point_cloud(cloud[~near_base], radius=self.cfg.obstacle_radius)
+
+    def cloud_tree(self, i: int) -> cKDTree:
+        """Env i's obstacle points in a KD-tree, made at the first query (only a carry to a
+        release asks: a pick episode makes none)."""
+        if i not in self._trees:
+            self._trees[i] = cKDTree(self.clouds[i])
+        return self._trees[i]
 
     # --- the policy ----------------------------------------------------------------------
     @property

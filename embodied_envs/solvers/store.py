@@ -64,7 +64,8 @@ def result_name(kind: str, files: Iterable[Path | None], settings: object, modul
 def cached(name: str, compute: Callable[[], T], kind: type[T]) -> T:
     """The result stored under ``name`` (:func:`result_name`), else ``compute()`` stored there.
 
-    ``kind`` is its class: a dataclass whose fields hold arrays, tuples of arrays or None."""
+    ``kind`` is its class: ``np.ndarray``, or a dataclass whose fields hold arrays, tuples of
+    arrays or None."""
     path = store_folder() / f"{name}.npz"
     try:
         with np.load(path) as data:
@@ -83,6 +84,8 @@ def cached(name: str, compute: Callable[[], T], kind: type[T]) -> T:
 
 
 def _pack(value) -> dict[str, np.ndarray]:
+    if isinstance(value, np.ndarray):
+        return {"value": value}
     out = {}
     for f in dataclasses.fields(value):
         item = getattr(value, f.name)
@@ -95,6 +98,8 @@ def _pack(value) -> dict[str, np.ndarray]:
 
 
 def _unpack(kind: type[T], data: dict[str, np.ndarray]) -> T:
+    if kind is np.ndarray:
+        return data["value"]
     values = {}
     for f in dataclasses.fields(kind):
         if f"{f.name}#" in data:
