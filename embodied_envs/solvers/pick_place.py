@@ -18,12 +18,8 @@ The solver is cut in rooms: the grasp choice (``grasp_choice.py``), planning and
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import weakref
 from dataclasses import dataclass, field
-from pathlib import Path
 
-import mplib
 import numpy as np
 import sapien
 import torch
@@ -33,20 +29,13 @@ from scipy.spatial import cKDTree
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers.driver import ArmDriver
-from embodied_envs.solvers.follow import follow_limits
 from embodied_envs.solvers.grasp_choice import GraspChoice, asset_spec
 from embodied_envs.solvers.grasps import GraspConfig, hull_points
 from embodied_envs.solvers.gripper import GripperModel
 from embodied_envs.solvers.jaws import Jaws
-from embodied_envs.solvers.motion import (
-    MotionConfig,
-    SeededPlanner,
-    joint_levers,
-    link_points,
-)
+from embodied_envs.solvers.models import follow_limits, levers, planners
+from embodied_envs.solvers.motion import MotionConfig, SeededPlanner
 from embodied_envs.solvers.place_flow import PlaceFlow
-from embodied_envs.solvers.planner_urdf import planner_urdf
-from embodied_envs.solvers.store import cached, result_name
 
 
 @dataclass(frozen=True)
@@ -153,58 +142,6 @@ class SolveResult:
         return np.asarray(torch.as_tensor(self.info["success"]).cpu().numpy()).reshape(-1)
 
 
-# per env (the unwrapped env object), its mplib planners, one per parallel env: building one
-# parses the URDF and its collision meshes (5 ms, an episode's 2%). Solvers of one env run one
-# after another; each sets everything a plan reads (base pose, joint limits, obstacle cloud,
-# the robot's configuration) before planning.
-_PLANNERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-# per robot URDF, its joints' levers (motion.joint_levers: 75 ms)
-_LEVERS: dict[str, np.ndarray] = {}
-
-
-def _levers(base) -> np.ndarray:
-    """The levers of ``base``'s (an unwrapped env's) robot's arm joints, measured once per
-    robot and kept between runs (``store.py``: named by the planner's URDF and SRDF, the
-    links' collision vertices and the code)."""
-    if base.agent.urdf_path not in _LEVERS:
-        robot, planner = base.agent.robot, _planners(base)[0]
-        names, points = link_points(robot)
-        shapes = hashlib.sha256(repr(names).encode())
-        for p in points:
-            shapes.update(np.ascontiguousarray(p).tobytes())
-        urdf = planner_urdf(base.agent.urdf_path)
-        srdf = Path(urdf).with_suffix(".srdf")
-        name = result_name("levers", (urdf, srdf if srdf.is_file() else None),
-                           (shapes.hexdigest(), planner.move_group), LEVERS_BY)  # fmt: skip
-        _LEVERS[base.agent.urdf_path] = cached(
-            name, lambda: joint_levers(robot, planner), np.ndarray
-        )
-    return _LEVERS[base.agent.urdf_path]
-
-
-LEVERS_BY = ("embodied_envs.solvers.motion", "embodied_envs.solvers.store")  # their code
-
-
-def _planners(base) -> list[mplib.Planner]:
-    """``base``'s (an unwrapped env's) mplib planners, built at its first solver, for the link
-    its robot's hand entry names."""
-    if base not in _PLANNERS:
-        robot = base.agent.robot
-        _PLANNERS[base] = [
-            mplib.Planner(
-                urdf=(urdf := planner_urdf(base.agent.urdf_path)),
-                srdf=urdf.replace(".urdf", ".srdf"),
-                user_link_names=[link.get_name() for link in robot.get_links()],
-                user_joint_names=[joint.get_name() for joint in robot.get_active_joints()],
-                move_group=ROBOTS[base.agent.uid].hand.link,
-            )
-            for _ in range(base.num_envs)
-        ]
-    return _PLANNERS[base]
-
-
 class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
     """Plans and executes pick-and-place in every env of a ``PickEmbodiedGen-v1`` env.
 
@@ -261,7 +198,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
                 f"the solver drives control_mode='pd_joint_pos', got {self.base.control_mode!r}"
             )
         base_poses = self.base.agent.robot.pose.raw_pose.cpu().numpy()
-        self.planners = _planners(self.base)
+        self.planners = planners(self.base)
         self.arm_dof = len(self.planners[0].move_group_joint_indices)  # the gripper's after them
         # the joint targets' bounds, so that other controllers replay them (solvers/follow.py)
         self.follow = follow_limits(self.base.agent, 1 / self.base.control_timestep, self.arm_dof)
@@ -272,7 +209,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
             planner.set_base_pose(base_poses[i])
             planner.joint_vel_limits = vel
             planner.joint_acc_limits = np.asarray(self.cfg.joint_acc_limits, dtype=np.float64)
-        self.motion = [SeededPlanner(p, self.cfg.motion, _levers(self.base)) for p in self.planners]
+        self.motion = [SeededPlanner(p, self.cfg.motion, levers(self.base)) for p in self.planners]
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
         self.steps = 0
         self.ended = False  # every env was truncated, failed, or succeeded hold_steps ago
@@ -288,7 +225,10 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
 
     # --- state ---------------------------------------------------------------------------
     def _qpos(self) -> np.ndarray:
-        return self.base.agent.robot.get_qpos().cpu().numpy().astype(np.float64)
+        robot = self.base.agent.robot
+        if not self.base.gpu_sim_enabled:  # the one env's joints, as get_qpos reads them
+            return robot._objs[0].qpos[None].astype(np.float64)
+        return robot.get_qpos().cpu().numpy().astype(np.float64)
 
     def _fingers(self) -> np.ndarray:
         """Per env, the gripper's joint positions (after the arm's)."""
