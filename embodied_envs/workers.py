@@ -45,11 +45,21 @@ def start_up() -> None:
     """A command's start-up begins: the garbage collector is off until :func:`started`.
     Importing ManiSkill, torch and SAPIEN and building the first env makes ~300,000 objects
     that live as long as the process; each full collection among them walks them all (0.3 s
-    of a command's 2 s start-up, and 0.25 s more in the two that ManiSkill forces when it
-    builds and closes a scene)."""
+    of a command's 2 s start-up). A collection forced meanwhile (ManiSkill forces one when it
+    builds a scene) finds every object alive then set aside first (:func:`_set_aside`): it
+    walks none of them (0.2 s less)."""
     global _starting
     gc.disable()
+    if _set_aside not in gc.callbacks:
+        gc.callbacks.append(_set_aside)
     _starting = True
+
+
+def _set_aside(phase: str, info: dict) -> None:
+    """A collection starts during a start-up: what is alive is set aside (``gc.freeze``),
+    as :func:`started` sets it aside at the start-up's end."""
+    if phase == "start":
+        gc.freeze()
 
 
 def started() -> None:
@@ -59,6 +69,8 @@ def started() -> None:
     global _starting
     if _starting:
         _starting = False
+        if _set_aside in gc.callbacks:
+            gc.callbacks.remove(_set_aside)
         gc.freeze()
         gc.enable()
 

@@ -73,7 +73,11 @@ def test_start_up_runs_without_the_collector_until_started():
         start_up()
         assert not gc.isenabled()
         alive = [object() for _ in range(1000)]
+        held = [[k] for k in range(1000)]  # tracked by the collector (containers)
+        gc.collect()  # forced during the start-up (ManiSkill's, building a scene)
+        assert gc.get_freeze_count() >= frozen + len(held), "set aside, not walked"
         started()
+        assert not any(f.__module__ == "embodied_envs.workers" for f in gc.callbacks)
         assert gc.isenabled() and gc.get_freeze_count() >= frozen + len(alive)
         count = gc.get_freeze_count()
         started()  # once only: nothing more set aside (what was, may be freed meanwhile)

@@ -205,6 +205,13 @@ def check_action(action, single_shape: tuple, num_envs: int, control_mode: str):
     """
     if action is None or isinstance(action, dict):
         return action  # ManiSkill's own meanings (no-op, multi-agent)
+    if (
+        type(action) is np.ndarray and action.dtype == np.float32
+        and action.shape in (single_shape, (num_envs, *single_shape))
+        and np.isfinite(action).all()
+    ):  # fmt: skip
+        return torch.from_numpy(action)  # a policy's usual action, checked in numpy (a third
+        # of the torch checks' cost); the general path below gives the same tensor
     try:
         a = torch.as_tensor(np.asarray(action) if isinstance(action, list | tuple) else action)
     except (TypeError, ValueError, RuntimeError) as e:

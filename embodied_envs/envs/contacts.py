@@ -34,44 +34,69 @@ def is_grasping(agent, obj, rule: FingerGrasp = PANDA_GRASP):
 
 def grasped_cpu(agent, objs, rule: FingerGrasp = PANDA_GRASP) -> np.ndarray:
     """``(len(objs),)`` bool: on the CPU simulation's one env, :func:`is_grasping` of each actor
-    of ``objs``, from one walk over the scene's contacts for all of them."""
+    of ``objs``, from one walk over the scene's contacts for all of them. A contact point's
+    impulse (a SAPIEN object, then an array, per point) is read only where both fingers touch
+    the target (with ``min_force`` > 0, one finger alone decides nothing else)."""
     scene = agent.scene
     # the rigid-body components (compared by identity, as ``==`` compares them)
     fingers = agent.finger1_link._bodies[0], agent.finger2_link._bodies[0]
     targets = [obj._bodies[0] for obj in objs]
     slot = {body: k for k, body in enumerate(dict.fromkeys(targets))}
-    # per target and finger, the impulses of its contact points with the target: those acting
-    # on the finger (it is the contact's first body) and those acting on the target
-    on_finger = [([], []) for _ in slot]
-    on_target = [([], []) for _ in slot]
+    # per target and finger, its contacts with the target and whether the finger is the
+    # contact's first body (the impulses act on it) or the target is (they act on the target)
+    touching = [([], []) for _ in slot]
     for contact in scene.px.get_contacts():
         a, b = contact.bodies
         if b in slot:
-            finger, into = a, on_finger[slot[b]]
+            finger, k, on_finger = a, slot[b], True
         elif a in slot:
-            finger, into = b, on_target[slot[a]]
+            finger, k, on_finger = b, slot[a], False
         else:
             continue
         side = 0 if finger == fingers[0] else 1 if finger == fingers[1] else None
         if side is not None:
-            into[side].extend([point.impulse for point in contact.points])
+            touching[k][side].append((contact, on_finger))
     links = agent.finger1_link._objs[0], agent.finger2_link._objs[0]
     step = scene.px.timestep
-    held = [_presses(on_finger[k], on_target[k], links, rule, step) for k in slot.values()]
+    held = [
+        (all(touching[k]) or rule.min_force <= 0)
+        and _presses([_impulses(c) for c in touching[k]], links, rule, step)
+        for k in slot.values()
+    ]
     return np.array([held[slot[body]] for body in targets], dtype=bool)
 
 
-def _presses(on_finger, on_target, links, rule: FingerGrasp, timestep: float) -> bool:
-    """Both fingers press on the target (their contact impulses with it, ``on_finger`` and
-    ``on_target`` per finger) with ``rule.min_force``, within ``rule.max_angle`` of opening."""
+def _impulses(contacts: list) -> tuple[list[float] | None, list[float] | None]:
+    """A finger's summed contact impulses with the target, in float64: those acting on the
+    finger and those acting on the target (None where none), each point's in the contacts'
+    order, added one after another (``np.sum`` over the points' rows adds them so)."""
+    sums: list = [None, None]
+    for contact, on_finger in contacts:
+        k = 0 if on_finger else 1
+        for point in contact.points:
+            x, y, z = point.impulse.tolist()
+            if sums[k] is None:
+                sums[k] = [0.0, 0.0, 0.0]
+            acc = sums[k]
+            acc[0] += x
+            acc[1] += y
+            acc[2] += z
+    return sums[0], sums[1]
+
+
+def _presses(impulses, links, rule: FingerGrasp, timestep: float) -> bool:
+    """Both fingers press on the target (per finger, its summed contact impulses with it
+    acting on the finger and on the target, :func:`_impulses`) with ``rule.min_force``, within
+    ``rule.max_angle`` of opening."""
     for side, opens in enumerate(rule.opening):  # the opening: each finger's y axis, signed
-        if not on_finger[side] and not on_target[side] and rule.min_force > 0:
+        on_finger, on_target = impulses[side]
+        if on_finger is None and on_target is None and rule.min_force > 0:
             return False  # no force
         impulse = np.zeros(3)
-        if on_finger[side]:
-            impulse += np.sum(on_finger[side], axis=0, dtype=np.float64)
-        if on_target[side]:
-            impulse -= np.sum(on_target[side], axis=0, dtype=np.float64)
+        if on_finger is not None:
+            impulse += on_finger
+        if on_target is not None:
+            impulse -= on_target
         force = impulse / timestep
         magnitude = float(np.linalg.norm(force))
         if magnitude < rule.min_force:

@@ -50,18 +50,27 @@ def cpu_state_dict(env) -> dict:
     zeros = np.zeros(3, dtype=np.float32)
     actors, articulations = {}, {}
     registry = env.scene.state_dict_registry
+    # every value in one array (numpy's cost is per call), each state a view of it
+    parts, rows = [], []  # rows: (the dict, its key, the state's length)
     for actor in registry.actors.values():
         if actor.px_body_type == "static":
             continue
         pose, body = actor._objs[0].pose, actor._bodies[0]
         moving = actor.px_body_type == "dynamic"
         vel = (body.linear_velocity, body.angular_velocity) if moving else (zeros, zeros)
-        actors[actor.name] = torch.from_numpy(np.concatenate([pose.p, pose.q, *vel])[None])
+        parts += (pose.p, pose.q, *vel)
+        rows.append((actors, actor.name, 13))
     for art in registry.articulations.values():
         root, px = art.root, art._objs[0]
         pose, body = root._objs[0].entity_pose, root._bodies[0]
-        state = [pose.p, pose.q, body.linear_velocity, body.angular_velocity, px.qpos, px.qvel]
-        articulations[art.name] = torch.from_numpy(np.concatenate(state)[None])
+        qpos, qvel = px.qpos, px.qvel
+        parts += (pose.p, pose.q, body.linear_velocity, body.angular_velocity, qpos, qvel)
+        rows.append((articulations, art.name, 13 + len(qpos) + len(qvel)))
+    if parts:
+        flat, start = torch.from_numpy(np.concatenate(parts)), 0
+        for into, name, size in rows:
+            into[name] = flat[None, start : start + size]
+            start += size
     state = {}
     if actors:
         state["actors"] = actors

@@ -21,7 +21,7 @@ from embodied_envs.envs.arguments import check_quaternion
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.rendering import HybridRendering, render_camera, robot_camera
 from embodied_envs.envs.tasks import INFO_KEYS, KIND_IDS, RULES, pick
-from embodied_envs.envs.tasks.scene import TaskReader, TaskScene
+from embodied_envs.envs.tasks.scene import TaskReader, TaskScene, as_tensor
 from embodied_envs.envs.tasks.state import concat, some
 from embodied_envs.layout import GoalRegion, LayoutInfo, PlacementLimits
 from embodied_envs.layout.sets import LayoutSet
@@ -249,7 +249,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         # a mover off the table, or the receptacle knocked off: one check for all
         points = concat([state.movers, state.rec_pos[:, None]], 1)
         off = self.layout_scene.off_table(points, self.fail_drop) & self.task_reader.can_fall
-        info["fail"] = torch.as_tensor(some(off, 1), device=self.device)
+        info["fail"] = as_tensor(some(off, 1), self.device)
         return info
 
     def _before_control_step(self):

@@ -105,11 +105,19 @@ class Tally:
 
         out = self.env.step(action)
         self.steps += 1
-        self.ret += float(torch.as_tensor(out[1]).reshape(-1)[0])
-        self.fail |= bool(torch.as_tensor(out[4]["fail"]).reshape(-1)[0])
+        self.ret += float(_first(out[1], torch))
+        self.fail |= bool(_first(out[4]["fail"], torch))
         if self.film_every and self.steps % self.film_every == 0:
             self.film()
         return out
+
+
+def _first(value, torch):
+    """The first env's number of ``value`` (a tensor, an array or a number; ``torch``: the
+    module, imported where episodes run), as Python's ``float``/``bool`` take it."""
+    if isinstance(value, torch.Tensor) and value.numel() == 1:
+        return value.item()  # the one env's: the usual case, without a reshaped view
+    return torch.as_tensor(value).reshape(-1)[0].item()
 
 
 def expert(tally: Tally, obs, seed: int, config=None) -> list[str]:

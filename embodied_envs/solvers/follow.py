@@ -93,7 +93,7 @@ def shortened(move: np.ndarray, bound: np.ndarray) -> np.ndarray:
     """``move`` (..., dof) scaled down, as a whole, until every joint's part is within
     ``bound``: the same direction (a target on a straight joint line stays on it)."""
     need = np.abs(move) / bound
-    return move / np.maximum(need.max(axis=-1, keepdims=True), 1.0)
+    return move / np.maximum(np.maximum.reduce(need, axis=-1, keepdims=True), 1.0)
 
 
 def rate_limited(targets: np.ndarray, start: np.ndarray, step: np.ndarray) -> np.ndarray:

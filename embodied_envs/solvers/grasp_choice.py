@@ -15,7 +15,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sapien
 
-from embodied_envs.layout.assets import asset_geometry, convex_hull_2d
+from embodied_envs.layout.assets import (
+    ASSET_FILES,
+    AssetSpec,
+    FileVersion,
+    asset_geometry,
+    convex_hull_2d,
+    parse_urdf,
+)
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.solvers.grasps import (
     asset_grasps,
@@ -31,6 +38,13 @@ FIXED_SLACK = np.deg2rad(15.0)
 
 if TYPE_CHECKING:
     from embodied_envs.solvers.pick_place import SolverConfig
+
+
+def asset_spec(layout, node: str) -> AssetSpec:
+    """``layout.asset_spec(node)``, its URDF read once per file version (``ASSET_FILES``): the
+    solver asks for every object's at every episode (a millisecond each, parsed)."""
+    urdf = layout.urdf_path(node)
+    return ASSET_FILES.get(("asset spec", FileVersion.of(urdf)), lambda: parse_urdf(urdf))
 
 
 def grasp_pose(approach: np.ndarray, closing: np.ndarray, centre: np.ndarray) -> sapien.Pose:
@@ -102,7 +116,7 @@ class GraspChoice:
         poses = []
         for i, layout in enumerate(self.base.layouts):
             actor = self.base.env_actors[f"env{i}"][self._node(i)]
-            spec = layout.asset_spec(self._node(i))
+            spec = asset_spec(layout, self._node(i))
             geom = asset_geometry(spec)
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             support = float(self.base.layout_scene.top_z[i])

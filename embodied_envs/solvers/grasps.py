@@ -48,6 +48,7 @@ from embodied_envs.solvers.gripper import (
     point_clearance,
     tcp_axes,
 )
+from embodied_envs.solvers.store import cached, result_name
 
 
 class GraspError(RuntimeError):
@@ -115,7 +116,7 @@ def _seed(spec: AssetSpec) -> int:
 def hull_points(spec: AssetSpec, n: int) -> np.ndarray:
     """About ``n`` points on the convex hulls of an asset's collision parts, in its own frame
     (the obstacle cloud the planner keeps clear of); sampled once per file version, seeded by
-    the asset's content."""
+    the asset's content, and kept between runs (``store.py``)."""
 
     def sample() -> np.ndarray:
         import trimesh  # only where clouds are sampled (the CLI starts without it)
@@ -132,7 +133,10 @@ def hull_points(spec: AssetSpec, n: int) -> np.ndarray:
         return np.concatenate(points)
 
     key = ("hull points", FileVersion.of(spec.collision.path), spec.collision, n)
-    return ASSET_FILES.get(key, sample)
+    mesh = spec.collision
+    settings = (mesh.path.suffix.lower(), mesh.xyz, mesh.rpy, mesh.scale, n)
+    name = lambda: result_name("hull-points", (mesh.path,), settings, STORED_BY)  # noqa: E731
+    return ASSET_FILES.get(key, lambda: cached(name(), sample, np.ndarray))
 
 
 def _outer_surface(parts, n: int, rng: np.random.Generator):
@@ -324,7 +328,7 @@ def asset_grasps(
     spec: AssetSpec, cfg: GraspConfig | None = None, gripper: GripperModel | None = None
 ) -> Grasps:
     """The grasps of an asset in its own frame, best first; computed once per file version
-    (``ASSET_FILES``) and configuration.
+    (``ASSET_FILES``) and configuration, and kept between runs (``store.py``).
 
     Raises:
         GraspError: naming the asset, when no grasp fits the gripper.
@@ -333,9 +337,21 @@ def asset_grasps(
     annot = annotation_path(spec.urdf_path)
     version = FileVersion.of(annot) if annot else None
     key = ("grasps", FileVersion.of(spec.collision.path), version, spec.collision, cfg, gripper)
-    return ASSET_FILES.get(
-        key, lambda: with_annotations(_compute(spec, cfg, gripper), annot, cfg, gripper)
-    )
+    mesh = spec.collision
+    settings = (mesh.path.suffix.lower(), mesh.xyz, mesh.rpy, mesh.scale, cfg, gripper)
+
+    def compute() -> Grasps:
+        name = result_name("grasps", (mesh.path, annot), settings, STORED_BY)
+        return cached(name, lambda: with_annotations(_compute(spec, cfg, gripper), annot, cfg,
+                                                     gripper), Grasps)  # fmt: skip
+
+    return ASSET_FILES.get(key, compute)
+
+
+# the modules whose code determines an asset's grasps (store.py names them by their source)
+STORED_BY = (__name__, "embodied_envs.solvers.gripper", "embodied_envs.solvers.annotated",
+             "embodied_envs.solvers.store", "embodied_envs.layout.affordance",
+             "embodied_envs.layout.assets", "embodied_envs.layout.collision")  # fmt: skip
 
 
 ROUND_BULGE = 0.002  # m: a body this much narrower at its top than at its widest section

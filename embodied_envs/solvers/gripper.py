@@ -113,15 +113,45 @@ def point_clearance(
 ) -> np.ndarray:
     """``(g, p)``: how far each point stays outside each grasp's gripper boxes (the least over
     the boxes; arguments as :func:`box_clearance`'s)."""
-    local = to_tcp(points, centre, closing, approach)
-    return outside(local[:, :, None], boxes[:, None]).min(2)
+    local = to_tcp(points, centre, closing, approach).astype(np.float32)
+    return _clearance(local, boxes, None)
 
 
 def pair_clearance(points, centre, rot, boxes, g, k) -> np.ndarray:
     """Per pair j, how far point ``k[j]`` stays outside the boxes of grasp ``g[j]`` (``rot``
     from :func:`tcp_axes`)."""
-    local = np.einsum("pk,pjk->pj", points[k] - centre[g], rot[g])
-    return outside(local[:, None], boxes[g]).min(-1)
+    local = np.einsum("pk,pjk->pj", points[k] - centre[g], rot[g]).astype(np.float32)
+    return _clearance(local, boxes, g)
+
+
+def _clearance(local: np.ndarray, boxes: np.ndarray, rows: np.ndarray | None) -> np.ndarray:
+    """:func:`outside` of float32 points ``local`` (``(g, p, 3)`` with ``rows`` None, each
+    grasp's points; else ``(n, 3)``, point j in grasp ``rows[j]``'s frame) and each grasp's
+    ``boxes (g, b, 2, 3)``, the least over the boxes: the same float32 values, one box bound
+    at a time. A bound the grasps share (every box's x and z, the palm's y: only the fingers'
+    gap differs) is one number, not an array gathered per point: a million pairs cost 9x less
+    memory traffic than gathering every box of every pair."""
+    bounds = boxes.astype(np.float32)
+    axes = np.moveaxis(local, -1, 0).copy()  # each axis's values contiguous
+    best = None
+    for b in range(bounds.shape[1]):
+        worst = None
+        for a, x in enumerate(axes):
+            lo, hi = (_bound(bounds[:, b, s, a], rows, local.ndim) for s in (0, 1))
+            far = np.maximum(lo - x, x - hi)
+            worst = far if worst is None else np.maximum(worst, far)
+        best = worst if best is None else np.minimum(best, worst)
+    return best
+
+
+def _bound(column: np.ndarray, rows: np.ndarray | None, ndim: int):
+    """One box bound per grasp ``column (g,)`` for :func:`_clearance`'s points: a float32
+    scalar when every grasp has the same, else per point (``rows``) or per grasp."""
+    if len(column) and (column == column[0]).all():
+        return column[0]
+    if rows is not None:
+        return column[rows]
+    return column.reshape(-1, *[1] * (ndim - 2))
 
 
 def tcp_axes(closing: np.ndarray, approach: np.ndarray) -> np.ndarray:

@@ -108,6 +108,18 @@ def straight_line_trajectory(
     return start + s[:, None] * (goal - start)
 
 
+def link_points(robot) -> tuple[list[str], list[np.ndarray]]:
+    """Per link of the ManiSkill articulation ``robot`` with collision geometry, its name and
+    its collision shapes' vertices in its frame (what :func:`joint_levers` measures)."""
+    names, points = [], []
+    for link in robot.get_links():
+        mesh = get_component_mesh(link._objs[0], to_world_frame=False)
+        if mesh is not None:
+            names.append(link.get_name())
+            points.append(np.asarray(mesh.vertices, dtype=np.float64))
+    return names, points
+
+
 def joint_levers(robot, planner: mplib.Planner, samples: int = 200, seed: int = 0) -> np.ndarray:
     """Per move-group joint of ``planner``, the farthest (m) the collision geometry it moves
     (its child link and every link beyond) reaches from its axis: the most over ``samples``
@@ -125,12 +137,7 @@ def joint_levers(robot, planner: mplib.Planner, samples: int = 200, seed: int = 
     model = planner.pinocchio_model
     # the planner's link names of the SAPIEN link components
     named = {link._objs[0].get_name(): link.get_name() for link in robot.get_links()}
-    names, points = [], []  # per link with collision geometry, its vertices in its frame
-    for link in robot.get_links():
-        mesh = get_component_mesh(link._objs[0], to_world_frame=False)
-        if mesh is not None:
-            names.append(link.get_name())
-            points.append(np.asarray(mesh.vertices, dtype=np.float64))
+    names, points = link_points(robot)
     owner = np.concatenate([np.full(len(p), k) for k, p in enumerate(points)])
     local = np.concatenate(points)
     rows = [owner == k for k in range(len(points))]  # each link's rows of `local`

@@ -18,10 +18,8 @@ The solver is cut in rooms: the grasp choice (``grasp_choice.py``), planning and
 from __future__ import annotations
 
 import dataclasses
-import weakref
 from dataclasses import dataclass, field
 
-import mplib
 import numpy as np
 import sapien
 import torch
@@ -31,19 +29,14 @@ from scipy.spatial import cKDTree
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers.driver import ArmDriver
-from embodied_envs.solvers.follow import follow_limits
-from embodied_envs.solvers.grasp_choice import GraspChoice
+from embodied_envs.solvers.grasp_choice import GraspChoice, asset_spec
 from embodied_envs.solvers.grasps import GraspConfig, hull_points
 from embodied_envs.solvers.gripper import GripperModel
 from embodied_envs.solvers.jaws import Jaws
+from embodied_envs.solvers.models import follow_limits, levers, planners
 from embodied_envs.solvers.modes import ModeActions, target_bounds
-from embodied_envs.solvers.motion import (
-    MotionConfig,
-    SeededPlanner,
-    joint_levers,
-)
+from embodied_envs.solvers.motion import MotionConfig, SeededPlanner
 from embodied_envs.solvers.place_flow import PlaceFlow
-from embodied_envs.solvers.planner_urdf import planner_urdf
 
 
 @dataclass(frozen=True)
@@ -150,42 +143,6 @@ class SolveResult:
         return np.asarray(torch.as_tensor(self.info["success"]).cpu().numpy()).reshape(-1)
 
 
-# per env (the unwrapped env object), its mplib planners, one per parallel env: building one
-# parses the URDF and its collision meshes (5 ms, an episode's 2%). Solvers of one env run one
-# after another; each sets everything a plan reads (base pose, joint limits, obstacle cloud,
-# the robot's configuration) before planning.
-_PLANNERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-# per robot URDF, its joints' levers (motion.joint_levers: 75 ms)
-_LEVERS: dict[str, np.ndarray] = {}
-
-
-def _levers(base) -> np.ndarray:
-    """The levers of ``base``'s (an unwrapped env's) robot's arm joints."""
-    if base.agent.urdf_path not in _LEVERS:
-        _LEVERS[base.agent.urdf_path] = joint_levers(base.agent.robot, _planners(base)[0])
-    return _LEVERS[base.agent.urdf_path]
-
-
-def _planners(base) -> list[mplib.Planner]:
-    """``base``'s (an unwrapped env's) mplib planners, built at its first solver, for the link
-    its robot's hand entry names."""
-    if base not in _PLANNERS:
-        robot = base.agent.robot
-        _PLANNERS[base] = [
-            mplib.Planner(
-                urdf=(urdf := planner_urdf(base.agent.urdf_path)),
-                srdf=urdf.replace(".urdf", ".srdf"),
-                user_link_names=[link.get_name() for link in robot.get_links()],
-                user_joint_names=[joint.get_name() for joint in robot.get_active_joints()],
-                move_group=ROBOTS[base.agent.uid].hand.link,
-            )
-            for _ in range(base.num_envs)
-        ]
-    return _PLANNERS[base]
-
-
 class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
     """Plans and executes pick-and-place in every env of a ``PickEmbodiedGen-v1`` env.
 
@@ -238,7 +195,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         self.grasp_in_link = sapien.Pose(hand.grasp_in_link[:3], hand.grasp_in_link[3:])
         self.link_in_grasp = self.grasp_in_link.inv()
         base_poses = self.base.agent.robot.pose.raw_pose.cpu().numpy()
-        self.planners = _planners(self.base)
+        self.planners = planners(self.base)
         self.arm_dof = len(self.planners[0].move_group_joint_indices)  # the gripper's after them
         # joint targets as the env's control mode's actions; their bounds (pd_joint_pos's)
         self.mode_actions = ModeActions(self.base, self.arm_dof)
@@ -252,7 +209,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
             planner.set_base_pose(base_poses[i])
             planner.joint_vel_limits = vel
             planner.joint_acc_limits = np.asarray(self.cfg.joint_acc_limits, dtype=np.float64)
-        self.motion = [SeededPlanner(p, self.cfg.motion, _levers(self.base)) for p in self.planners]
+        self.motion = [SeededPlanner(p, self.cfg.motion, levers(self.base)) for p in self.planners]
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
         self.steps = 0
         self.ended = False  # every env was truncated, failed, or succeeded hold_steps ago
@@ -261,14 +218,17 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         self._batched_actions = len(self.env.action_space.shape) == 2
         self.gripper = np.full(self.num_envs, self.robot_hand.action_open)
         self.clouds: list[np.ndarray] = []  # per env, the obstacle surface points (world)
-        self.cloud_trees: list[cKDTree] = []  # and their KD-trees
+        self._trees: dict[int, cKDTree] = {}  # their KD-trees, made where asked (cloud_tree)
         self.slot = 0  # the mover slot being taken (``env.task_scene.movers``)
         self.command = self._qpos()[:, : self.arm_dof]  # per env, the arm's last joint targets
         self._set_obstacles()
 
     # --- state ---------------------------------------------------------------------------
     def _qpos(self) -> np.ndarray:
-        return self.base.agent.robot.get_qpos().cpu().numpy().astype(np.float64)
+        robot = self.base.agent.robot
+        if not self.base.gpu_sim_enabled:  # the one env's joints, as get_qpos reads them
+            return robot._objs[0].qpos[None].astype(np.float64)
+        return robot.get_qpos().cpu().numpy().astype(np.float64)
 
     def _fingers(self) -> np.ndarray:
         """Per env, the gripper's joint positions (after the arm's)."""
@@ -290,24 +250,30 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
 
     def _set_obstacles(self) -> None:
         """Every object but the mover being taken, where it stands now, is an obstacle."""
-        self.clouds, self.cloud_trees = [], []
+        self.clouds, self._trees = [], {}
         for i, layout in enumerate(self.base.layouts):
             actors = self.base.env_actors[f"env{i}"]
             clouds = []
             for node, actor in actors.items():
                 if node == self._node(i):
                     continue
-                points = hull_points(layout.asset_spec(node), self.cfg.obstacle_points)
+                points = hull_points(asset_spec(layout, node), self.cfg.obstacle_points)
                 pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
                 clouds.append(pose.transform_points(points))
             cloud = np.concatenate(clouds)
             self.clouds.append(cloud)
-            self.cloud_trees.append(cKDTree(cloud))
             base = self.base.layout_scene.robot_poses[i, :3].cpu().numpy()
             near_base = (
                 np.linalg.norm(cloud[:, :2] - base[:2], axis=1) < self.cfg.base_clearance
             ) & (cloud[:, 2] < base[2] + self.cfg.base_clearance_height)
             self.planners[i].update_point_cloud(cloud[~near_base], radius=self.cfg.obstacle_radius)
+
+    def cloud_tree(self, i: int) -> cKDTree:
+        """Env i's obstacle points in a KD-tree, made at the first query (only a carry to a
+        release asks: a pick episode makes none)."""
+        if i not in self._trees:
+            self._trees[i] = cKDTree(self.clouds[i])
+        return self._trees[i]
 
     # --- the policy ----------------------------------------------------------------------
     @property

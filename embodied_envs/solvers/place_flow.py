@@ -201,10 +201,10 @@ class PlaceFlow:
         grasp = self.grasp_in_link.to_transformation_matrix()
         tcp = _matrices(base[None]) @ _matrices(links) @ grasp  # (T, 4, 4) the grasp frame
         points = tcp[:, :3] @ np.append(in_hand, 1.0)  # (T, 3) the held object's centre
-        if held is not None and self.cloud_trees:
+        if held is not None and self.clouds:
             at = np.einsum("tij,vj->tvi", tcp[:, :3, :3], held) + tcp[:, None, :3, 3]
             bound = self.cfg.carry_clearance  # nearer points only: the tree prunes the rest
-            near, _ = self.cloud_trees[i].query(at.reshape(-1, 3), distance_upper_bound=bound)
+            near, _ = self.cloud_tree(i).query(at.reshape(-1, 3), distance_upper_bound=bound)
             hit = (near.reshape(len(path), -1) < self.cfg.carry_clearance).any(1)
             if hit.any():
                 return f"the held object meets an obstacle at waypoint {int(np.argmax(hit))}"

@@ -239,3 +239,22 @@ def test_enable_grasp_is_accepted_and_changes_nothing():
     finally:
         env.close()
         other.close()
+
+
+def test_a_float32_array_action_is_shared_as_the_general_path_makes_it():
+    """The usual action (a float32 array of the single or batched shape) is checked in numpy
+    and shared with torch, the tensor ``torch.as_tensor`` makes of it (as before); a
+    non-finite one is refused with the same message."""
+    from embodied_envs.envs.arguments import check_action
+
+    action = np.linspace(-1, 1, 8, dtype=np.float32)
+    for a in (action, action[None]):
+        fast = check_action(a, (8,), 1, "pd_joint_pos")
+        want = torch.as_tensor(a)
+        assert fast.dtype == want.dtype == torch.float32 and torch.equal(fast, want)
+        assert fast.shape == a.shape
+        assert np.shares_memory(fast.numpy(), a), "shared, as torch.as_tensor shares it"
+    bad = action.copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match=r"action contains NaN or inf \(env \[0\]\)"):
+        check_action(bad, (8,), 1, "pd_joint_pos")

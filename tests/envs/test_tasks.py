@@ -436,3 +436,17 @@ def test_layout_generate_keeps_move_destinations_on_the_table_within_reach(tmp_p
         foot = rotate(item.footprint, np.array([can.yaw]))[0] + dest
         n, o = half_planes(top)
         assert inside(foot[None], n[None], o[None])[0], f.name
+
+
+def test_rule_results_become_the_tensors_torch_makes_of_them():
+    """The rules' numpy results become the info's tensors shared as ``torch.from_numpy``
+    shares them: the same dtype and values as ``torch.as_tensor``; other values go through it."""
+    from embodied_envs.envs.tasks.scene import as_tensor
+
+    cpu = torch.device("cpu")
+    for value in (np.array([True, False]), np.arange(6, dtype=np.float32).reshape(2, 3)[:, ::2],
+                  np.arange(3.0), np.bool_(True), [1.5, 2.0]):  # fmt: skip
+        got, want = as_tensor(value, cpu), torch.as_tensor(value, device=cpu)
+        assert got.dtype == want.dtype and torch.equal(got, want)
+    shared = np.array([1.0, 2.0], np.float32)
+    assert np.shares_memory(as_tensor(shared, cpu).numpy(), shared)

@@ -253,7 +253,7 @@ def test_joint_levers_bound_how_far_each_joint_moves_the_robot():
     from mani_skill.utils.geometry.trimesh_utils import get_component_mesh
 
     import embodied_envs  # noqa: F401
-    from embodied_envs.solvers.pick_place import _planners
+    from embodied_envs.solvers.models import planners as _planners
 
     env = gym.make("PickEmbodiedGen-v1", control_mode="pd_joint_pos")
     try:

@@ -20,17 +20,23 @@ from embodied_envs.envs.tasks.state import (
     TaskState,
     at_least,
     norm,
+    number_set,
     robot_static,
 )
 
 GOAL_THRESH = 0.025  # m, object-to-goal distance that counts as placed
 STATIC_SOFT = 1.0  # rad/s over STATIC_ARM: the static credit falls to 0.24 (1 - tanh 1)
 MAX_REWARD = 4.0  # the dense reward on success; the normalised reward divides by it
+# the numbers the rules compute with, of the arrays' dtype (state.number_set: the same values)
+numbers = number_set(
+    ZERO=0.0, ONE=1.0, TWO=2.0, FIVE=5.0, GOAL_THRESH=GOAL_THRESH, STATIC_ARM=STATIC_ARM,
+    STATIC_SOFT=STATIC_SOFT, MAX_REWARD=MAX_REWARD,
+)
 
 
 def evaluate(s: TaskState) -> dict:
     obj_to_goal = s.goal - s.origins[:, 0]
-    placed = norm(obj_to_goal) <= GOAL_THRESH
+    placed = norm(obj_to_goal) <= numbers(obj_to_goal).GOAL_THRESH
     static = robot_static(s)
     return {
         "success": placed & static,
@@ -42,11 +48,12 @@ def evaluate(s: TaskState) -> dict:
 
 
 def reward(s: TaskState, info: dict):
-    xp = s.xp
-    reach = 1 - xp.tanh(5 * norm(s.origins[:, 0] - s.tcp))
-    place = 1 - xp.tanh(5 * at_least(norm(info["obj_to_goal_pos"]) - GOAL_THRESH, 0))
+    xp, c = s.xp, numbers(s.origins)
+    reach = c.ONE - xp.tanh(c.FIVE * norm(s.origins[:, 0] - s.tcp))
+    place = c.ONE - xp.tanh(c.FIVE * at_least(norm(info["obj_to_goal_pos"]) - c.GOAL_THRESH,
+                                              c.ZERO))  # fmt: skip
     speed = s.arm_speed
-    speed = speed.max(-1) if xp.__name__ == "numpy" else speed.amax(-1)
-    static = 1 - xp.tanh(at_least(speed - STATIC_ARM, 0) / STATIC_SOFT)
-    reward = xp.where(info["is_grasped"], 2 + place * (1 + static), reach)
-    return xp.where(info["success"], MAX_REWARD, reward)
+    speed = xp.maximum.reduce(speed, -1) if xp.__name__ == "numpy" else speed.amax(-1)
+    static = c.ONE - xp.tanh(at_least(speed - c.STATIC_ARM, c.ZERO) / c.STATIC_SOFT)
+    reward = xp.where(info["is_grasped"], c.TWO + place * (c.ONE + static), reach)
+    return xp.where(info["success"], c.MAX_REWARD, reward)

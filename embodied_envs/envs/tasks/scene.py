@@ -53,6 +53,18 @@ def _quat_matrix_np(q: np.ndarray) -> np.ndarray:
     return out.reshape(*q.shape[:-1], 3, 3)
 
 
+def as_tensor(value, device: torch.device) -> torch.Tensor:
+    """``torch.as_tensor(value, device=device)``; a numpy array for the CPU shared as
+    ``torch.from_numpy`` shares it (the same tensor, a third of the cost: the rules' results
+    become the info's tensors at every step)."""
+    if type(value) is np.ndarray and device.type == "cpu":
+        try:
+            return torch.from_numpy(value)
+        except (TypeError, ValueError):  # a dtype or strides torch cannot share
+            pass
+    return torch.as_tensor(value, device=device)
+
+
 def support_height(parts: tuple[np.ndarray, ...], xy: np.ndarray, default: float) -> float:
     """The highest point of any convex part straight above or below ``xy`` (its top surface
     there: a bowl's floor, a box's lid), in the actor's frame; ``default`` where none is."""
@@ -316,41 +328,49 @@ class TaskReader:
         speed = moved / self.env.control_timestep
         return speed * ~self.fresh[:, None]
 
-    def state(self, goal) -> TaskState:
-        """The state now; ``goal (n, 3)`` the pick goal (same array type as the reads)."""
+    def state(self, goal, full: bool = True) -> TaskState:
+        """The state now; ``goal (n, 3)`` the pick goal (same array type as the reads).
+        ``full=False``: what ``pick``'s rules and the env's ``fail`` read, ``bottom``,
+        ``in_receptacle``, ``rec_top`` and ``opening`` None (:meth:`rules` of pick alone)."""
         tcp, qpos, poses, lin, ang, grasped = self._read()
         m = poses.shape[1] - 1
         origin, rec = poses[:, :m, :3], poses[:, m]
         rots = quat_matrix(poses[..., 3:])  # the movers' and the receptacle's, in one call
         rot, rec_rot = rots[:, :m], rots[:, m]
         p = origin + (rot @ self.centres[..., None])[..., 0]  # the movers' centres
-        low = (rot[..., 2:3, :] @ self.hulls_t)[..., 0, :]  # (n, m, V)
-        bottom = origin[..., 2] + (low.min(-1) if not self.gpu else low.amin(-1))
-        local = ((p - rec[:, None, :3])[..., None, :] @ rec_rot[:, None])[..., 0, :]
-        lo, hi = self.ts.finger_span
         j = self.env.robot_entry.gripper.joints  # the trailing gripper joints
+        bottom = local = rec_top = opening = None
+        if full:
+            low = (rot[..., 2:3, :] @ self.hulls_t)[..., 0, :]  # (n, m, V)
+            bottom = origin[..., 2] + (low.min(-1) if not self.gpu else low.amin(-1))
+            local = ((p - rec[:, None, :3])[..., None, :] @ rec_rot[:, None])[..., 0, :]
+            rec_top = rec[:, 2] + self.rim
+            lo, hi = self.ts.finger_span
+            opening = (qpos[:, -j:].sum(-1) - lo) / (hi - lo)
         return TaskState(
-            tcp=tcp, goal=goal, arm_speed=self._arm_speed(qpos[:, :-j]),
-            opening=(qpos[:, -j:].sum(-1) - lo) / (hi - lo),
+            tcp=tcp, goal=goal, arm_speed=self._arm_speed(qpos[:, :-j]), opening=opening,
             movers=p, origins=origin, lin_vel=lin, ang_vel=ang, bottom=bottom, grasped=grasped,
             start=self.start, dest=self.dest, in_receptacle=local, footprint=self.footprint,
-            rim=self.rim, rec_top=rec[:, 2] + self.rim, rec_pos=rec[:, :3], is_in=self.is_in,
+            rim=self.rim, rec_top=rec_top, rec_pos=rec[:, :3], is_in=self.is_in,
             rec_is_table=self.rec_is_table, table_z=self.table_z, direction=self.direction,
             bounds=self.bounds,
         )  # fmt: skip
 
     def rules(self, goal) -> tuple[TaskState, dict]:
-        """The state now (:meth:`state`) and each present kind's rule results
-        (``RULES[kind].evaluate``), kind -> dict."""
-        state = self.state(goal)
+        """The state now (:meth:`state`; without the fields only ``place`` and ``move`` read
+        where ``pick`` is the one kind present: 11 array operations less every step) and each
+        present kind's rule results (``RULES[kind].evaluate``), kind -> dict."""
+        state = self.state(goal, full=self.kinds != ["pick"])
         return state, {k: RULES[k].evaluate(state) for k in self.kinds}
 
     def by_kind(self, results: dict, key: str) -> torch.Tensor:
         """``key`` of each env's own kind (``results``: kind -> dict of per-env values), as a
         tensor on the env's device."""
+        if len(results) == 1:  # one kind present (every shipped layout): its values
+            return as_tensor(next(iter(results.values()))[key], self.env.device)
         out = None
         for kind, res in results.items():
-            value = torch.as_tensor(res[key], device=self.env.device)
+            value = as_tensor(res[key], self.env.device)
             if out is None:
                 out = value
             else:

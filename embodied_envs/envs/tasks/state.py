@@ -54,6 +54,10 @@ class TaskState:
         direction: ``(n, 2)`` unit vector of a move's direction in the world's XY.
         bounds: ``place.Bounds`` of the receptacle fields, made once per configuration
             (``TaskReader``); ``None``: ``place`` makes them on every call.
+
+    ``bottom``, ``in_receptacle``, ``rec_top`` and ``opening`` are None in the state of the
+    env's rules where ``pick``, which reads none of them, is the only kind present
+    (``TaskReader.rules``).
     """
 
     tcp: Any
