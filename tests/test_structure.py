@@ -27,7 +27,8 @@ ALLOWED = {
     "config": {"layout", "paths", "robots"},
     "scene": {"layout", "paths", "robots"},
     "envs": {"layout", "paths", "scene", "splat", "config", "robots"},
-    "solvers": {"layout", "paths", "robots"},
+    # the expert records a control mode's actions as the converters compute them (solvers/modes.py)
+    "solvers": {"layout", "paths", "robots", "datasets", "config"},
     "datasets": {"layout", "paths", "config", "robots"},
     "pipelines": {
         "layout", "paths", "scene", "splat", "config", "envs", "solvers", "workers", "robots",

@@ -19,6 +19,7 @@ import numpy as np
 
 from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers import follow
+from embodied_envs.solvers.modes import ModeActions
 from embodied_envs.solvers.motion import joint_levers, link_points
 from embodied_envs.solvers.planner_urdf import planner_urdf
 from embodied_envs.solvers.store import cached, result_name
@@ -32,6 +33,9 @@ LEVERS_BY = ("embodied_envs.solvers.motion", "embodied_envs.solvers.store")  # t
 # per agent, its follow limits (follow.follow_limits reads every controller config, which
 # ManiSkill's agents build anew on each read: 2 ms an episode)
 _FOLLOW: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# per agent, its control mode's actions for the expert's targets (solvers/modes.py: reads every
+# controller config, and a pinocchio model for the end-effector modes)
+_MODES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def planners(base) -> list[mplib.Planner]:
@@ -70,6 +74,17 @@ def levers(base) -> np.ndarray:
             name, lambda: joint_levers(robot, planner), np.ndarray
         )
     return _LEVERS[base.agent.urdf_path]
+
+
+def mode_actions(base, arm_dof: int) -> ModeActions:
+    """``base``'s (an unwrapped env's) :class:`~embodied_envs.solvers.modes.ModeActions` for
+    its control mode, made at its first solver in that mode with that agent (a
+    reconfiguration makes a new agent)."""
+    per = _MODES.setdefault(base.agent, {})
+    key = (base.control_mode, arm_dof)
+    if key not in per:
+        per[key] = ModeActions(base, arm_dof)
+    return per[key]
 
 
 def follow_limits(agent, control_freq: float, arm_dof: int) -> follow.FollowLimits:

@@ -61,10 +61,11 @@ def drivable_modes(agent) -> list[str]:
     return [m for m in EXPERT_MODES if m in agent._controller_configs]
 
 
-def target_bounds(agent, arm_dof: int) -> tuple[np.ndarray, np.ndarray]:
+def target_bounds(agent, configs: dict, arm_dof: int) -> tuple[np.ndarray, np.ndarray]:
     """``(low, high)`` of the arm's ``pd_joint_pos`` targets: its config's bounds, or the
-    joints' limits where it has none (ManiSkill's action space in that mode)."""
-    config = arm_config(agent._controller_configs, RECORDED_MODE, arm_dof)
+    joints' limits where it has none (ManiSkill's action space in that mode). ``configs``:
+    ``agent._controller_configs`` (ManiSkill builds them anew on each read)."""
+    config = arm_config(configs, RECORDED_MODE, arm_dof)
     if config.lower is not None:
         return _per_joint(config.lower, arm_dof), _per_joint(config.upper, arm_dof)
     names = [j.name for j in agent.robot.get_active_joints()]
@@ -81,6 +82,7 @@ class ModeActions:
         agent, mode = base.agent, base.control_mode
         self.mode, self.arm_dof = mode, arm_dof
         configs = agent._controller_configs
+        self.bounds = target_bounds(agent, configs, arm_dof)  # of the expert's joint targets
         if mode not in EXPERT_MODES:
             raise ModeError(
                 f"control_mode={mode!r}: the expert records {drivable_modes(agent)} for "

@@ -33,8 +33,7 @@ from embodied_envs.solvers.grasp_choice import GraspChoice, asset_spec
 from embodied_envs.solvers.grasps import GraspConfig, hull_points
 from embodied_envs.solvers.gripper import GripperModel
 from embodied_envs.solvers.jaws import Jaws
-from embodied_envs.solvers.models import follow_limits, levers, planners
-from embodied_envs.solvers.modes import ModeActions, target_bounds
+from embodied_envs.solvers.models import follow_limits, levers, mode_actions, planners
 from embodied_envs.solvers.motion import MotionConfig, SeededPlanner
 from embodied_envs.solvers.place_flow import PlaceFlow
 
@@ -198,8 +197,8 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         self.planners = planners(self.base)
         self.arm_dof = len(self.planners[0].move_group_joint_indices)  # the gripper's after them
         # joint targets as the env's control mode's actions; their bounds (pd_joint_pos's)
-        self.mode_actions = ModeActions(self.base, self.arm_dof)
-        self.target_bounds = target_bounds(self.base.agent, self.arm_dof)
+        self.mode_actions = mode_actions(self.base, self.arm_dof)
+        self.target_bounds = self.mode_actions.bounds
         # the joint targets' bounds, so that other controllers replay them (solvers/follow.py)
         self.follow = follow_limits(self.base.agent, 1 / self.base.control_timestep, self.arm_dof)
         vel = np.asarray(self.cfg.joint_vel_limits, dtype=np.float64)
