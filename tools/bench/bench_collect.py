@@ -13,7 +13,10 @@ Prints successful demonstrations per minute, the ratio to PickCube's runner (the
 in a temporary folder and import the installed package: ``PYTHONPATH=$PWD`` measures this
 checkout's; ``OMP_NUM_THREADS=1`` gives both sides one thread.
 
+``--before DIR`` times another checkout's ``collect`` too, in the same pairs (before/after).
+
 Usage: python tools/bench/bench_collect.py [--num 20] [--repeats 1] [--layout FILE ...]
+       [--before DIR]
 """
 
 from __future__ import annotations
@@ -32,10 +35,10 @@ os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
 from embodied_envs.paths import default_layout, shipped_layouts  # noqa: E402
 
 
-def timed(cmd: list[str], cwd: str) -> float:
+def timed(cmd: list[str], cwd: str, env: dict | None = None) -> float:
     """Minutes the command ran (it must succeed)."""
     t = time.perf_counter()
-    subprocess.run(cmd, cwd=cwd, check=True, capture_output=True, env=os.environ)
+    subprocess.run(cmd, cwd=cwd, check=True, capture_output=True, env=env or os.environ)
     return (time.perf_counter() - t) / 60
 
 
@@ -47,13 +50,15 @@ def pickcube(num: int) -> float:
         return num / timed(cmd, tmp)
 
 
-def ours(num: int, layout: Path, workers: int) -> tuple[float, float]:
-    """Demonstrations per minute and MB per 100 demonstrations."""
+def ours(num: int, layout: Path, workers: int, checkout: Path | None = None) -> tuple[float, float]:
+    """Demonstrations per minute and MB per 100 demonstrations (``checkout``: the package of
+    that folder, on ``PYTHONPATH``)."""
+    env = None if checkout is None else {**os.environ, "PYTHONPATH": str(checkout)}
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "embodied_envs.cli.main", "collect", "--layout",
                str(layout), "--num", str(num), "--only-success", "--workers", str(workers),
                "--out", "out"]  # fmt: skip
-        rate = num / timed(cmd, tmp)
+        rate = num / timed(cmd, tmp, env)
         size = sum(p.stat().st_size for p in (Path(tmp) / "out" / layout.stem).iterdir())
     return rate, size / 1e6 / num * 100
 
@@ -65,6 +70,8 @@ def main() -> None:
     ap.add_argument("--num", type=int, default=20)
     ap.add_argument("--repeats", type=int, default=1, help="pairs per case (median ratio)")
     ap.add_argument("--layout", type=Path, nargs="+", default=None)
+    ap.add_argument("--before", type=Path, default=None, help="another checkout (e.g. `git "
+                    "worktree add DIR COMMIT`): its collect too, right after ours in each pair")
     args = ap.parse_args()
     runs = [(path.resolve(), 1) for path in args.layout or shipped_layouts()]  # cwd: a temp dir
     runs.append((default_layout(), 2))
@@ -72,13 +79,18 @@ def main() -> None:
         pairs = []
         for _ in range(args.repeats):  # each pair back to back: the machine drifts
             base = pickcube(args.num)
-            pairs.append((*ours(args.num, path, workers), base))
-        rate, mb, base = (statistics.median(x) for x in zip(*pairs, strict=True))
-        ratio = statistics.median(r / b for r, _, b in pairs)
+            before = ours(args.num, path, workers, args.before)[0] if args.before else None
+            pairs.append((*ours(args.num, path, workers), base, before))
+        rate, mb, base = (statistics.median(x) for x in list(zip(*pairs, strict=True))[:3])
+        ratio = statistics.median(r / b for r, _, b, _ in pairs)
+        was = ""
+        if args.before:
+            old = [round(o / b, 2) for _, _, b, o in pairs]
+            was = f"; {args.before.name}'s median ratio {statistics.median(old):.2f} {old}"
         print(
             f"{path.name:18s} {workers} worker(s): {rate:5.1f} successful demonstrations/min; "
             f"PickCube-v1 runner (1 process) {base:5.1f}/min; median ratio {ratio:.2f} of "
-            f"{args.repeats} pair(s) {[round(r / b, 2) for r, _, b in pairs]}; "
+            f"{args.repeats} pair(s) {[round(r / b, 2) for r, _, b, _ in pairs]}{was}; "
             f"{mb:.1f} MB per 100 demonstrations (obs none)",
             flush=True,
         )
