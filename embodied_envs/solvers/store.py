@@ -19,6 +19,7 @@ import functools
 import hashlib
 import importlib.metadata
 import sys
+import zipfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TypeVar
@@ -70,8 +71,8 @@ def cached(name: str, compute: Callable[[], T], kind: type[T]) -> T:
     try:
         with np.load(path) as data:
             return _unpack(kind, dict(data))
-    except (OSError, ValueError, KeyError, TypeError):  # absent, or unreadable: computed
-        pass
+    except (OSError, EOFError, ValueError, KeyError, TypeError, zipfile.BadZipFile):
+        pass  # absent, empty, cut short or of another layout: computed again
     value = compute()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

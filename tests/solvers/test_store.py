@@ -93,12 +93,14 @@ def test_an_unreadable_file_is_computed_again_and_rewritten(cache, monkeypatch):
     calls = counted(monkeypatch)
     first = asset_grasps(spec)
     (path,) = cache.glob("grasps-*.npz")
-    path.write_bytes(b"not an npz")
-    monkeypatch.setattr(grasps_module, "ASSET_FILES", FileCache())
-    again = asset_grasps(spec)
-    assert len(calls) == 2
-    assert_same(first, again)
-    assert path.read_bytes()[:2] == b"PK", "rewritten as an npz (a zip)"
+    good = path.read_bytes()
+    for k, bad in enumerate((b"not an npz", b"", good[: len(good) // 2])):  # cut short too
+        path.write_bytes(bad)
+        monkeypatch.setattr(grasps_module, "ASSET_FILES", FileCache())
+        again = asset_grasps(spec)
+        assert len(calls) == 2 + k
+        assert_same(first, again)
+        assert path.read_bytes()[:2] == b"PK", "rewritten as an npz (a zip)"
 
 
 def test_a_cache_folder_that_cannot_be_written_costs_only_the_time(tmp_path, monkeypatch):

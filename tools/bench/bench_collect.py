@@ -10,11 +10,15 @@ In one run, interleaved, each timed as a whole command (start-up, planning, phys
   the env's default controller, recorded natively: demos in the controller learners use, with
   no conversion after), and with ``--workers 2`` on the default layout.
 
-Prints successful demonstrations per minute, the ratio to PickCube's runner (issue 34's target:
->= 1.0 in the default controller) and MB per 100 demonstrations.
+Prints successful demonstrations per minute, the ratio to PickCube's runner (the target is
+>= 1.0 with one worker on the default layout) and MB per 100 demonstrations. The commands run
+in a temporary folder and import the installed package: ``PYTHONPATH=$PWD`` measures this
+checkout's; ``OMP_NUM_THREADS=1`` gives both sides one thread.
+
+``--before DIR`` times another checkout's ``collect`` too, in the same pairs (before/after).
 
 Usage: python tools/bench/bench_collect.py [--num 20] [--repeats 1] [--layout FILE ...]
-       [--control-mode pd_joint_delta_pos]
+       [--before DIR] [--control-mode pd_joint_delta_pos]
 """
 
 from __future__ import annotations
@@ -33,10 +37,10 @@ os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
 from embodied_envs.paths import default_layout, shipped_layouts  # noqa: E402
 
 
-def timed(cmd: list[str], cwd: str) -> float:
+def timed(cmd: list[str], cwd: str, env: dict | None = None) -> float:
     """Minutes the command ran (it must succeed)."""
     t = time.perf_counter()
-    subprocess.run(cmd, cwd=cwd, check=True, capture_output=True, env=os.environ)
+    subprocess.run(cmd, cwd=cwd, check=True, capture_output=True, env=env or os.environ)
     return (time.perf_counter() - t) / 60
 
 
@@ -48,13 +52,20 @@ def pickcube(num: int) -> float:
         return num / timed(cmd, tmp)
 
 
-def ours(num: int, layout: Path, workers: int, mode: str) -> tuple[float, float]:
-    """Demonstrations per minute and MB per 100 demonstrations."""
+def ours(
+    num: int, layout: Path, workers: int, mode: str, checkout: Path | None = None
+) -> tuple[float, float]:
+    """Demonstrations per minute and MB per 100 demonstrations (``checkout``: the package of
+    that folder, on ``PYTHONPATH``; ``pd_joint_pos`` is asked without ``--control-mode``, which
+    a checkout from before it lacks)."""
+    env = None if checkout is None else {**os.environ, "PYTHONPATH": str(checkout)}
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "embodied_envs.cli.main", "collect", "--layout",
                str(layout), "--num", str(num), "--only-success", "--workers", str(workers),
-               "--control-mode", mode, "--out", "out"]  # fmt: skip
-        rate = num / timed(cmd, tmp)
+               "--out", "out"]  # fmt: skip
+        if mode != "pd_joint_pos":
+            cmd += ["--control-mode", mode]
+        rate = num / timed(cmd, tmp, env)
         size = sum(p.stat().st_size for p in (Path(tmp) / "out" / layout.stem).iterdir())
     return rate, size / 1e6 / num * 100
 
@@ -66,6 +77,8 @@ def main() -> None:
     ap.add_argument("--num", type=int, default=20)
     ap.add_argument("--repeats", type=int, default=1, help="pairs per case (median ratio)")
     ap.add_argument("--layout", type=Path, nargs="+", default=None)
+    ap.add_argument("--before", type=Path, default=None, help="another checkout (e.g. `git "
+                    "worktree add DIR COMMIT`): its collect too, right after ours in each pair")
     ap.add_argument("--control-mode", default="pd_joint_delta_pos", help="collect's mode")
     args = ap.parse_args()
     runs = [(path.resolve(), 1) for path in args.layout or shipped_layouts()]  # cwd: a temp dir
@@ -74,14 +87,20 @@ def main() -> None:
         pairs = []
         for _ in range(args.repeats):  # each pair back to back: the machine drifts
             base = pickcube(args.num)
-            pairs.append((*ours(args.num, path, workers, args.control_mode), base))
-        rate, mb, base = (statistics.median(x) for x in zip(*pairs, strict=True))
-        ratio = statistics.median(r / b for r, _, b in pairs)
+            mode = args.control_mode
+            before = ours(args.num, path, workers, mode, args.before)[0] if args.before else None
+            pairs.append((*ours(args.num, path, workers, mode), base, before))
+        rate, mb, base = (statistics.median(x) for x in list(zip(*pairs, strict=True))[:3])
+        ratio = statistics.median(r / b for r, _, b, _ in pairs)
+        was = ""
+        if args.before:
+            old = [round(o / b, 2) for _, _, b, o in pairs]
+            was = f"; {args.before.name}'s median ratio {statistics.median(old):.2f} {old}"
         print(
             f"{path.name:18s} {workers} worker(s), {args.control_mode}: {rate:5.1f} successful "
             "demonstrations/min; "
             f"PickCube-v1 runner (1 process) {base:5.1f}/min; median ratio {ratio:.2f} of "
-            f"{args.repeats} pair(s) {[round(r / b, 2) for r, _, b in pairs]}; "
+            f"{args.repeats} pair(s) {[round(r / b, 2) for r, _, b, _ in pairs]}{was}; "
             f"{mb:.1f} MB per 100 demonstrations (obs none)",
             flush=True,
         )
