@@ -67,9 +67,9 @@ def cpu_state_dict(env) -> dict:
         parts += (pose.p, pose.q, body.linear_velocity, body.angular_velocity, qpos, qvel)
         rows.append((articulations, art.name, 13 + len(qpos) + len(qvel)))
     if parts:
-        flat, start = torch.from_numpy(np.concatenate(parts)), 0
+        flat, start = np.concatenate(parts)[None], 0
         for into, name, size in rows:
-            into[name] = flat[None, start : start + size]
+            into[name] = torch.from_numpy(flat[:, start : start + size])
             start += size
     state = {}
     if actors:
