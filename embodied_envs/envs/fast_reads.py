@@ -18,7 +18,8 @@ reason, and the same test covers what they use: ``envs/contacts.py`` (``Link._bo
 (``Articulation._objs``, ``Link._objs``, ``Actor._objs``, ``Actor._bodies``: the task state).
 ``envs/fast_control.py`` (ManiSkill's ``set_action`` in numpy) writes drive targets through
 ``ArticulationJoint._objs`` and reads the controllers' attributes it lists in its
-``CONTROLLER_ATTRIBUTES``; the same test checks those.
+``CONTROLLER_ATTRIBUTES``; the same test checks those. The expert reads its joints through
+``Articulation._objs`` too (``solvers/pick_place.py``, ``PickPlaceSolver._qpos``).
 """
 
 from __future__ import annotations
