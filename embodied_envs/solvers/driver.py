@@ -262,7 +262,7 @@ class ArmDriver:
         def arrived() -> bool:
             if self.steps < start + moving:
                 return False
-            return self.mode_actions.arrived(ends, self.cfg.settle_tolerance)
+            return self.mode_actions.arrived(self._qpos(), ends, self.cfg.settle_tolerance)
 
         self._execute(paths, settle, arrived if settle else None, open_before)
         return chosen

@@ -125,12 +125,12 @@ class ModeActions:
             self.arm.config.use_delta
         )
 
-    def arrived(self, ends: np.ndarray, tolerance: float) -> bool:
-        """Whether every env's arm is where the joint targets ``ends`` ``(n, arm_dof)`` put it:
+    def arrived(self, qpos: np.ndarray, ends: np.ndarray, tolerance: float) -> bool:
+        """Whether every env's arm, at joints ``qpos`` (the solver's read), is where the joint
+        targets ``ends`` ``(n, arm_dof)`` put it:
         each joint within ``tolerance`` rad; in an end-effector mode, the hand within
         ``EE_ARRIVED`` of their hand pose (its position only, where the mode keeps the hand's
         orientation as it is)."""
-        qpos = self.robot.get_qpos().cpu().numpy().astype(np.float64)
         if self.joint_targets:
             return bool(np.abs(qpos[:, : self.arm_dof] - ends).max() < tolerance)
         p, q = self._hand(qpos, ends)
