@@ -50,10 +50,16 @@ class Jaws:
         (``robots.Hand.close_gap``; shut at once, the SO-100's jaw meets the object with 100
         N m and pushes the arm away): at once to the target's width across the jaws plus
         ``close_gap``, then the jaw's target ``close_step`` ahead of the jaw until the jaws
-        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw."""
+        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw.
+        In a mode whose drive moves the jaw slower than ``pd_joint_pos``'s, the lead is
+        ``ModeActions.lead``'s (the Koch's delta modes: else its jaw, at 0.11 rad/s, stops
+        ``close_steps`` short of the block)."""
         hand, grip = self.robot_hand, self.gripper_entry
         way = np.sign(hand.action_closed - hand.action_open)
         per_qpos = (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)
+        # the jaw's lead (action), as the jaw's joint (after the arm's) leads in the mode
+        step = self.mode_actions.lead(self.arm_dof, hand.close_step / abs(per_qpos))
+        step *= abs(per_qpos)
 
         def jaw() -> np.ndarray:  # the jaw's position as an action
             return hand.action_open + (self._fingers()[:, 0] - grip.open_qpos) * per_qpos
@@ -63,13 +69,13 @@ class Jaws:
         width = held[..., 1].max(1) - held[..., 1].min(1)
         near = np.array([hand.action(w + hand.close_gap) for w in width])
         self.gripper[envs] = near[envs]
-        there = lambda: bool(np.all(np.abs(jaw() - self.gripper)[envs] < hand.close_step))  # noqa: E731
+        there = lambda: bool(np.all(np.abs(jaw() - self.gripper)[envs] < step))  # noqa: E731
         self._execute([None] * self.num_envs, self.cfg.close_steps, until=there)
         closing = envs & ~self._grasping()
         for _ in range(self.cfg.close_steps):
             if not closing.any() or self.ended:
                 break
-            shut = jaw() + way * hand.close_step  # from where the jaw stands: no wind-up
+            shut = jaw() + way * step  # from where the jaw stands: no wind-up
             shut = np.minimum(shut, hand.action_closed) if way > 0 else np.maximum(
                 shut, hand.action_closed
             )

@@ -33,7 +33,7 @@ import torch
 from mani_skill.utils import gym_utils
 
 from embodied_envs.datasets.ee_actions import ee_action, root_pose_of_target
-from embodied_envs.datasets.joint_actions import mode_action
+from embodied_envs.datasets.joint_actions import RELATIVE_TO, mode_action
 from embodied_envs.robots import EXPERT_MODES
 from embodied_envs.solvers.follow import RECORDED_MODE, _per_joint, arm_config
 
@@ -107,6 +107,13 @@ class ModeActions:
             pos, vel = (pos["arm"], vel["arm"]) if self.combined else (pos, vel)
             dof = len(vel.joint_names)
             self.gain = _per_joint(pos.stiffness, dof) / _per_joint(vel.damping, dof)
+        self.lead_scale = self.bound = None  # per joint of one controller in a delta mode
+        if not self.combined and mode in RELATIVE_TO:
+            pos, own = configs[RECORDED_MODE], configs[mode]
+            dof = len(own.joint_names)
+            lag = lambda c: _per_joint(c.damping, dof) / _per_joint(c.stiffness, dof)  # noqa: E731
+            self.lead_scale = lag(own) / lag(pos)
+            self.bound = np.minimum(np.abs(_per_joint(own.lower, dof)), _per_joint(own.upper, dof))
         self.robot = agent.robot
         self.clipped = False  # whether the last action had to be clipped, in any env
         if mode in EE_MODES:
@@ -124,6 +131,19 @@ class ModeActions:
         return self.mode in EE_MODES and not hasattr(self.arm.config, "rot_lower") and (
             self.arm.config.use_delta
         )
+
+    def lead(self, joint: int, lead: float) -> float:
+        """How far (rad) the target of ``joint`` (an index of the robot's active joints) leads
+        it so that the joint moves in this mode as a target ``lead`` ahead moves it in
+        ``pd_joint_pos``: a position drive moves a joint at ``stiffness / damping`` times its
+        target's lead, so the lead is scaled by the mode's drive lag (damping / stiffness)
+        over ``pd_joint_pos``'s, to at most the mode's per-step bound. The same lead where the
+        hand's action passes as it is, and for an arm whose modes share their gains (the
+        SO-100); the Koch's jaw lags 0.175 s in its delta modes and 0.01 s in pd_joint_pos:
+        a gentle close (``solvers/jaws.py``) leads it by 0.05 rad, not 0.02."""
+        if self.lead_scale is None:
+            return lead
+        return float(min(lead * self.lead_scale[joint], self.bound[joint]))
 
     def arrived(self, qpos: np.ndarray, ends: np.ndarray, tolerance: float) -> bool:
         """Whether every env's arm, at joints ``qpos`` (the solver's read), is where the joint
