@@ -16,7 +16,7 @@ from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
 from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP, SUPPORTED_ROBOTS, CameraSpec
-from embodied_envs.envs import agents, fast_control, fast_reads, keywords
+from embodied_envs.envs import agents, fast_control, fast_reads, keywords, physx_scene
 from embodied_envs.envs.arguments import check_quaternion
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.rendering import HybridRendering, render_camera, robot_camera
@@ -184,6 +184,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
 
     def _load_scene(self, options: dict):
         self._num_configurations += 1
+        self._physx_fresh = True  # a new scene: its first reset needs no new PhysX scene
         self.layouts = configuration_layouts(
             self.layout_set, self._episode_seed, self.placement_limits,
             first=self._num_configurations == 1, replace=self.replace_objs,
@@ -218,6 +219,16 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         super()._set_episode_rng(seed, env_idx)  # new RNGs: drop starts drawn from the old ones
         if getattr(self, "layout_scene", None) is not None:
             self.layout_scene.episodes.reseeded(seed, env_idx, self._enhanced_determinism)
+
+    def _clear_sim_state(self):
+        # CPU: each reset after the first in a configuration moves the scene into a new PhysX
+        # scene, so that the episode does not depend on those before (envs/physx_scene.py)
+        if not self.gpu_sim_enabled and not self._physx_fresh:
+            physx_scene.renew_physx_system(self.scene)
+            if self._viewer is not None:
+                self._viewer.set_scene(self.scene.sub_scenes[0])
+        self._physx_fresh = False
+        super()._clear_sim_state()
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         ls = self.layout_scene
