@@ -1,15 +1,15 @@
 """A new PhysX scene at each reset on the CPU simulation, so that a seed's episode does not depend
-on the episodes the env ran before it.
+on the episodes the env ran before it (docs/reliability.md, "Determinism").
 
-PhysX keeps, across ``set_pose`` and across removing and re-adding actors, the pools it numbers
-its contact pairs and their island edges from; the solver visits an island's contacts in that
-order, and a body resting on several contact pairs at once (a bowl's convex pieces on the
-table) then takes other impulses after another history: up to 5e-4 in the distractors' states
-within 10 control steps (docs/reliability.md, "Determinism"). A fresh PhysX scene has fresh
-pools. :func:`renew_physx_system` moves every entity, as it stands, into a new
-``PhysxCpuSystem``: the assets, shapes, joints and render bodies stay the same objects, so
-ManiSkill's structs and the env's references keep working, and the reset then sets the state
-as in a new env. Not for the GPU simulation (its system holds every sub-scene).
+A PhysX scene keeps its contact-pair bookkeeping across ``set_pose``, and across removing and
+re-adding every actor: after another history, the solver meets a body's contact pairs in
+another order, and a body resting on several at once (the default layout's bowl: convex pieces
+on the table) takes other impulses, its angular velocity 2.4e-3 rad/s apart after one control
+step. A new scene has none of it. :func:`renew_physx_system` moves every entity, as it stands,
+into a new ``PhysxCpuSystem`` (0.6 ms; 1.1 ms with a camera): shapes, joints, drives and render
+bodies stay the same objects, so ManiSkill's structs and the env's references keep working, and
+the reset then sets the state as in a new env. Not for the GPU simulation, whose one system
+holds every sub-scene.
 """
 
 from __future__ import annotations
@@ -44,3 +44,16 @@ def renew_physx_system(scene) -> None:
         new.add_entity(entity)
     scene.sub_scenes[0] = new
     scene.px = new_px
+
+
+def before_reset(env) -> None:
+    """The env's reset (CPU simulation): a new PhysX scene, unless the scene is new since the
+    last reset (the first reset of a configuration); the viewer, if open, shows the new scene.
+    Nothing on the GPU simulation."""
+    if env.gpu_sim_enabled:
+        return
+    if env.scene.px is getattr(env, "_physx_at_reset", None):
+        renew_physx_system(env.scene)
+        if env._viewer is not None:
+            env._viewer.set_scene(env.scene.sub_scenes[0])
+    env._physx_at_reset = env.scene.px

@@ -184,7 +184,6 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
 
     def _load_scene(self, options: dict):
         self._num_configurations += 1
-        self._physx_fresh = True  # a new scene: its first reset needs no new PhysX scene
         self.layouts = configuration_layouts(
             self.layout_set, self._episode_seed, self.placement_limits,
             first=self._num_configurations == 1, replace=self.replace_objs,
@@ -221,13 +220,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
             self.layout_scene.episodes.reseeded(seed, env_idx, self._enhanced_determinism)
 
     def _clear_sim_state(self):
-        # CPU: each reset after the first in a configuration moves the scene into a new PhysX
-        # scene, so that the episode does not depend on those before (envs/physx_scene.py)
-        if not self.gpu_sim_enabled and not self._physx_fresh:
-            physx_scene.renew_physx_system(self.scene)
-            if self._viewer is not None:
-                self._viewer.set_scene(self.scene.sub_scenes[0])
-        self._physx_fresh = False
+        physx_scene.before_reset(self)  # CPU: a new PhysX scene, whatever ran before
         super()._clear_sim_state()
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
