@@ -16,7 +16,7 @@ from mani_skill.utils.structs.pose import Pose
 from mani_skill.utils.structs.types import GPUMemoryConfig, SceneConfig, SimConfig
 
 from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP, SUPPORTED_ROBOTS, CameraSpec
-from embodied_envs.envs import agents, fast_control, fast_reads, keywords
+from embodied_envs.envs import agents, fast_control, fast_reads, keywords, physx_scene
 from embodied_envs.envs.arguments import check_quaternion
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.rendering import HybridRendering, render_camera, robot_camera
@@ -218,6 +218,10 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         super()._set_episode_rng(seed, env_idx)  # new RNGs: drop starts drawn from the old ones
         if getattr(self, "layout_scene", None) is not None:
             self.layout_scene.episodes.reseeded(seed, env_idx, self._enhanced_determinism)
+
+    def _clear_sim_state(self):
+        physx_scene.before_reset(self)  # CPU: a new PhysX scene, whatever ran before
+        super()._clear_sim_state()
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         ls = self.layout_scene

@@ -1,0 +1,59 @@
+"""A new PhysX scene at each reset on the CPU simulation, so that a seed's episode does not depend
+on the episodes the env ran before it (docs/reliability.md, "Determinism").
+
+A PhysX scene keeps its contact-pair bookkeeping across ``set_pose``, and across removing and
+re-adding every actor: after another history, the solver meets a body's contact pairs in
+another order, and a body resting on several at once (the default layout's bowl: convex pieces
+on the table) takes other impulses, its angular velocity 2.4e-3 rad/s apart after one control
+step. A new scene has none of it. :func:`renew_physx_system` moves every entity, as it stands,
+into a new ``PhysxCpuSystem`` (0.6 ms; 1.1 ms with a camera): shapes, joints, drives and render
+bodies stay the same objects, so ManiSkill's structs and the env's references keep working, and
+the reset then sets the state as in a new env. Not for the GPU simulation, whose one system
+holds every sub-scene.
+"""
+
+from __future__ import annotations
+
+import sapien
+from sapien import physx
+
+
+def renew_physx_system(scene) -> None:
+    """Moves every entity of a CPU-simulation ManiSkill ``scene`` (one sub-scene) into a new
+    ``PhysxCpuSystem`` with the old one's scene config and timestep; the render system stays.
+    ``scene.sub_scenes[0]`` and ``scene.px`` then name the new ones."""
+    old = scene.sub_scenes[0]
+    px = old.physx_system
+    default = physx.get_scene_config()  # the process-wide default a new system takes
+    physx.set_scene_config(px.config)
+    try:
+        new_px = physx.PhysxCpuSystem()
+    finally:
+        physx.set_scene_config(default)
+    new_px.timestep = px.timestep
+    systems = [new_px]
+    try:
+        systems.append(old.render_system)
+    except RuntimeError:  # a scene built without rendering has no render system
+        pass
+    new = sapien.Scene(systems)
+    entities = list(old.entities)
+    for entity in reversed(entities):  # joints and drives before the bodies they join
+        old.remove_entity(entity)
+    for entity in entities:  # the order a new env adds them in
+        new.add_entity(entity)
+    scene.sub_scenes[0] = new
+    scene.px = new_px
+
+
+def before_reset(env) -> None:
+    """The env's reset (CPU simulation): a new PhysX scene, unless the scene is new since the
+    last reset (the first reset of a configuration); the viewer, if open, shows the new scene.
+    Nothing on the GPU simulation."""
+    if env.gpu_sim_enabled:
+        return
+    if env.scene.px is getattr(env, "_physx_at_reset", None):
+        renew_physx_system(env.scene)
+        if env._viewer is not None:
+            env._viewer.set_scene(env.scene.sub_scenes[0])
+    env._physx_at_reset = env.scene.px
