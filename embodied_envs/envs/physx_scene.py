@@ -38,12 +38,30 @@ def renew_physx_system(scene) -> None:
         pass
     new = sapien.Scene(systems)
     entities = list(old.entities)
+    ids = [entity.per_scene_id for entity in entities]
     for entity in reversed(entities):  # joints and drives before the bodies they join
         old.remove_entity(entity)
-    for entity in entities:  # the order a new env adds them in
-        new.add_entity(entity)
+    _add_keeping_ids(new, entities, ids)
     scene.sub_scenes[0] = new
     scene.px = new_px
+
+
+def _add_keeping_ids(scene, entities: list, ids: list[int]) -> None:
+    """Adds ``entities`` to ``scene`` in their order (the order a new env adds them in), each
+    with its old ``per_scene_id`` (``ids``; a scene numbers entities 1, 2, ... as they are
+    added): an id left free by an entity removed earlier (ManiSkill's CPU-only
+    ``Actor.remove_from_scene``) is taken by an empty entity, removed after. ManiSkill caches
+    the ids (``Actor.per_scene_id``, ``segmentation_id_map``; the hybrid renderer's foreground)
+    and the camera's segmentation draws the live ones."""
+    fillers, expected = [], 1
+    for entity, want in zip(entities, ids, strict=True):
+        for _ in range(want - expected):
+            fillers.append(sapien.Entity())
+            scene.add_entity(fillers[-1])
+        scene.add_entity(entity)
+        expected = entity.per_scene_id + 1
+    for filler in fillers:  # no components: nothing in the PhysX scene
+        scene.remove_entity(filler)
 
 
 def before_reset(env) -> None:

@@ -93,3 +93,22 @@ def test_only_resets_after_a_configurations_first_renew(envs, monkeypatch):
     env.reset(seed=6)
     env.reset(seed=7)
     assert len(calls) == 2
+
+
+def test_entities_keep_their_segmentation_ids_after_one_is_removed():
+    """ManiSkill caches each actor's ``per_scene_id`` (what the camera's segmentation draws):
+    a removed actor's id stays free in the new PhysX scene, the others keep theirs."""
+    env = gym.make(ENV_ID, obs_mode="none")
+    try:
+        u = env.unwrapped
+        env.reset(seed=1)
+        mug = u.scene.actors.pop("env0/mug")
+        mug.remove_from_scene()  # ManiSkill's CPU-only removal
+        before = [(e.name, e.per_scene_id) for e in u.scene.sub_scenes[0].entities]
+        bowl = u.scene.actors["env0/bowl"]
+        cached = int(bowl.per_scene_id[0])
+        env.reset(seed=2)
+        assert [(e.name, e.per_scene_id) for e in u.scene.sub_scenes[0].entities] == before
+        assert bowl._objs[0].per_scene_id == cached == dict(before)["scene-0_env0/bowl"]
+    finally:
+        env.close()
