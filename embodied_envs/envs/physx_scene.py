@@ -70,8 +70,10 @@ def before_reset(env) -> None:
     Nothing on the GPU simulation."""
     if env.gpu_sim_enabled:
         return
-    if env.scene.px is getattr(env, "_physx_at_reset", None):
+    # marked on the ManiSkill scene, which a reconfiguration replaces (the env holds no PhysX
+    # system: after close() none stays alive with its bodies)
+    if getattr(env.scene, "reset_before", False):
         renew_physx_system(env.scene)
         if env._viewer is not None:
             env._viewer.set_scene(env.scene.sub_scenes[0])
-    env._physx_at_reset = env.scene.px
+    env.scene.reset_before = True

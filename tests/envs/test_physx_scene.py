@@ -7,6 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from sapien import physx
 
 import embodied_envs  # noqa: F401
 from embodied_envs.envs import physx_scene
@@ -112,3 +113,12 @@ def test_entities_keep_their_segmentation_ids_after_one_is_removed():
         assert bowl._objs[0].per_scene_id == cached == dict(before)["scene-0_env0/bowl"]
     finally:
         env.close()
+
+
+def test_a_closed_env_holds_no_physx_system():
+    env = gym.make(ENV_ID, obs_mode="none")
+    env.reset(seed=1)
+    env.reset(seed=2)
+    env.close()
+    held = [v for v in vars(env.unwrapped).values() if isinstance(v, physx.PhysxSystem)]
+    assert held == []
