@@ -63,6 +63,19 @@ def _per_joint(values, dof: int) -> np.ndarray:
     return np.broadcast_to(values, (dof,)) if values.ndim == 0 else values[:dof]
 
 
+def action_bound(config, dof: int) -> np.ndarray:
+    """Per joint of ``config`` (the first ``dof``), the most its action asks either way: a delta
+    mode's rad per step, a velocity mode's rad/s (the smaller of its lower and upper bound)."""
+    return np.minimum(np.abs(_per_joint(config.lower, dof)), _per_joint(config.upper, dof))
+
+
+def drive_lag(config, dof: int) -> np.ndarray:
+    """Per joint of ``config`` (the first ``dof``), how far (s) its PD drive lags a moving
+    target: damping / stiffness (a drive moves its joint at stiffness / damping times the
+    target's lead)."""
+    return _per_joint(config.damping, dof) / _per_joint(config.stiffness, dof)
+
+
 def follow_limits(agent, control_freq: float, arm_dof: int, margin: float = MARGIN) -> FollowLimits:
     """The limits for the first ``arm_dof`` joints of ``agent`` (a ManiSkill agent whose
     ``pd_joint_pos`` and ``pd_joint_delta_pos`` configs drive its arm, and ``pd_joint_vel``
@@ -75,14 +88,12 @@ def follow_limits(agent, control_freq: float, arm_dof: int, margin: float = MARG
             f"{type(agent).__name__} has no arm controller in {RECORDED_MODE} or "
             f"{JOINT_MODES[0]}: the expert's targets are bounded by those controllers' limits"
         )
-    delta = np.minimum(np.abs(_per_joint(delta_config.lower, arm_dof)),
-                       _per_joint(delta_config.upper, arm_dof))  # rad per step  # fmt: skip
+    delta = action_bound(delta_config, arm_dof)  # rad per step
     vel_config = arm_config(configs, JOINT_MODES[1], arm_dof)
     vel = np.full(arm_dof, np.inf)  # rad/s
     if vel_config is not None:
-        vel = np.minimum(np.abs(_per_joint(vel_config.lower, arm_dof)),
-                         _per_joint(vel_config.upper, arm_dof))  # fmt: skip
-    lag = _per_joint(pos.damping, arm_dof) / _per_joint(pos.stiffness, arm_dof)  # s
+        vel = action_bound(vel_config, arm_dof)
+    lag = drive_lag(pos, arm_dof)  # s
     step = margin * np.minimum(vel / control_freq, delta)
     lead = margin * delta
     speed = SPEED_SHARE * np.minimum(np.minimum(vel, delta * control_freq), delta / lag)

@@ -35,7 +35,13 @@ from mani_skill.utils import gym_utils
 from embodied_envs.datasets.ee_actions import ee_action, root_pose_of_target
 from embodied_envs.datasets.joint_actions import RELATIVE_TO, mode_action
 from embodied_envs.robots import EXPERT_MODES
-from embodied_envs.solvers.follow import RECORDED_MODE, _per_joint, arm_config
+from embodied_envs.solvers.follow import (
+    RECORDED_MODE,
+    _per_joint,
+    action_bound,
+    arm_config,
+    drive_lag,
+)
 
 JOINT_VEL = "pd_joint_vel"
 EE_MODES = tuple(m for m in EXPERT_MODES if m.startswith("pd_ee"))
@@ -107,13 +113,12 @@ class ModeActions:
             pos, vel = (pos["arm"], vel["arm"]) if self.combined else (pos, vel)
             dof = len(vel.joint_names)
             self.gain = _per_joint(pos.stiffness, dof) / _per_joint(vel.damping, dof)
-        self.lead_scale = self.bound = None  # per joint of one controller in a delta mode
+        self.lead_scale = self.lead_bound = None  # per joint of one controller, delta modes
         if not self.combined and mode in RELATIVE_TO:
             pos, own = configs[RECORDED_MODE], configs[mode]
             dof = len(own.joint_names)
-            lag = lambda c: _per_joint(c.damping, dof) / _per_joint(c.stiffness, dof)  # noqa: E731
-            self.lead_scale = lag(own) / lag(pos)
-            self.bound = np.minimum(np.abs(_per_joint(own.lower, dof)), _per_joint(own.upper, dof))
+            self.lead_scale = drive_lag(own, dof) / drive_lag(pos, dof)
+            self.lead_bound = action_bound(own, dof)
         self.robot = agent.robot
         self.clipped = False  # whether the last action had to be clipped, in any env
         if mode in EE_MODES:
@@ -143,7 +148,7 @@ class ModeActions:
         a gentle close (``solvers/jaws.py``) leads it by 0.05 rad, not 0.02."""
         if self.lead_scale is None:
             return lead
-        return float(min(lead * self.lead_scale[joint], self.bound[joint]))
+        return float(min(lead * self.lead_scale[joint], self.lead_bound[joint]))
 
     def arrived(self, qpos: np.ndarray, ends: np.ndarray, tolerance: float) -> bool:
         """Whether every env's arm, at joints ``qpos`` (the solver's read), is where the joint
