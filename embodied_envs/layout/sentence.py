@@ -22,7 +22,7 @@ import re
 from dataclasses import dataclass, field
 
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.nouns import ARTICLES, Nodes, Phrase, Unread, is_participle, words
+from embodied_envs.layout.nouns import ARTICLES, Nodes, Phrase, Unread, is_participle
 from embodied_envs.layout.task_model import EXPLICIT, Task
 from embodied_envs.robots import ROBOT_NAMES
 
