@@ -72,7 +72,7 @@ def stem(word: str) -> str:
 def is_participle(ws: list[str], k: int) -> bool:
     """``ws[k]`` is a participle opening a description ("lying" in "a can lying on its side")."""
     w = ws[k]
-    return (len(w) >= 5 and w.endswith("ing") and k > 0 and ws[k - 1] not in ARTICLES
+    return (len(w) >= 5 and w.endswith("ing") and not w.endswith("thing") and k > 0 and ws[k - 1] not in ARTICLES
             and k + 1 < len(ws) and ws[k + 1] in PARTICIPLE_NEXT)  # fmt: skip
 
 

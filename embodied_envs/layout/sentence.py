@@ -27,6 +27,7 @@ from embodied_envs.layout.task_model import EXPLICIT, Task
 from embodied_envs.robots import ROBOT_NAMES
 
 MAX_SENTENCE = 1000  # characters: a task_desc is one sentence; a longer one is refused unread
+QUOTE = 200  # characters of the sentence a refusal quotes
 PICK, PLACE, MOVE, HOLD = "pick", "place", "move", "hold"
 VERBS = {
     **dict.fromkeys("pick lift grab grasp take raise get fetch remove retrieve collect".split(),
@@ -93,8 +94,11 @@ class Clause:
 
 def refuse(f: str, sentence: str, why: str) -> LayoutError:
     """The one-line refusal: the sentence, what could not be read, the forms and the fix."""
+    said = " ".join(sentence.split())  # one line, however it was written
+    if len(said) > QUOTE:
+        said = said[:QUOTE] + "..."
     return LayoutError(
-        f'{f}: relation["task_desc"] "{sentence}" is not a task this env grades ({why}). '
+        f'{f}: relation["task_desc"] "{said}" is not a task this env grades ({why}). '
         f"Understood: {FORMS}. Fix: rephrase it so, {EXPLICIT}."
     )
 
@@ -110,7 +114,7 @@ def tokens(sentence: str, robot: str = "") -> list[str]:
         text = text[: m.start()]
     toks = re.findall(r"[^\W_]+(?:'[^\W_]+)*|[,;:.!?]",
                       text.lower().replace("\u2019", "'").replace("_", " "))  # fmt: skip
-    while toks and toks[-1] in ".!":
+    while toks and toks[-1] in ".!?":
         toks.pop()
     k = 0
     while k < len(toks) and (toks[k] in FILLERS or toks[k] == ","):
@@ -166,7 +170,7 @@ class Reader:
         ws, with_words = [], []
         while (w := self.peek()) is not None:
             if w == "of" or not self.stop(w):
-                if is_participle(self.t, self.k) and w not in self.nodes.name_words:
+                if ws and is_participle(self.t, self.k) and w not in self.nodes.name_words:
                     self.k += 1  # "a can lying on its side": the description is read over
                     if self.peek() in INTO or self.peek() in SOURCES:
                         self.k += 1
@@ -265,10 +269,11 @@ class Reader:
                 if nxt is None:
                     self.k = len(self.t)
                     break
-                if nxt in ARTICLES or nxt in self.nodes.name_words:
+                if (nxt in ARTICLES or nxt in self.nodes.name_words or nxt in INTO
+                        or nxt in DIRECTION_WORDS or nxt in ("to", "at", "back")):  # fmt: skip
                     raise Unread(
                         f'after "{" ".join(self.t[:self.k])}" it goes on with "{nxt} ...": two '
-                        "destinations or two tasks in one sentence; state one"
+                        "destinations, directions or tasks in one sentence; state one"
                     )
                 raise Unread(f'"{nxt}" is not a verb it knows')
             self.k += 1
