@@ -53,13 +53,16 @@ ADVERBS = frozenset("slightly gently carefully slowly quickly just again also to
                     "now there bit little way".split())  # fmt: skip
 FILLERS = frozenset({"please", "kindly", "now", "first", "then", "carefully", "gently"})
 PARTICLES = frozenset({"up", "down"})
+RELATIVE = frozenset({"away", "toward", "towards", "closer", "nearer", "farther", "further"})
+# how the object should stand: not graded, so refused
+POSES = frozenset("vertically horizontally upright upside sideways diagonally flat".split())
 # a part of an object, not the object: refused as a destination; "top"/"surface" mean on it
 REGIONS = frozenset("middle center centre side edge corner end bottom back front rear left right "
                     "part area half interior".split())  # fmt: skip
 NEGATION = frozenset("not no never nor neither without except instead rather avoid nothing "
                      "none but cannot".split())  # fmt: skip
 CHOICE = frozenset("or either if unless until when whenever while after before once otherwise "
-                   "whether because".split())  # fmt: skip
+                   "whether because which where whose".split())  # fmt: skip
 # other spatial relations: the word, as the refusal quotes it
 RELATIONS = {
     "next": "next to", "beside": "beside", "besides": "beside", "behind": "behind",
@@ -68,7 +71,7 @@ RELATIONS = {
     "among": "among", "amongst": "among", "around": "around", "against": "against",
     "across": "across", "along": "along", "alongside": "alongside", "opposite": "opposite",
     "adjacent": "adjacent to", "beyond": "beyond", "through": "through", "outside": "outside",
-    "front": "in front of", "by": "by", "close": "close to", "underside": "under",
+    "front": "front of", "by": "by", "close": "close to", "underside": "under",
 }  # fmt: skip
 UNITS = frozenset("cm mm m centimeter centimeters centimetre centimetres millimeter millimeters "
                   "meter meters metre metres inch inches foot feet".split())  # fmt: skip
@@ -132,7 +135,7 @@ def _check_words(toks: list[str], names: set[str]) -> None:
         if w in NEGATION or w.endswith("n't"):
             raise Unread(f'it negates ("{w}"): say only what to do')
         if w in CHOICE:
-            raise Unread(f'"{w}" makes a choice or a condition: state one task')
+            raise Unread(f'"{w}" adds a choice, a condition or a clause: state one task')
         if w in ".;:!?":
             raise Unread("it holds more than one sentence: state one task")
         if w in RELATIONS and not (w == "close" and toks[k + 1 : k + 2] != ["to"]):
@@ -206,13 +209,21 @@ class Reader:
         elif prep in ("on", "in") and self.peek() == "to":
             self.k += 1
             prep = prep + "to"
-        return prep, rel, self.phrase()
+        p = self.phrase()
+        if not [w for w in p.words if w not in ARTICLES] and self.peek() in (
+                *DIRECTION_WORDS, "back", "front"):  # fmt: skip
+            raise Unread(f'"{prep} {p.text()} {self.peek()}" names a side, not an object: only '
+                         "in or on an object is graded")  # fmt: skip
+        return prep, rel, p
 
     def direction_to(self) -> str | None:
         """After "to": the direction it states, or None for "to the goal"."""
         ws = [w for w in self.phrase().words if w not in ARTICLES]
         if ws and ws[-1] == "goal":
             return None
+        if self.peek() in ("back", "front"):
+            raise Unread(f'"to the {self.peek()}" is not a direction it grades (left, right, '
+                         "forward, backward)")  # fmt: skip
         if self.peek() in DIRECTION_WORDS:
             w = self.t[self.k]
             self.k += 1
@@ -277,6 +288,12 @@ class Reader:
                     )
                 raise Unread(f'"{nxt}" is not a verb it knows')
             self.k += 1
+            if w in POSES:
+                raise Unread(f'"{w}" asks for a pose: only where the object ends is graded')
+            if c.kind != MOVE and (w in DIRECTION_WORDS or w in RELATIVE or (
+                    w == "to" and self.peek(1) in DIRECTION_WORDS)):  # fmt: skip
+                raise Unread(f'"{c.verb}" with a direction ("{w}"): a direction is graded after '
+                             "move, push, slide, shift, drag or nudge")  # fmt: skip
             if w in ADVERBS or w.endswith("ly") or (w == "a" and self.peek() in ("bit", "little")):
                 continue  # "slightly", "gently", "a bit"
             if w in PARTICLES:
@@ -299,10 +316,11 @@ class Reader:
             elif w in DIRECTION_WORDS:
                 c.directions.append(self.direction(w))
             elif w == "back" and c.kind == MOVE and not c.places:
-                c.directions.append("backward")
+                raise Unread('"back" may say towards the robot or away from it: say forward or '
+                             "backward")  # fmt: skip
             elif w == "back":
                 continue  # "put it back in the mug"
-            elif w in ("away", "toward", "towards", "closer", "nearer", "farther", "further"):
+            elif w in RELATIVE:
                 c.directions.append(self.relative(w))
             elif w == "at":
                 ws = [v for v in self.phrase().words if v not in ARTICLES]
