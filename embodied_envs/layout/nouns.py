@@ -72,8 +72,9 @@ def stem(word: str) -> str:
 def is_participle(ws: list[str], k: int) -> bool:
     """``ws[k]`` is a participle opening a description ("lying" in "a can lying on its side")."""
     w = ws[k]
-    return (len(w) >= 5 and w.endswith("ing") and not w.endswith("thing") and k > 0 and ws[k - 1] not in ARTICLES
-            and k + 1 < len(ws) and ws[k + 1] in PARTICIPLE_NEXT)  # fmt: skip
+    return (len(w) >= 5 and w.endswith("ing") and not w.endswith("thing") and k > 0
+            and ws[k - 1] not in ARTICLES and k + 1 < len(ws)
+            and ws[k + 1] in PARTICIPLE_NEXT)  # fmt: skip
 
 
 def desc_head(desc: str) -> str | None:
