@@ -134,6 +134,8 @@ class Nodes:
         """
         pool = self.names if among is None else among
         ws = [w for w in phrase.words if w not in ARTICLES]
+        while len(ws) > 1 and ws[-1].isdigit() and not ws[-2].isdigit():  # "apple 1": apple1
+            ws[-2:] = [ws[-2] + ws[-1]]
         plural = any(w in QUANTIFIERS or w.isdigit() for w in ws)
         ws = [w for w in ws if w not in QUANTIFIERS and not w.isdigit()]
         if "of" in ws:  # "the box of tools": the box; "one of the pens": refused by its noun
@@ -147,6 +149,8 @@ class Nodes:
         exact = [n for n in pool if self.raw[n] and tuple(ws[-len(self.raw[n]) :]) == self.raw[n]]
         head = stem(ws[-1])
         plural = plural or head != ws[-1].rstrip("0123456789") or head in EVERYTHING | {"fruit"}
+        if not exact and re.fullmatch(r"\D+\d+", ws[-1]):  # a numbered name names that node
+            raise Unread(f"{said} names no object of the layout", none=True)
         if exact:
             longest = max(len(self.raw[n]) for n in exact)
             cands = [n for n in exact if len(self.raw[n]) == longest]

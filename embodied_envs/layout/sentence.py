@@ -172,6 +172,8 @@ class Reader:
         """A noun phrase up to the next stop word (with its "with ..." description)."""
         ws, with_words = [], []
         while (w := self.peek()) is not None:
+            if w == "a" and self.peek(1) in ("bit", "little"):
+                break  # "move the lamp a bit to the left"
             if w == "of" or not self.stop(w):
                 if ws and is_participle(self.t, self.k) and w not in self.nodes.name_words:
                     self.k += 1  # "a can lying on its side": the description is read over
@@ -258,6 +260,9 @@ class Reader:
             self.k += 1
         whom = self.phrase()
         toward = w in ("toward", "towards", "closer", "nearer")
+        if toward and not set(whom.words) - ARTICLES and self.peek() in DIRECTION_WORDS:
+            self.k += 1  # "towards the left"
+            return self.direction(self.t[self.k - 1])
         if set(whom.words) & ROBOT_WORDS:
             return "backward" if toward else "forward"
         raise Unread(f'"{w} {whom.text()}" is a direction relative to an object: only left, '
