@@ -7,13 +7,17 @@ context, as its hierarchy prompt places them). The table holds EmbodiedGen's own
 list (apps/assets/example_layout/task_list.txt), the sentences of its prompts' examples, and
 phrasings an LLM writes that the rules were not written from."""
 
+import json
 import random
 import time
 from types import SimpleNamespace
 
 import pytest
+from conftest import DATA
 
+from embodied_envs.layout import LayoutInfo
 from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.pools import with_assets
 from embodied_envs.layout.sentence import MAX_SENTENCE
 from embodied_envs.layout.task import Task, parse_task, resolve_task
 
@@ -378,3 +382,24 @@ def test_the_structured_task_wins_and_a_dict_in_task_is_read_as_before():
     scene.relation["task"] = 5
     with pytest.raises(LayoutError, match='relation\\["task"\\] is 5: EmbodiedGen writes'):
         resolve_task(scene, F)
+
+
+# --- instruction = grade ------------------------------------------------------------------
+def test_the_instruction_is_the_sentence_the_grade_was_read_from():
+    """The sentence where the grade was read from it; a sentence built from the structured task
+    where that is graded (the layout's task_desc then says nothing the grade follows), and
+    where a pooled target replaced the sentence's object."""
+    path = DATA / "layouts" / "place_tray.json"
+    data = json.loads(path.read_text())
+    layout = LayoutInfo.from_dict(data, source=path)
+    assert layout.task == Task("place", ("mug",), "tray", "on")
+    assert layout.instruction == "Place the mug on the tray."
+    data["relation"]["task_spec"] = {"kind": "place", "objects": ["mug"], "receptacle": "bowl",
+                                     "relation": "in"}  # fmt: skip
+    graded = LayoutInfo.from_dict(data, source=path)
+    assert graded.task == Task("place", ("mug",), "bowl", "in")
+    assert graded.instruction == "Put an orange mug with a handle in a white bowl."
+    drawn = with_assets(layout, {"mug": "../assets/cups/blue_cup"})
+    assert drawn.task == layout.task and drawn.relation["task_spec"] == layout.task.spec()
+    assert drawn.instruction == "Put blue cup on a red serving tray with low rims."
+    assert "task_desc" not in drawn.relation and drawn.relation["task"] == "pick and place"
