@@ -306,20 +306,32 @@ WORDS = ("put the a pen apple mug tray bowl in into on onto and then it them not
 
 def test_any_word_order_gives_a_reading_or_a_one_line_refusal():
     """Random sentences of the reader's own words and garbage: a Task or a LayoutError, never
-    another exception; a reading names only nodes of the layout."""
+    another exception; a reading names only nodes of the layout, and the same one whatever
+    order the layout lists its nodes in."""
     rng = random.Random(49)
     nodes = {"pen", "apple", "mug", "tray", "bowl", "table"}
+    reversed_order = {**OFFICE, "manipulated": OFFICE["manipulated"][::-1],
+                      "distractors": OFFICE["distractors"][::-1]}  # fmt: skip
+
+    def reading(sentence, scene):
+        try:
+            return parse_task(sentence, eg_scene(sentence, **scene), F)
+        except LayoutError as e:
+            assert len(e.problems) == 1 and "\n" not in str(e)
+            return None
+
     read = 0
     for _ in range(3000):
         sentence = " ".join(rng.choice(WORDS) for _ in range(rng.randint(0, 14)))
-        layout = eg_scene(sentence, **OFFICE)
-        try:
-            task = parse_task(sentence, layout, F)
-        except LayoutError as e:
-            assert len(e.problems) == 1 and "\n" not in str(e)
+        task = reading(sentence, OFFICE)
+        other = reading(sentence, reversed_order)
+        assert (task is None) == (other is None), sentence
+        if task is None:
             continue
         read += 1
         assert set(task.objects) <= {"pen", "apple"} and (task.receptacle or "pen") in nodes
+        assert (set(task.objects), task.receptacle, task.relation, task.direction) == (
+            set(other.objects), other.receptacle, other.relation, other.direction), sentence
     assert read > 0
 
 
