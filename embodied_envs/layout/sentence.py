@@ -22,7 +22,15 @@ import re
 from dataclasses import dataclass, field
 
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.nouns import ARTICLES, Nodes, Phrase, Unread, is_participle
+from embodied_envs.layout.nouns import (
+    ARTICLES,
+    PRONOUNS,
+    QUANTIFIERS,
+    Nodes,
+    Phrase,
+    Unread,
+    is_participle,
+)
 from embodied_envs.layout.task_model import EXPLICIT, Task
 from embodied_envs.robots import ROBOT_NAMES
 
@@ -181,6 +189,9 @@ class Reader:
                         self.k += 1
                         self.phrase()
                     continue
+                if ws and ws[-1] != "of" and (w in ARTICLES and set(ws) - ARTICLES - QUANTIFIERS
+                                               or set(ws) & PRONOUNS):  # fmt: skip
+                    raise Unread(f'"{" ".join(ws)} {w}" runs two phrases together')
                 ws.append(w)
                 self.k += 1
             elif w == "with" and ws and not with_words:
@@ -212,10 +223,11 @@ class Reader:
             self.k += 1
             prep = prep + "to"
         p = self.phrase()
-        if not [w for w in p.words if w not in ARTICLES] and self.peek() in (
-                *DIRECTION_WORDS, "back", "front"):  # fmt: skip
-            raise Unread(f'"{prep} {p.text()} {self.peek()}" names a side, not an object: only '
-                         "in or on an object is graded")  # fmt: skip
+        if not [w for w in p.words if w not in ARTICLES]:
+            if self.peek() in (*DIRECTION_WORDS, "back", "front"):
+                raise Unread(f'"{prep} {p.text()} {self.peek()}" names a side, not an object: '
+                             "only in or on an object is graded")  # fmt: skip
+            raise Unread(f'"{prep}" is followed by no object')
         return prep, rel, p
 
     def direction_to(self) -> str | None:
