@@ -179,6 +179,7 @@ class Reader:
     def phrase(self) -> Phrase:
         """A noun phrase up to the next stop word (with its "with ..." description)."""
         ws, with_words = [], []
+        noun = pronoun = False  # a word other than an article or quantifier read; a pronoun
         while (w := self.peek()) is not None:
             if w == "a" and self.peek(1) in ("bit", "little"):
                 break  # "move the lamp a bit to the left"
@@ -189,9 +190,10 @@ class Reader:
                         self.k += 1
                         self.phrase()
                     continue
-                if ws and ws[-1] != "of" and (w in ARTICLES and set(ws) - ARTICLES - QUANTIFIERS
-                                               or set(ws) & PRONOUNS):  # fmt: skip
+                if ws and ws[-1] != "of" and (w in ARTICLES and noun or pronoun):
                     raise Unread(f'"{" ".join(ws)} {w}" runs two phrases together')
+                noun = noun or w not in ARTICLES and w not in QUANTIFIERS
+                pronoun = pronoun or w in PRONOUNS
                 ws.append(w)
                 self.k += 1
             elif w == "with" and ws and not with_words:
@@ -307,8 +309,9 @@ class Reader:
             self.k += 1
             if w in POSES:
                 raise Unread(f'"{w}" asks for a pose: only where the object ends is graded')
+            ahead = {self.peek(), self.peek(1)}  # "to left", "to the left"
             if c.kind != MOVE and (w in DIRECTION_WORDS or w in RELATIVE or (
-                    w == "to" and self.peek(1) in DIRECTION_WORDS)):  # fmt: skip
+                    w == "to" and DIRECTION_WORDS.keys() & ahead)):  # fmt: skip
                 raise Unread(f'"{c.verb}" with a direction ("{w}"): a direction is graded after '
                              "move, push, slide, shift, drag or nudge")  # fmt: skip
             if w in ADVERBS or w.endswith("ly") or (w == "a" and self.peek() in ("bit", "little")):
