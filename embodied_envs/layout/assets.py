@@ -22,7 +22,12 @@ import numpy as np
 from PIL import Image
 from scipy.spatial import ConvexHull, QhullError
 
-from embodied_envs.layout.collision import convex_collision, obj_objects
+from embodied_envs.layout.collision import (
+    MIN_COLLISION_THICKNESS,
+    convex_collision,
+    obj_objects,
+    thickness,
+)
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.folders import resolve_path
 from embodied_envs.layout.pose import rpy_to_matrix, rpy_to_quat_wxyz
@@ -34,7 +39,6 @@ DEFAULT_DYNAMIC_FRICTION = 0.4  # when the URDF has no mu2
 RESTITUTION = 0.05
 DEFAULT_DENSITY = 1000.0  # kg/m^3, when the URDF gives no mass
 MASS_RANGE = (1e-3, 1e3)  # kg: a graspable or supporting object (a paper clip to a table)
-MIN_COLLISION_THICKNESS = 1e-3  # m: a collision mesh thinner than this along an axis is flat
 HEAVY_COLLISION_FACES = 50_000  # a collision mesh with more faces is warned about (cost)
 MAX_IMAGE_SIDE = 8192  # pixels a side of any image rendered or read: larger ones are refused
 
@@ -395,11 +399,13 @@ def _geometry(collision: MeshRef) -> AssetGeometry:
         )
     vertices = np.concatenate(parts)
     extent = vertices.max(0) - vertices.min(0)
-    if extent.min() < MIN_COLLISION_THICKNESS:
+    thin = thickness(vertices)
+    if thin < MIN_COLLISION_THICKNESS:
         raise LayoutError(
             f"{collision.path}: the collision mesh is flat ({extent.round(4).tolist()} m across"
-            f" x, y, z; under {MIN_COLLISION_THICKNESS} m in one): the object would sink through"
-            " its support. Fix: export a closed collision mesh with volume."
+            f" x, y, z; {thin:.4f} m at its thinnest, under {MIN_COLLISION_THICKNESS} m): the"
+            " object would sink through its support. Fix: export a closed collision mesh with"
+            " volume."
         )
     return AssetGeometry(vertices, tuple(parts), volume)
 
