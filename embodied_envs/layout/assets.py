@@ -417,15 +417,38 @@ def check_visual_mesh(spec: AssetSpec) -> None:
     """The visual mesh loads and holds finite vertices (it is rendered as it is), and every
     material and texture it names (OBJ ``mtllib``, ``map_*``) lies in the asset folder and
     reads as an image of at most ``MAX_IMAGE_SIDE`` px a side: SAPIEN would otherwise fail
-    minutes later, without naming the node.
+    minutes later, without naming the node. A collision mesh whose top or bottom stands
+    over ``VISUAL_MISMATCH`` from the visual mesh's is warned about once (placement and the
+    simulator stand objects on the collision mesh: they would float or sink on camera).
 
     Raises:
         LayoutError: naming the file and the first bad vertex, material or texture.
     """
-    key = ("visual checked", FileVersion.of(spec.visual.path), spec.visual)
-    ASSET_FILES.get(key, lambda: _load_parts_checked(spec.visual, collision=False) and True)
+    key = ("visual heights", FileVersion.of(spec.visual.path), spec.visual)
+    low, high = ASSET_FILES.get(key, lambda: _heights(spec.visual))
+    geom = asset_geometry(spec)
+    below, above = geom.min_z - low, geom.max_z - high
+    if max(abs(below), abs(above)) > VISUAL_MISMATCH and spec.urdf_path not in _WARNED_MISMATCH:
+        _WARNED_MISMATCH.add(spec.urdf_path)
+        warnings.warn(
+            f"{spec.urdf_path}: its collision mesh's top is {above * 1000:+.1f} mm and its bottom"
+            f" {below * 1000:+.1f} mm from its visual mesh's: objects rest on the collision mesh,"
+            " so on camera they float over it or sink into it by as much (and it does on"
+            " its own support). Fix: export the collision mesh from the visual mesh's shape.",
+            stacklevel=2,
+        )
     if spec.visual.path.suffix.lower() == ".obj":
         _check_materials(spec.visual.path, spec.urdf_path.parent)
+
+
+VISUAL_MISMATCH = 2e-3  # m: a collision top or bottom this far from the visual one is warned
+_WARNED_MISMATCH: set = set()
+
+
+def _heights(visual: MeshRef) -> tuple[float, float]:
+    """The lowest and highest point of a visual mesh in the actor frame (Z-up)."""
+    z = visual.to_link_frame(_load_parts_checked(visual, collision=False).vertices)[:, 2]
+    return float(z.min()), float(z.max())
 
 
 def _inside(path: Path, folder: Path, what: str, source: Path, name: str) -> Path:
