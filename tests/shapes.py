@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from scipy.spatial import ConvexHull
 
 URDF = """<?xml version="1.0"?>
 <robot name="{stem}">
@@ -106,23 +105,3 @@ def bowl_wedges(r0=0.045, r=0.08, h=0.055, t=BOWL_FLOOR, n=16) -> list[trimesh.T
                for rr, zz in ((r0, 0), (r, h), (r - t, h), (r0 - t, t))]  # fmt: skip
         parts.append(trimesh.Trimesh(np.array(pts)).convex_hull)
     return parts
-
-
-def solid_top(parts: list[np.ndarray], xy) -> float:
-    """The highest z at ``xy`` inside any of the convex ``parts`` (vertex arrays, Z-up):
-    where an object dropped there would rest; -inf when no part is under it."""
-    best = -np.inf
-    for verts in parts:
-        eq = ConvexHull(verts).equations  # a . p + d <= 0 inside
-        rhs = -(eq[:, 3] + eq[:, :2] @ np.asarray(xy, float))
-        az = eq[:, 2]
-        up = az > 1e-12
-        down = az < -1e-12
-        flat = ~(up | down)
-        if np.any(rhs[flat] < -1e-12):
-            continue
-        high = (rhs[up] / az[up]).min()
-        low = (rhs[down] / az[down]).max()
-        if low <= high + 1e-12:
-            best = max(best, float(high))
-    return best

@@ -66,7 +66,7 @@ COACD_PARAMS = dict(
 METHOD = 2  # in the cache key: a decomposition made by an earlier method is not reused
 OPT_OUT_ENV = "EMBODIED_ENVS_DECOMPOSE"  # "0": keep one-object concave meshes (warned once)
 CACHE_ENV = "EMBODIED_ENVS_CACHE"
-KEPT = "# kept as written: "  # first line of a cache file recording a refused decomposition
+KEPT = "# kept as written: "  # second line of a cache file recording a refused decomposition
 
 # original collision mesh -> what was found and the decomposed file (read by `layout validate`)
 DECOMPOSED: dict[Path, tuple[str, Path]] = {}
@@ -200,29 +200,30 @@ def _settings() -> str:
 
 @functools.lru_cache(maxsize=1024)
 def _convex_collision(path: Path, size: int, mtime_ns: int, opt_out: str | None) -> Path:
-    plan = _plan(path)
-    if plan is None:
-        return path
-    reason, found = plan
-    if opt_out == "0":
-        _warn_once(
-            path,
-            f"{path}: {reason}; the simulator makes one convex hull of it, a solid blob "
-            f"(kept: {OPT_OUT_ENV}=0). Fix: export one object per convex part (EmbodiedGen's "
-            f"CoACD export does), or unset {OPT_OUT_ENV} to decompose it on load.",
-        )
-        return path
     digest = hashlib.sha256(path.read_bytes())
     digest.update(_settings().encode())
     out = cache_folder() / f"{digest.hexdigest()[:32]}.obj"
-    if not out.is_file():
-        _decompose(path, out, reason, found)
-    with open(out) as fh:
-        first = fh.readline()
-    if first.startswith(KEPT):
+    if opt_out != "0" and out.is_file():  # made before from these bytes with these settings
+        with open(out) as fh:
+            reason, outcome = fh.readline()[2:].strip(), fh.readline()
+    else:
+        plan = _plan(path)
+        if plan is None:
+            return path
+        reason, found = plan
+        if opt_out == "0":
+            _warn_once(
+                path,
+                f"{path}: {reason}; the simulator makes one convex hull of it, a solid blob "
+                f"(kept: {OPT_OUT_ENV}=0). Fix: export one object per convex part (EmbodiedGen's "
+                f"CoACD export does), or unset {OPT_OUT_ENV} to decompose it on load.",
+            )
+            return path
+        outcome = _decompose(path, out, reason, found)
+    if outcome.startswith(KEPT):
         _warn_once(
             path,
-            f"{path}: {reason}; {first[len(KEPT) :].strip()}, so it is kept as written: the "
+            f"{path}: {reason}; {outcome[len(KEPT) :].strip()}, so it is kept as written: the "
             "simulator makes one convex hull of it, a solid blob. Fix: export one object per "
             "convex part (EmbodiedGen's CoACD export does).",
         )
@@ -241,7 +242,9 @@ class Refused(Exception):
     """Why a mesh is kept as written rather than decomposed."""
 
 
-def _decompose(path: Path, out: Path, reason: str, found: list[Piece]) -> None:
+def _decompose(path: Path, out: Path, reason: str, found: list[Piece]) -> str:
+    """Write the convex parts of ``found`` to ``out``, headed by the reason and the outcome
+    (the parts, or why the mesh is kept as written: ``KEPT``); the outcome."""
     concave = sum(p.concave for p in found)
     how = f"CoACD (seed {COACD_PARAMS['seed']}) on {concave} concave, " if concave else ""
     print(
@@ -253,9 +256,10 @@ def _decompose(path: Path, out: Path, reason: str, found: list[Piece]) -> None:
     start = time.perf_counter()
     try:
         parts = [part for i, piece in enumerate(found) for part in _convex_parts(piece, i)]
-        lines = [f"# {len(parts)} convex parts of {path.name} ({_settings()})"]
+        outcome = f"# {len(parts)} convex parts of {path.name} ({_settings()})"
     except Refused as e:
-        parts, lines = [], [f"{KEPT}{e}"]
+        parts, outcome = [], f"{KEPT}{e}"
+    lines = [f"# {reason}", outcome]
     base = 1
     for i, verts in enumerate(parts):
         faces = _hull_faces(verts)
@@ -267,8 +271,9 @@ def _decompose(path: Path, out: Path, reason: str, found: list[Piece]) -> None:
     with atomic_output(out) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
     seconds = time.perf_counter() - start
-    done = f"{len(parts)} convex parts" if parts else lines[0][2:]
+    done = f"{len(parts)} convex parts" if parts else outcome[2:]
     print(f"{path}: {done} in {seconds:.1f} s", file=sys.stderr, flush=True)
+    return outcome
 
 
 def _hull_faces(verts: np.ndarray) -> np.ndarray:
@@ -328,3 +333,25 @@ def _convex_parts(piece: Piece, index: int) -> list[np.ndarray]:
             f"the convex parts of its piece {index} miss its bounds by {gap * 1000:.1f} mm"
         )
     return parts
+
+
+def solid_top(parts: list[np.ndarray], xy) -> float:
+    """The highest z at ``xy`` inside any of the convex ``parts`` (vertex arrays, Z-up):
+    where an object dropped there would rest; -inf when no part is under it."""
+    from scipy.spatial import ConvexHull
+
+    best = -np.inf
+    for verts in parts:
+        eq = ConvexHull(verts).equations  # a . p + d <= 0 inside
+        rhs = -(eq[:, 3] + eq[:, :2] @ np.asarray(xy, float))
+        az = eq[:, 2]
+        up = az > 1e-12
+        down = az < -1e-12
+        flat = ~(up | down)
+        if np.any(rhs[flat] < -1e-12):
+            continue
+        high = (rhs[up] / az[up]).min()
+        low = (rhs[down] / az[down]).max()
+        if low <= high + 1e-12:
+            best = max(best, float(high))
+    return best

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 from scipy.spatial import ConvexHull
-from shapes import BOWL_FLOOR, bowl_wedges, round_table_pieces, solid_top, table_pieces, write_asset
+from shapes import BOWL_FLOOR, bowl_wedges, round_table_pieces, table_pieces, write_asset
 
 from embodied_envs.cli.main import main
 from embodied_envs.layout import LayoutError, asset_geometry, parse_urdf
@@ -116,7 +116,7 @@ def test_pieces_written_as_one_object_become_their_own_hulls_exactly(
 
 def test_a_bowl_of_touching_parts_keeps_its_floor(fresh, no_coacd, tmp_path):
     geom = asset_geometry(parse_urdf(write_asset(tmp_path / "assets", "bowl", bowl_wedges())))
-    floor = solid_top(list(geom.parts), (0.0, 0.0)) - geom.min_z
+    floor = col.solid_top(list(geom.parts), (0.0, 0.0)) - geom.min_z
     assert floor == pytest.approx(BOWL_FLOOR, abs=EXACT)
 
 
@@ -142,7 +142,7 @@ def test_a_concave_object_is_decomposed_within_its_shape(cup):
     assert col.VOLUME_RATIO[0] <= ratio <= col.VOLUME_RATIO[1]
     # the cup's floor stays where it is: a block dropped in rests on it
     geom = asset_geometry(spec)
-    floor = solid_top(list(geom.parts), (0.0, 0.0)) - geom.min_z
+    floor = col.solid_top(list(geom.parts), (0.0, 0.0)) - geom.min_z
     assert floor == pytest.approx(CUP_FLOOR, abs=col.BOUNDS_TOLERANCE)
 
 
