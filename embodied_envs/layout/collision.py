@@ -42,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from embodied_envs.paths import atomic_output
 
@@ -278,8 +279,6 @@ def _decompose(path: Path, out: Path, reason: str, found: list[Piece]) -> str:
 
 def _hull_faces(verts: np.ndarray) -> np.ndarray:
     """Outward triangles of the convex hull of ``verts`` (every vertex is on it)."""
-    from scipy.spatial import ConvexHull
-
     hull = ConvexHull(verts)
     faces = hull.simplices.copy()
     centre = verts.mean(0)
@@ -292,8 +291,6 @@ def _hull_faces(verts: np.ndarray) -> np.ndarray:
 def _convex_parts(piece: Piece, index: int) -> list[np.ndarray]:
     """The vertices of each convex part of a piece: its hull's, or CoACD's parts checked
     against the piece (bounds within ``BOUNDS_TOLERANCE``, volume within ``VOLUME_RATIO``)."""
-    from scipy.spatial import ConvexHull
-
     mesh = piece.mesh
     if thickness(mesh.vertices) < MIN_COLLISION_THICKNESS:
         raise Refused(f"its piece {index} is flat")
@@ -338,8 +335,6 @@ def _convex_parts(piece: Piece, index: int) -> list[np.ndarray]:
 def solid_top(parts: list[np.ndarray], xy) -> float:
     """The highest z at ``xy`` inside any of the convex ``parts`` (vertex arrays, Z-up):
     where an object dropped there would rest; -inf when no part is under it."""
-    from scipy.spatial import ConvexHull
-
     best = -np.inf
     for verts in parts:
         eq = ConvexHull(verts).equations  # a . p + d <= 0 inside

@@ -102,7 +102,7 @@ def test_heavy_collision_mesh_is_warned_about_once_with_its_cost(tmp_path):
 def test_a_collision_mesh_off_the_visual_one_is_warned_about_once(tmp_path):
     import warnings
 
-    from embodied_envs.layout.assets import check_visual_mesh
+    from embodied_envs.layout.visual import check_visual_mesh
 
     spec = parse_urdf(make_asset(tmp_path))  # the collision mesh's origin 0.1 m higher
     with pytest.warns(UserWarning) as caught:

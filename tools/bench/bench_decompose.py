@@ -25,6 +25,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+import trimesh
+from scipy.spatial import ConvexHull
 
 from embodied_envs.layout import asset_geometry, parse_urdf
 from embodied_envs.layout import collision as col
@@ -55,8 +57,6 @@ def load_seconds(urdf: Path, repeat: int) -> tuple[float, object]:
 
 
 def shape_numbers(name: str, original: Path, spec) -> str:
-    import trimesh
-
     mesh = trimesh.load(original, force="mesh", process=False)
     geom = asset_geometry(spec)
     raw = [np.asarray(p) for p in col.obj_objects(spec.collision.path)]
@@ -65,8 +65,6 @@ def shape_numbers(name: str, original: Path, spec) -> str:
     gap = max(np.abs(allv.min(0) - lo).max(), np.abs(allv.max(0) - hi).max())
     pieces = col.pieces(mesh)
     volume = sum(p.mesh.volume for p in pieces) if all(p.ratio for p in pieces) else np.nan
-    from scipy.spatial import ConvexHull
-
     held = sum(ConvexHull(p).volume for p in raw) / volume
     text = f"{len(raw)} parts, bounds {gap * 1000:.3f} mm off, volume {held:.3f}x"
     if name in RECEPTACLES:
