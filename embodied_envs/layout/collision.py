@@ -132,6 +132,8 @@ def _read(path: Path):
         return None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         return None
+    # the shape alone: normals and texture coordinates would keep equal positions apart
+    mesh = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
     mesh.remove_unreferenced_vertices()
     if not np.isfinite(mesh.vertices).all():
         return None
@@ -142,10 +144,11 @@ def pieces(mesh) -> list[Piece]:
     """The pieces of a one-object mesh: its closed surfaces as the file connects them (parts
     written one after another, touching or not), else -- when one is open, as in a file of
     unshared triangles -- the surfaces its equal vertex positions join."""
+    import trimesh  # only where a mesh is read
+
     found = mesh.split(only_watertight=False)
     if not all(p.is_watertight for p in found):
-        merged = mesh.copy()
-        merged.merge_vertices()
+        merged = trimesh.Trimesh(mesh.vertices, mesh.faces, process=True)  # equal positions
         found = merged.split(only_watertight=False)
     out = []
     for p in found:

@@ -326,3 +326,19 @@ def test_layout_validate_names_what_it_decomposed(cup, monkeypatch, tmp_path, ca
     assert len(line) == 1 and "handled_cup_collision.obj" in line[0], out
     assert "convex parts" in line[0] and str(cup["cache"]) in line[0]
     col._convex_collision.cache_clear()
+
+
+@pytest.mark.parametrize("soup", [False, True], ids=["shared_vertices", "triangle_soup"])
+def test_pieces_are_found_whatever_normals_and_vertex_sharing_the_file_has(soup, tmp_path):
+    """Per-corner normals or unshared triangles (an STL-like export) do not split a piece."""
+    table = trimesh.util.concatenate(table_pieces())
+    if soup:
+        table.unmerge_vertices()
+    path = tmp_path / "table.obj"
+    path.write_text(trimesh.exchange.obj.export_obj(table, include_normals=True))
+    assert col.concavity(path) == "one object of 5 disconnected pieces"
+    cup = revolved_cup()
+    if soup:
+        cup.unmerge_vertices()
+    path.write_text(trimesh.exchange.obj.export_obj(cup, include_normals=True))
+    assert col.concavity(path) == "one concave object (its convex hull is 3.1x its volume)"
