@@ -47,6 +47,11 @@ from scipy.spatial import ConvexHull
 from embodied_envs.paths import atomic_output
 
 CONCAVE_RATIO = 1.3  # convex hull volume / volume above which a closed piece is concave
+# an open piece (no volume) whose hull reaches farther than this share of its size from its
+# surface is concave (a bowl surface, a box without a lid): warned, the simulator fills it in
+OPEN_CONCAVITY = 0.1
+FILL_SAMPLES = 4000  # surface points sampled (seeded) on an open piece and on its hull
+OPEN_NOTE = "open and concave"  # in the reason of a mesh with such pieces
 MIN_COLLISION_THICKNESS = 1e-3  # m: a collision mesh thinner than this (any direction) is flat
 BOUNDS_TOLERANCE = 1e-3  # m: how far a CoACD part may reach past its piece's bounding box
 # the CoACD parts' total volume / the piece's: they cover it (>= 1 but for rounding) and fill
@@ -157,6 +162,21 @@ def pieces(mesh) -> list[Piece]:
     return out
 
 
+def open_concave(piece: Piece) -> bool:
+    """Whether an open piece's convex hull reaches farther than ``OPEN_CONCAVITY`` of its
+    size from its surface (sampled, seeded): the simulator would fill it in."""
+    import trimesh  # only where a mesh is read
+    from scipy.spatial import cKDTree
+
+    mesh = piece.mesh
+    if piece.ratio is not None or thickness(mesh.vertices) < MIN_COLLISION_THICKNESS:
+        return False
+    surface = trimesh.sample.sample_surface(mesh, FILL_SAMPLES, seed=0)[0]
+    hull = trimesh.sample.sample_surface(mesh.convex_hull, FILL_SAMPLES, seed=0)[0]
+    reach = float(cKDTree(surface).query(hull)[0].max())
+    return reach > OPEN_CONCAVITY * float(np.ptp(mesh.vertices, 0).max())
+
+
 def concavity(path: Path) -> str | None:
     """Why the collision mesh at ``path`` would be filled in by the simulator, in words, or
     ``None`` (several objects, one convex or open piece, degenerate, or unreadable)."""
@@ -170,14 +190,28 @@ def _plan(path: Path) -> tuple[str, list[Piece]] | None:
         return None  # degenerate: refused by assets.py before anything is decomposed
     found = pieces(mesh)
     concave = [p for p in found if p.concave]
+    opened = sum(map(open_concave, found))
     if len(found) == 1:
+        if opened:
+            _warn_open(path, f"one {OPEN_NOTE} object (not closed: no volume)")
         if not concave:
             return None
         return f"one concave object (its convex hull is {concave[0].ratio:.1f}x its volume)", found
     reason = f"one object of {len(found)} disconnected pieces"
     if concave:
         reason += f", {len(concave)} of them concave"
+    if opened:
+        reason += f", {opened} {OPEN_NOTE} (not closed: no volume)"
     return reason, found
+
+
+def _warn_open(path: Path, reason: str) -> None:
+    _warn_once(
+        path,
+        f"{path}: {reason}; the simulator makes one convex hull of an open piece, filled in"
+        " (it cannot be decomposed without growing it). Fix: close the mesh, or export one"
+        " object per convex part (EmbodiedGen's CoACD export does).",
+    )
 
 
 def convex_collision(path: Path) -> Path:
@@ -197,6 +231,7 @@ def _settings() -> str:
             bounds=BOUNDS_TOLERANCE,
             volume=VOLUME_RATIO,
             thin=MIN_COLLISION_THICKNESS,
+            open=(OPEN_CONCAVITY, FILL_SAMPLES),
         ),
         sort_keys=True,
     )
@@ -224,6 +259,8 @@ def _convex_collision(path: Path, size: int, mtime_ns: int, opt_out: str | None)
             )
             return path
         outcome = _decompose(path, out, reason, found)
+    if OPEN_NOTE in reason and not outcome.startswith(KEPT):
+        _warn_open(path, reason)
     if outcome.startswith(KEPT):
         _warn_once(
             path,

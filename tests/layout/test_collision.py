@@ -342,3 +342,36 @@ def test_pieces_are_found_whatever_normals_and_vertex_sharing_the_file_has(soup,
         cup.unmerge_vertices()
     path.write_text(trimesh.exchange.obj.export_obj(cup, include_normals=True))
     assert col.concavity(path) == "one concave object (its convex hull is 3.1x its volume)"
+
+
+def open_bowl() -> trimesh.Trimesh:
+    """A bowl as one open surface, no thickness (a scan's or a careless export's)."""
+    profile = np.array([[0.0, 0.0], [0.045, 0.0], [0.08, 0.055]])
+    return trimesh.creation.revolve(profile, sections=32)
+
+
+@pytest.mark.parametrize("with_table", [False, True], ids=["alone", "among_pieces"])
+def test_an_open_concave_piece_is_named_in_a_warning(with_table, fresh, no_coacd, tmp_path):
+    parts = [*table_pieces(), open_bowl().apply_translation([0, 0, 0.9])] if with_table else []
+    urdf = write_asset(tmp_path / "assets", "thing", parts or [open_bowl()])
+    original = urdf.parent / "mesh" / "thing_collision.obj"
+    with pytest.warns(UserWarning) as caught:
+        spec = parse_urdf(urdf)
+    (text,) = [str(w.message) for w in caught]
+    assert text.startswith(f"{original}: one ") and "open and concave" in text, text
+    assert "Fix: close the mesh" in text
+    if with_table:  # the closed pieces still become their own hulls
+        assert "6 disconnected pieces, 1 open and concave" in text
+        assert len(col.obj_objects(spec.collision.path)) == 6
+    else:
+        assert spec.collision.path == original
+
+
+def test_open_convex_pieces_are_not_warned_about(fresh, tmp_path):
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.05)
+    sphere.update_faces(np.arange(len(sphere.faces)) != 0)  # one triangle missing: open
+    path = tmp_path / "sphere.obj"
+    path.write_text(trimesh.exchange.obj.export_obj(sphere))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert col.convex_collision(path) == path
