@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import ConvexHull
+from scipy.spatial import ConvexHull, cKDTree
 
 from embodied_envs.paths import atomic_output
 
@@ -166,7 +166,6 @@ def open_concave(piece: Piece) -> bool:
     """Whether an open piece's convex hull reaches farther than ``OPEN_CONCAVITY`` of its
     size from its surface (sampled, seeded): the simulator would fill it in."""
     import trimesh  # only where a mesh is read
-    from scipy.spatial import cKDTree
 
     mesh = piece.mesh
     if piece.ratio is not None or thickness(mesh.vertices) < MIN_COLLISION_THICKNESS:
