@@ -90,9 +90,13 @@ class Reader:
     def after_links(self) -> str | None:
         """The first word after a run of "and", "then", "," and adverbs."""
         j = self.k
-        while j < len(self.t) and (self.t[j] in ("and", "then", ",") or self.t[j] in ADVERBS):
+        while j < len(self.t) and (self.t[j] in ("and", "then", ",") or self.adverb(self.t[j])):
             j += 1
         return self.t[j] if j < len(self.t) else None
+
+    def adverb(self, w: str) -> bool:
+        """"slightly", "gently", "precisely" (a word of no node's name)."""
+        return (w in ADVERBS or w.endswith("ly")) and w not in self.nodes.name_words
 
     def stop(self, w: str) -> bool:
         """Whether ``w`` ends a noun phrase."""
@@ -160,7 +164,11 @@ class Reader:
 
     def direction_to(self) -> str | None:
         """After "to": the direction it states, or None for "to the goal"."""
-        ws = [w for w in self.phrase().words if w not in ARTICLES]
+        said = self.phrase().words
+        if "my" in said:
+            raise Unread('"to my ..." is the speaker\'s side, unknown here: say left, right, '
+                         "forward or backward (the robot's)")  # fmt: skip
+        ws = [w for w in said if w not in ARTICLES]
         if ws and ws[-1] == "goal":
             return None
         if self.peek() in ("back", "front"):
@@ -175,7 +183,7 @@ class Reader:
     def direction(self, w: str, prefix=()) -> str:
         """A direction word, refused where it is relative to an object ("to the left of X"),
         "to the left side of the table" (the context) kept."""
-        if any(p not in ("side", "edge", "end", "part", "your", "my") for p in prefix):
+        if any(p not in ("side", "edge", "end", "part", "your", "robot's") for p in prefix):
             raise Unread(f'"to {" ".join(prefix)} {w}" is not a direction it grades')
         part = self.peek() in ("side", "edge", "end", "part") and self.peek(1) == "of"
         if self.peek() == "of" or part:
@@ -216,8 +224,15 @@ class Reader:
         c = Clause(verb, VERBS[verb])
         while self.peek() in PARTICLES:
             self.k += 1
+        if self.peek() in ("and", "then") and self.peek(1) in VERBS:
+            self.k += 1  # "pick and place the pen in the bowl": the last verb's clause
+            return self.clause()
         c.objects = self.objects()
         while (w := self.peek()) is not None:
+            if w in ("and", ",") and self.adverb(self.t[self.k - 1]) and self.adverb(
+                    self.peek(1) or ""):  # fmt: skip
+                self.k += 1  # "gently and precisely"
+                continue
             if w in ("and", "then", ","):
                 if self.after_links() in VERBS:
                     break
@@ -392,6 +407,9 @@ def read_sentence(sentence: str, layout) -> Task:
             places = []  # "move the pen in the tray to the left": where it is
         if len(c.directions) > 1:
             raise Unread("it states two directions: state one")
+        if acts and not (places or c.directions):  # "put it in the bowl, then lift it"
+            raise Unread(f'"{c.verb}" after the destination or direction: it would not end '
+                         "there; state one task")  # fmt: skip
         if places or c.directions:
             acts.append((c, places))
         elif c.kind == PLACE:
