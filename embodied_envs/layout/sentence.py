@@ -18,7 +18,7 @@ a place naming the context, or where the movers already stand, says where they a
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.nouns import (
@@ -36,6 +36,7 @@ from embodied_envs.layout.vocabulary import (
     DIRECTION_WORDS,
     DIRECTIONAL,
     FORMS,
+    HOLD,
     INTO,
     MOVE,
     PARTICLES,
@@ -329,6 +330,16 @@ def _movers(c: Clause, nodes: Nodes, manipulated: list[str]) -> list[str]:
     return found
 
 
+def _above(nodes: list[str], parents: dict[str, str]) -> set[str]:
+    """Every node the ``nodes`` stand on or in, up the tree."""
+    out = set()
+    for n in nodes:
+        while n in parents and parents[n] not in out:
+            n = parents[n]
+            out.add(n)
+    return out
+
+
 def _receptacle(places, nodes: Nodes, movers: list[str], parents: dict[str, str]):
     """The first place that is not where the movers already stand (nor the context); the
     others must say where it or they stand."""
@@ -338,24 +349,30 @@ def _receptacle(places, nodes: Nodes, movers: list[str], parents: dict[str, str]
         if len(where) > 1:
             raise Unread(f'"{prep} {p.text()}" names {len(where)} objects: name one receptacle')
         named.append((where[0], rel, f"{prep} {p.text()}"))
-    around = set()
-    for n in movers:
-        while n in parents:
-            n = parents[n]
-            around.add(n)
-    around.add(nodes.context)
+    around = _above(movers, parents) | {nodes.context}
     first = next((x for x in named if x[0] not in around), named[0])
     if first[0] in movers:
         raise Unread(f'"{first[2]}" names an object it also moves')
-    rec_around = set()
-    n = first[0]
-    while n in parents:
-        n = parents[n]
-        rec_around.add(n)
+    rec_around = _above([first[0]], parents)
     for node, _, said in named:
         if node != first[0] and node not in around | rec_around:
             raise Unread(f'"{first[2]}" and "{said}" name two destinations: name one')
     return first[0], first[1]
+
+
+def _located(c: Clause, nodes: Nodes, movers: list[str], parents: dict[str, str]) -> None:
+    """After a pick or hold verb, "in"/"on" say where the movers stand ("pick up the pen on the
+    desk"). Naming anything else, it may mean a destination ("lift the pen on the tray"), and a
+    held object is placed nowhere: refused."""
+    around = _above(movers, parents) | {nodes.context}
+    for prep, _, p in c.places:
+        where, _ = nodes.resolve(_region(prep, p))
+        if c.kind == HOLD and not set(where) <= around or prep in DIRECTIONAL:
+            raise Unread(f'"{c.verb} ... {prep} {p.text()}": a held object is not placed; say '
+                         "put")  # fmt: skip
+        if not set(where) <= around:
+            raise Unread(f'"{c.verb} ... {prep} {p.text()}": not where the objects stand; a '
+                         f'destination after "{c.verb}" takes into or onto')  # fmt: skip
 
 
 def _region(prep: str, p: Phrase) -> Phrase:
@@ -393,6 +410,7 @@ def read_sentence(sentence: str, layout) -> Task:
     if not first.objects or any(p.pronoun() for p in first.objects):
         raise Unread(f'"{first.verb}" names no object')
     movers = _movers(first, nodes, manipulated)
+    parents = {kid: parent for parent, kids in layout.tree.items() for kid, *_ in kids}
     acts = []
     for c in clauses:
         if c.objects and c is not first and not all(p.pronoun() for p in c.objects):
@@ -401,6 +419,10 @@ def read_sentence(sentence: str, layout) -> Task:
                              "in one sentence; state one")  # fmt: skip
         # after a pick verb only into/onto is a destination ("pick up the pen on the desk")
         places = c.places if c.kind != PICK else [x for x in c.places if x[0] in DIRECTIONAL]
+        if c.kind in (PICK, HOLD):  # the others say where the objects stand
+            places = places if c.kind == PICK else []
+            _located(replace(c, places=[x for x in c.places if x not in places]), nodes, movers,
+                     parents)  # fmt: skip
         if c.kind == MOVE and c.directions and places:
             if any(x[0] in DIRECTIONAL for x in places):
                 raise Unread("it states a direction and a destination: state one")
@@ -429,7 +451,6 @@ def read_sentence(sentence: str, layout) -> Task:
         raise Unread("it names the goal and another destination: state one")
     if c.directions:
         return Task("move", tuple(movers), direction=c.directions[0])
-    parents = {kid: parent for parent, kids in layout.tree.items() for kid, *_ in kids}
     receptacle, relation = _receptacle(places, nodes, movers, parents)
     objects = tuple(n for n in movers if n != receptacle)
     if not objects:
