@@ -135,7 +135,9 @@ class Nodes:
             text = self.desc.get(n, "")
             self.vocab[n] = set(name) | {s for s in (stem(w) for w in words(text)) if s}
             self.heads[n] = {h for h in (name[-1] if name else None, desc_head(text)) if h}
-        self.name_words = {w for n in self.names for w in self.raw[n]}
+        self.name_words = {w for n in self.names for w in (*self.raw[n], *words(n))}
+        # words of names and descriptions: "left" in "the left shoe", "jelly" in "the jelly jar"
+        self.all_words = self.name_words | {w for d in self.desc.values() for w in words(d)}
 
     def shown(self, nodes) -> str:
         return ", ".join(f'{n} ("{self.desc[n]}")' if n in self.desc else n for n in nodes)

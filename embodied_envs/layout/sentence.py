@@ -99,6 +99,14 @@ class Reader:
         """"slightly", "gently", "precisely" (a word of no node's name)."""
         return (w in ADVERBS or w.endswith("ly")) and w not in self.nodes.name_words
 
+    def modifier(self, w: str) -> bool:
+        """A direction or "-ly" word of a node's name or description before another of its
+        words, not a stop: "the left shoe", "the jelly jar"."""
+        nxt = self.peek(1)
+        return (w in DIRECTION_WORDS or self.adverb(w) or w.endswith("ly")) and (
+            w in self.nodes.all_words and nxt is not None and nxt in self.nodes.all_words
+            and not self.stop(nxt))  # fmt: skip
+
     def stop(self, w: str) -> bool:
         """Whether ``w`` ends a noun phrase."""
         return (w in INTO or w in SOURCES or w in PARTICLES or w in DIRECTION_WORDS
@@ -114,7 +122,7 @@ class Reader:
         while (w := self.peek()) is not None:
             if w == "a" and self.peek(1) in ("bit", "little"):
                 break  # "move the lamp a bit to the left"
-            if w == "of" or not self.stop(w):
+            if w == "of" or not self.stop(w) or self.modifier(w):
                 if ws and is_participle(self.t, self.k) and w not in self.nodes.name_words:
                     self.k += 1  # "a can lying on its side": the description is read over
                     if self.peek() in INTO or self.peek() in SOURCES:

@@ -80,6 +80,10 @@ def tokens(sentence: str, robot: str = "") -> list[str]:
                       text.lower().replace("\u2019", "'").replace("_", " "))  # fmt: skip
     while toks and toks[-1] in ".!?":
         toks.pop()
+    while toks[-2:] in ([",", "robot"], [",", "thanks"]) or toks[-3:] == [",", "thank", "you"]:
+        toks = toks[: -3 if toks[-1] == "you" else -2]  # ", robot." ", thank you!"
+        while toks and toks[-1] in ".!?":
+            toks.pop()
     # "slide it over to the left": "over" before "to" adds nothing
     toks = [w for k, w in enumerate(toks) if not (w == "over" and toks[k + 1 : k + 2] == ["to"])]
     names = EMBODIEDGEN_ROBOTS | set(ROBOT_NAMES) | {robot.lower(), "robot"}

@@ -1,10 +1,10 @@
-"""An adversarial sweep of the task-sentence reader (layout/sentence.py), written before reading
-the reader or its own table: sentences as an LLM writes them for tabletop scenes, each with the
-readings a careful person accepts ("place [pen] in bowl") or REFUSE where it may only be refused.
-A sentence whose reading is clear must not be refused; one that cannot be graded exactly as written
-must be. Every sentence of EmbodiedGen's example task list
-(apps/assets/example_layout/task_list.txt) and of its layout prompts' examples is here. Scenes
-are relations in EmbodiedGen's exact form."""
+"""An adversarial sweep of the task-sentence reader (layout/sentence.py): sentences as an LLM
+writes them for tabletop scenes, each with the readings a careful person accepts ("place [pen] in
+bowl") or REFUSE where it may only be refused. The first pass was written before reading the reader
+or its own table; the later passes aim at its joints. A sentence whose reading is clear must not be
+refused; one that cannot be graded exactly as written must be. Every sentence of EmbodiedGen's
+example task list (apps/assets/example_layout/task_list.txt) and of its layout prompts' examples is
+here. Scenes are relations in EmbodiedGen's exact form."""
 
 from types import SimpleNamespace
 
@@ -82,6 +82,9 @@ ZH = scene(["苹果"], ["盘子"], "table", {"苹果": "a red apple", "盘子": 
 CAFE = scene(["café_cup"], ["crème tray"], "table", {"café_cup": "a small espresso cup"})
 DE = scene(["Würfel"], ["Schachtel"], "table",
            {"Würfel": "a wooden block", "Schachtel": "a cardboard box"})
+SHOES = scene(["left shoe", "right shoe"], ["box"])
+JELLY = scene(["jar"], ["tray"], desc={"jar": "a jar of strawberry jelly"})
+CANS3 = scene(["can1", "can2", "can3"], ["tray"])
 
 R = REFUSE
 TWO_APPLES = "place [red apple, green apple]"
@@ -604,6 +607,39 @@ CASES = [
     ("Put the yellow sponge and the blue cloth into the bucket.", CLEAN,
      ["place [sponge, cloth] in bucket"]),
     ("Put the sponge into the bucket or the box.", CLEAN, [R]),
+    # a fourth pass: name words that are stop words elsewhere, courtesies, counts over three
+    ("Put the left shoe in the box.", SHOES, ["place [left shoe] in box"]),
+    ("Move the right shoe to the left.", SHOES, ["move [right shoe] left"]),
+    ("Put the shoes in the box.", SHOES, ["place [left shoe, right shoe] in box"]),
+    ("Put the shoe in the box.", SHOES, [R]),
+    ("Move the left shoe left.", SHOES, ["move [left shoe] left"]),
+    ("Put the jelly jar on the tray.", JELLY, ["place [jar] on tray"]),
+    ("Put the jar of jelly on the tray.", JELLY, ["place [jar] on tray"]),
+    ("Move the jelly jar slightly to the left.", JELLY, ["move [jar] left"]),
+    ("Set the set square on the tray.", scene(["set square"], ["tray"]),
+     ["place [set square] on tray"]),
+    ("Put the scissors in the organizer.", scene(["scissors"], ["drawer organizer"]),
+     ["place [scissors] in drawer organizer"]),
+    ("Put the cup on the plate, robot.", CUP, ["place [cup] on plate"]),
+    ("Put the cup on the plate, thank you!", CUP, ["place [cup] on plate"]),
+    ("Put the cup on the plate, thanks.", CUP, ["place [cup] on plate"]),
+    ("Put the cup on the plate (franka).", CUP, ["place [cup] on plate", R]),
+    ("Turn the cup upside down.", CUP, [R]),
+    ("Put the cup on the plate, centered.", CUP, [R]),
+    ("Put the cup on the plate's center.", CUP, [R]),
+    ("Put the cup on the plate so it does not fall.", CUP, [R]),
+    ("Put the cup on the plate 5 cm from the edge.", CUP, [R]),
+    ("Pick up the cup, move it left.", CUP, ["move [cup] left"]),
+    ("Apple on plate.", FRUIT, [R]),
+    ("Put two cans on the tray.", CANS3, [R]),
+    ("Put the three cans on the tray.", CANS3, ["place [can1, can2, can3] on tray"]),
+    ("Put all three cans on the tray.", CANS3, ["place [can1, can2, can3] on tray"]),
+    ("Put can1, can2 and can3 on the tray.", CANS3, ["place [can1, can2, can3] on tray"]),
+    ("Put cans 1 and 2 on the tray.", CANS3, ["place [can1, can2] on tray", R]),
+    ("Put the cans on the tray.", CANS3, ["place [can1, can2, can3] on tray"]),
+    ("Put the apple on the plate, not the bowl.", scene(["apple"], ["plate", "bowl"]),
+     ["place [apple] on plate", R]),
+    ("Put the apple on either the plate or the bowl.", scene(["apple"], ["plate", "bowl"]), [R]),
 ]  # fmt: skip
 
 
