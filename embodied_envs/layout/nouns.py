@@ -18,7 +18,11 @@ from dataclasses import dataclass
 ARTICLES = frozenset(
     "the a an this that these those its their his her my your our one's".split()
 )
-QUANTIFIERS = frozenset("all both every each some two three four five six several".split())
+QUANTIFIERS = frozenset("all both every each".split())  # every node the noun names
+# that many: all the nodes the noun names, or refused
+NUMBERS = {"two": 2, "three": 3, "four": 4, "five": 5, "six": 6}
+# a part of what the noun names, not which: refused ("some apples", "a few cans")
+VAGUE = frozenset("some several few many most half couple any other another remaining".split())
 PRONOUNS = frozenset("it them they itself themselves".split())
 EVERYTHING = frozenset("object item thing everything stuff".split())  # (stems) all movers
 FRUITS = frozenset(
@@ -56,6 +60,17 @@ def words(text: str) -> list[str]:
     """Lower-case words in any script; apostrophes inside a word kept ("rubik's"), other
     punctuation and underscores separate words."""
     return re.findall(r"[^\W_]+(?:'[^\W_]+)*", text.lower().replace("\u2019", "'"))
+
+
+def joined(ws: list[str]) -> list[str]:
+    """A number after a word joined to it: "apple 1" (or "apple_1") -> apple1."""
+    out: list[str] = []
+    for w in ws:
+        if out and w.isdigit() and not out[-1].isdigit():
+            out[-1] += w
+        else:
+            out.append(w)
+    return out
 
 
 def stem(word: str) -> str:
@@ -113,14 +128,16 @@ class Nodes:
         self.names = [n for n in layout.objs_mapping if layout.objs_mapping[n] != "background"]
         desc = dict(layout.objs_desc or {})
         self.desc = {n: d for n in self.names if isinstance(d := desc.get(n), str) and d.strip()}
-        self.raw = {n: tuple(words(n)) for n in self.names}
+        self.raw = {n: tuple(joined(words(n))) for n in self.names}
         self.vocab, self.heads = {}, {}
         for n in self.names:
             name = [s for s in (stem(w) for w in self.raw[n]) if s]
             text = self.desc.get(n, "")
             self.vocab[n] = set(name) | {s for s in (stem(w) for w in words(text)) if s}
             self.heads[n] = {h for h in (name[-1] if name else None, desc_head(text)) if h}
-        self.name_words = {w for n in self.names for w in self.raw[n]}
+        self.name_words = {w for n in self.names for w in (*self.raw[n], *words(n))}
+        # words of names and descriptions: "left" in "the left shoe", "jelly" in "the jelly jar"
+        self.all_words = self.name_words | {w for d in self.desc.values() for w in words(d)}
 
     def shown(self, nodes) -> str:
         return ", ".join(f'{n} ("{self.desc[n]}")' if n in self.desc else n for n in nodes)
@@ -133,17 +150,19 @@ class Nodes:
             Unread: it names none of them, or several where it says one.
         """
         pool = self.names if among is None else among
+        said = f'"{phrase.text()}"'
         ws = [w for w in phrase.words if w not in ARTICLES]
-        while len(ws) > 1 and ws[-1].isdigit() and not ws[-2].isdigit():  # "apple 1": apple1
-            ws[-2:] = [ws[-2] + ws[-1]]
-        plural = any(w in QUANTIFIERS or w.isdigit() for w in ws)
-        ws = [w for w in ws if w not in QUANTIFIERS and not w.isdigit()]
+        if vague := [w for w in ws if w in VAGUE and w not in self.name_words]:
+            raise Unread(f'{said} says "{vague[0]}": name the objects, or all of them')
+        ws = joined(ws)  # "apple 1": apple1; "2 apples" stays a count
+        counts = [NUMBERS.get(w) or int(w) for w in ws if w in NUMBERS or w.isdigit()]
+        plural = bool(counts) or any(w in QUANTIFIERS for w in ws)
+        ws = [w for w in ws if w not in QUANTIFIERS and w not in NUMBERS and not w.isdigit()]
         if "of" in ws:  # "the box of tools": the box; "one of the pens": refused by its noun
             k = ws.index("of")
             ws, tail = ws[:k], ws[k + 1 :]
         else:
             tail = []
-        said = f'"{phrase.text()}"'
         if not ws:
             raise Unread(f"{said} names no object", none=True)
         exact = [n for n in pool if self.raw[n] and tuple(ws[-len(self.raw[n]) :]) == self.raw[n]]
@@ -167,6 +186,16 @@ class Nodes:
             mods = [stem(w) for w in ws[:-1] + tail + list(phrase.with_words)]
         if not cands:
             raise Unread(f"{said} names no object of the layout", none=True)
+        # another object named after it or as its owner ("the bowl of fruit", "the pen with the
+        # apple", "the tray's bowl"), not a word of its own: refused (a compound such as "the
+        # fruit bowl" is read as the bowl)
+        for m in {stem(w) for w in tail + list(phrase.with_words)} | {
+                w[:-2] for w in ws if w.endswith("'s")}:  # fmt: skip
+            others = [n for n in self.names if n not in cands and (
+                m in self.heads[n] or m == "fruit" and self.heads[n] & FRUITS)]  # fmt: skip
+            if others and not any(m in self.vocab[n] for n in cands):
+                raise Unread(f'{said} names "{m}" ({self.shown(others)}) beside the object: '
+                             "name one object in each place")  # fmt: skip
         for m in (m for m in mods if m and m not in ARTICLES):
             if m in STRICT:
                 kept = [n for n in cands if m in self.vocab[n] or n not in self.desc]
@@ -182,4 +211,7 @@ class Nodes:
                 f"{said} names {len(cands)} objects ({self.shown(cands)}): say which, with a "
                 "word of its objs_desc"
             )
+        if counts and counts[0] != len(cands):
+            raise Unread(f"{said} counts {counts[0]}, and it names {len(cands)} "
+                         f"({self.shown(cands)})")  # fmt: skip
         return cands, plural

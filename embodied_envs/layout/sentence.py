@@ -18,7 +18,7 @@ a place naming the context, or where the movers already stand, says where they a
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.nouns import (
@@ -36,6 +36,7 @@ from embodied_envs.layout.vocabulary import (
     DIRECTION_WORDS,
     DIRECTIONAL,
     FORMS,
+    HOLD,
     INTO,
     MOVE,
     PARTICLES,
@@ -90,9 +91,21 @@ class Reader:
     def after_links(self) -> str | None:
         """The first word after a run of "and", "then", "," and adverbs."""
         j = self.k
-        while j < len(self.t) and (self.t[j] in ("and", "then", ",") or self.t[j] in ADVERBS):
+        while j < len(self.t) and (self.t[j] in ("and", "then", ",") or self.adverb(self.t[j])):
             j += 1
         return self.t[j] if j < len(self.t) else None
+
+    def adverb(self, w: str) -> bool:
+        """"slightly", "gently", "precisely" (a word of no node's name)."""
+        return (w in ADVERBS or w.endswith("ly")) and w not in self.nodes.name_words
+
+    def modifier(self, w: str) -> bool:
+        """A direction or "-ly" word of a node's name or description before another of its
+        words, not a stop: "the left shoe", "the jelly jar"."""
+        nxt = self.peek(1)
+        return (w in DIRECTION_WORDS or self.adverb(w) or w.endswith("ly")) and (
+            w in self.nodes.all_words and nxt is not None and nxt in self.nodes.all_words
+            and not self.stop(nxt))  # fmt: skip
 
     def stop(self, w: str) -> bool:
         """Whether ``w`` ends a noun phrase."""
@@ -109,7 +122,7 @@ class Reader:
         while (w := self.peek()) is not None:
             if w == "a" and self.peek(1) in ("bit", "little"):
                 break  # "move the lamp a bit to the left"
-            if w == "of" or not self.stop(w):
+            if w == "of" or not self.stop(w) or self.modifier(w):
                 if ws and is_participle(self.t, self.k) and w not in self.nodes.name_words:
                     self.k += 1  # "a can lying on its side": the description is read over
                     if self.peek() in INTO or self.peek() in SOURCES:
@@ -160,7 +173,11 @@ class Reader:
 
     def direction_to(self) -> str | None:
         """After "to": the direction it states, or None for "to the goal"."""
-        ws = [w for w in self.phrase().words if w not in ARTICLES]
+        said = self.phrase().words
+        if "my" in said:
+            raise Unread('"to my ..." is the speaker\'s side, unknown here: say left, right, '
+                         "forward or backward (the robot's)")  # fmt: skip
+        ws = [w for w in said if w not in ARTICLES]
         if ws and ws[-1] == "goal":
             return None
         if self.peek() in ("back", "front"):
@@ -175,7 +192,7 @@ class Reader:
     def direction(self, w: str, prefix=()) -> str:
         """A direction word, refused where it is relative to an object ("to the left of X"),
         "to the left side of the table" (the context) kept."""
-        if any(p not in ("side", "edge", "end", "part", "your", "my") for p in prefix):
+        if any(p not in ("side", "edge", "end", "part", "your", "robot's") for p in prefix):
             raise Unread(f'"to {" ".join(prefix)} {w}" is not a direction it grades')
         part = self.peek() in ("side", "edge", "end", "part") and self.peek(1) == "of"
         if self.peek() == "of" or part:
@@ -216,8 +233,15 @@ class Reader:
         c = Clause(verb, VERBS[verb])
         while self.peek() in PARTICLES:
             self.k += 1
+        if self.peek() in ("and", "then") and self.peek(1) in VERBS:
+            self.k += 1  # "pick and place the pen in the bowl": the last verb's clause
+            return self.clause()
         c.objects = self.objects()
         while (w := self.peek()) is not None:
+            if w in ("and", ",") and self.adverb(self.t[self.k - 1]) and self.adverb(
+                    self.peek(1) or ""):  # fmt: skip
+                self.k += 1  # "gently and precisely"
+                continue
             if w in ("and", "then", ","):
                 if self.after_links() in VERBS:
                     break
@@ -314,6 +338,16 @@ def _movers(c: Clause, nodes: Nodes, manipulated: list[str]) -> list[str]:
     return found
 
 
+def _above(nodes: list[str], parents: dict[str, str]) -> set[str]:
+    """Every node the ``nodes`` stand on or in, up the tree."""
+    out = set()
+    for n in nodes:
+        while n in parents and parents[n] not in out:
+            n = parents[n]
+            out.add(n)
+    return out
+
+
 def _receptacle(places, nodes: Nodes, movers: list[str], parents: dict[str, str]):
     """The first place that is not where the movers already stand (nor the context); the
     others must say where it or they stand."""
@@ -323,24 +357,30 @@ def _receptacle(places, nodes: Nodes, movers: list[str], parents: dict[str, str]
         if len(where) > 1:
             raise Unread(f'"{prep} {p.text()}" names {len(where)} objects: name one receptacle')
         named.append((where[0], rel, f"{prep} {p.text()}"))
-    around = set()
-    for n in movers:
-        while n in parents:
-            n = parents[n]
-            around.add(n)
-    around.add(nodes.context)
+    around = _above(movers, parents) | {nodes.context}
     first = next((x for x in named if x[0] not in around), named[0])
     if first[0] in movers:
         raise Unread(f'"{first[2]}" names an object it also moves')
-    rec_around = set()
-    n = first[0]
-    while n in parents:
-        n = parents[n]
-        rec_around.add(n)
+    rec_around = _above([first[0]], parents)
     for node, _, said in named:
         if node != first[0] and node not in around | rec_around:
             raise Unread(f'"{first[2]}" and "{said}" name two destinations: name one')
     return first[0], first[1]
+
+
+def _located(c: Clause, nodes: Nodes, movers: list[str], parents: dict[str, str]) -> None:
+    """After a pick or hold verb, "in"/"on" say where the movers stand ("pick up the pen on the
+    desk"). Naming anything else, it may mean a destination ("lift the pen on the tray"), and a
+    held object is placed nowhere: refused."""
+    around = _above(movers, parents) | {nodes.context}
+    for prep, _, p in c.places:
+        where, _ = nodes.resolve(_region(prep, p))
+        if c.kind == HOLD and not set(where) <= around or prep in DIRECTIONAL:
+            raise Unread(f'"{c.verb} ... {prep} {p.text()}": a held object is not placed; say '
+                         "put")  # fmt: skip
+        if not set(where) <= around:
+            raise Unread(f'"{c.verb} ... {prep} {p.text()}": not where the objects stand; a '
+                         f'destination after "{c.verb}" takes into or onto')  # fmt: skip
 
 
 def _region(prep: str, p: Phrase) -> Phrase:
@@ -378,6 +418,7 @@ def read_sentence(sentence: str, layout) -> Task:
     if not first.objects or any(p.pronoun() for p in first.objects):
         raise Unread(f'"{first.verb}" names no object')
     movers = _movers(first, nodes, manipulated)
+    parents = {kid: parent for parent, kids in layout.tree.items() for kid, *_ in kids}
     acts = []
     for c in clauses:
         if c.objects and c is not first and not all(p.pronoun() for p in c.objects):
@@ -386,12 +427,19 @@ def read_sentence(sentence: str, layout) -> Task:
                              "in one sentence; state one")  # fmt: skip
         # after a pick verb only into/onto is a destination ("pick up the pen on the desk")
         places = c.places if c.kind != PICK else [x for x in c.places if x[0] in DIRECTIONAL]
+        if c.kind in (PICK, HOLD):  # the others say where the objects stand
+            places = places if c.kind == PICK else []
+            _located(replace(c, places=[x for x in c.places if x not in places]), nodes, movers,
+                     parents)  # fmt: skip
         if c.kind == MOVE and c.directions and places:
             if any(x[0] in DIRECTIONAL for x in places):
                 raise Unread("it states a direction and a destination: state one")
             places = []  # "move the pen in the tray to the left": where it is
         if len(c.directions) > 1:
             raise Unread("it states two directions: state one")
+        if acts and not (places or c.directions):  # "put it in the bowl, then lift it"
+            raise Unread(f'"{c.verb}" after the destination or direction: it would not end '
+                         "there; state one task")  # fmt: skip
         if places or c.directions:
             acts.append((c, places))
         elif c.kind == PLACE:
@@ -411,7 +459,6 @@ def read_sentence(sentence: str, layout) -> Task:
         raise Unread("it names the goal and another destination: state one")
     if c.directions:
         return Task("move", tuple(movers), direction=c.directions[0])
-    parents = {kid: parent for parent, kids in layout.tree.items() for kid, *_ in kids}
     receptacle, relation = _receptacle(places, nodes, movers, parents)
     objects = tuple(n for n in movers if n != receptacle)
     if not objects:

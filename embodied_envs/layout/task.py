@@ -22,7 +22,7 @@ Resolution, in order:
 from __future__ import annotations
 
 from embodied_envs.layout.errors import LayoutError
-from embodied_envs.layout.sentence import parse_task
+from embodied_envs.layout.sentence import QUOTE, parse_task
 from embodied_envs.layout.task_model import (
     DIRECTION_XY,
     DIRECTIONS,
@@ -120,10 +120,12 @@ def resolve_task(layout, f: str) -> Task:
     """
     rel = layout.relation
     spec = structured_spec(rel, f)
+    said = ""  # where the task was read from, as a refusal quotes it
     if spec is not None:
         task = _structured(*spec, layout, f)
     elif isinstance(rel.get("task_desc"), str) and rel["task_desc"].strip():
         task = parse_task(rel["task_desc"], layout, f)
+        said = f' read from relation["task_desc"] "{" ".join(rel["task_desc"].split())[:QUOTE]}"'
     else:
         task = Task("pick", (rel["manipulated_objs"][0],))
     if task.kind == "place" and task.receptacle == rel["context"]:
@@ -131,7 +133,7 @@ def resolve_task(layout, f: str) -> Task:
                     layout.tree.get(rel["context"], [])]]  # fmt: skip
         if on_table:
             raise LayoutError(
-                f'{f}: the task puts {on_table} on the context "{rel["context"]}", where the '
+                f'{f}: the task{said} puts {on_table} on the context "{rel["context"]}", where the '
                 "tree already places them: it would start done. Fix: name another object as "
                 f'the receptacle, {EXPLICIT[3:]}.'
             )
@@ -140,8 +142,8 @@ def resolve_task(layout, f: str) -> Task:
             if [node, "ON"] in [list(x) for x in layout.tree.get(task.receptacle, [])] or [
                 node, "IN"] in [list(x) for x in layout.tree.get(task.receptacle, [])]:  # fmt: skip
                 raise LayoutError(
-                    f'{f}: the task puts "{node}" {task.relation} "{task.receptacle}", and the '
-                    f"tree already places it there: it would start done. Fix: place "
+                    f'{f}: the task{said} puts "{node}" {task.relation} "{task.receptacle}", '
+                    f"and the tree already places it there: it would start done. Fix: place "
                     f'"{node}" on the context ("{rel["context"]}") in "tree".'
                 )
     return task

@@ -13,9 +13,12 @@ PICK, PLACE, MOVE, HOLD = "pick", "place", "move", "hold"
 VERBS = {
     **dict.fromkeys("pick lift grab grasp take raise get fetch remove retrieve collect".split(),
                     PICK),
-    **dict.fromkeys("put place set drop transfer lay shove toss throw stick insert stack stash "
-                    "store load pop deposit tuck plop dump position".split(), PLACE),
-    **dict.fromkeys("move push slide shift drag nudge".split(), MOVE),
+    **dict.fromkeys("put place set drop transfer lay toss throw stick insert stack stash "
+                    "store stow load pack pop deposit tuck plop dump position lower".split(),
+                    PLACE),
+    # these take a direction ("shove it to the left") or a destination ("shove it in the box")
+    **dict.fromkeys("move push slide shift drag nudge shove pull roll carry bring relocate "
+                    "reposition".split(), MOVE),
     **dict.fromkeys("hold keep".split(), HOLD),
 }  # fmt: skip
 # destination prepositions and the relation each states; the directional ones (a destination
@@ -77,11 +80,22 @@ def tokens(sentence: str, robot: str = "") -> list[str]:
                       text.lower().replace("\u2019", "'").replace("_", " "))  # fmt: skip
     while toks and toks[-1] in ".!?":
         toks.pop()
-    k = 0
-    while k < len(toks) and (toks[k] in FILLERS or toks[k] == ","):
-        k += 1
-    if k + 1 < len(toks) and toks[k] in ("can", "could", "would", "will") and toks[k + 1] == "you":
-        k += 2
+    while toks[-2:] in ([",", "robot"], [",", "thanks"]) or toks[-3:] == [",", "thank", "you"]:
+        toks = toks[: -3 if toks[-1] == "you" else -2]  # ", robot." ", thank you!"
+        while toks and toks[-1] in ".!?":
+            toks.pop()
+    # "slide it over to the left": "over" before "to" adds nothing
+    toks = [w for k, w in enumerate(toks) if not (w == "over" and toks[k + 1 : k + 2] == ["to"])]
+    names = EMBODIEDGEN_ROBOTS | set(ROBOT_NAMES) | {robot.lower(), "robot"}
+    k, j = 0, -1
+    while k != j:  # "Robot, please ...", "Could you please ...", "Franka: ..."
+        j = k
+        while k < len(toks) and (toks[k] in FILLERS or toks[k] == ","):
+            k += 1
+        if toks[k : k + 2] in (["can", "you"], ["could", "you"], ["would", "you"],
+                                ["will", "you"]) or (k + 1 < len(toks) and toks[k] in names
+                                                     and toks[k + 1] in (",", ":")):  # fmt: skip
+            k += 2
     return toks[k:]
 
 
