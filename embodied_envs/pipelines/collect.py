@@ -83,6 +83,9 @@ class CollectPlan:
             each step's joint targets as that mode's action, graded on the run they make.
         env_kwargs: further ``gym.make`` keywords (from ``--config`` files), recorded with the
             dataset's ``env_kwargs``.
+        ray: None: on this machine; else on Ray (``pipelines/on_ray.py``): ``local`` (a Ray
+            started for the run), ``auto`` or a cluster's address; ``workers`` then caps the
+            episodes running at once (default: the cluster's CPUs).
     """
 
     layout: str | tuple[str, ...]
@@ -98,6 +101,7 @@ class CollectPlan:
     fixed_hand: bool = False
     control_mode: str = "pd_joint_pos"
     env_kwargs: dict = field(default_factory=dict)
+    ray: str | None = None
 
     @property
     def files(self) -> list[str]:
@@ -137,15 +141,14 @@ class LayoutSummary:
     steps_max: int
     wall_time_s: float
     seeds: list[int]
+    workers: int = 1  # processes that ran episodes
+    nodes: int = 1  # machines they ran on
     files: list[str] = field(default_factory=list)
 
 
-def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name: str) -> list:
-    """One worker's block of seeds: one env recorded by ManiSkill's RecordEpisode
-    (``datasets/recorder.py``: its files, cheaper per step) into
-    ``out_dir/name.h5``; a record per episode is reported (the parent's progress bar) and all
-    are returned."""
-    env = gym.make(
+def make_env(plan: CollectPlan):
+    """The env a worker collects ``plan`` in (one CPU env, not yet recorded)."""
+    return gym.make(
         ENV_ID,
         **plan.env_kwargs,
         layout_file=plan.env_layout,
@@ -155,7 +158,12 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         render_mode=film_mode(plan.files) if plan.video else None,
         sim_backend="physx_cpu",
     )
-    env = EpisodeRecorder(
+
+
+def recorder(env, plan: CollectPlan, out_dir: str, name: str) -> EpisodeRecorder:
+    """``env`` recorded by ManiSkill's RecordEpisode (``datasets/recorder.py``: its files,
+    cheaper per step) into ``out_dir/name.h5``."""
+    return EpisodeRecorder(
         env,
         output_dir=out_dir,
         trajectory_name=name,
@@ -166,16 +174,30 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         source_desc=SOURCE_DESC + (FIXED_HAND_DESC if plan.fixed_hand else ""),
         video_fps=int(round(1 / env.unwrapped.control_timestep)),
     )
+
+
+def record_seed(env: EpisodeRecorder, plan: CollectPlan, seed: int) -> Episode:
+    """The episode of ``seed``, by the expert, recorded by ``env`` (kept in its file when it
+    succeeded or ``plan`` keeps every episode; with its video when filming): what every worker,
+    local or on Ray, does per seed."""
     drive = functools.partial(expert, config=SolverConfig(fixed_hand=plan.fixed_hand))
+    episode = run_episode(env, seed, drive)
+    episode.kept = episode.success or not plan.only_success
+    env.flush_trajectory(save=episode.kept)
+    if plan.video:
+        env.flush_video(name=f"seed_{seed:06d}", save=episode.kept)
+    return episode
+
+
+def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name: str) -> list:
+    """One worker's block of seeds: one env recorded into ``out_dir/name.h5``; a record per
+    episode is reported (the parent's progress bar) and all are returned."""
+    env = recorder(make_env(plan), plan, out_dir, name)
     started()
     kept, records = 0, []
     try:
         for seed in seeds:
-            episode = run_episode(env, seed, drive)
-            episode.kept = episode.success or not plan.only_success
-            env.flush_trajectory(save=episode.kept)
-            if plan.video:
-                env.flush_video(name=f"seed_{seed:06d}", save=episode.kept)
+            episode = record_seed(env, plan, seed)
             kept += episode.kept
             records.append(episode)
             report(asdict(episode))
@@ -280,66 +302,91 @@ def _collect_into(plan: CollectPlan, out: Path, target: Path, progress):
     to ``target`` when complete."""
     work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{plan.dataset_name}.", dir=out))
     t0 = time.perf_counter()
-    layout = plan.layout if isinstance(plan.layout, str) else f"{plan.dataset_name} (a layout set)"
     try:
-        tasks = [
-            (plan, seeds, quota, str(work), f"part{k:03d}")
-            for k, (seeds, quota) in enumerate(plan.blocks())
-        ]
-        parts = run(
-            _worker,
-            tasks,
-            len(tasks) if plan.workers > 1 else 1,
-            on_progress=None if progress is None else lambda rec: progress(Episode(**rec)),
-        )
-        records = [r for part in parts for r in part]
-        records.sort(key=lambda r: r.seed)
-        kept = [r for r in records if r.kept]
-        successes = sum(r.success for r in records)
-        if plan.only_success and len(kept) < plan.num:
-            raise CollectError(
-                f"{layout}: {len(kept)} of {plan.num} successful demonstrations after "
-                f"{len(records)} attempts (success rate {successes / max(len(records), 1):.0%})."
-                " Fix: raise --max-attempts, or check the layout with `embodied-envs demo`."
-            )
-        parts = sorted(work.glob("part*.h5"))
-        staged = work / "trajectory.h5"
-        merge_trajectories(str(staged), [str(p) for p in parts])
-        meta_path = staged.with_suffix(".json")
-        meta = json.loads(meta_path.read_text())
-        meta[RECORD_KEY] = scene_record(plan.files)  # replay checks the scene is unchanged
-        # gymnasium's module:id form: ManiSkill's replay_trajectory and baselines import the
-        # plugin themselves
-        meta["env_info"]["env_id"] = ENTRY_ID
-        drawn = {r.seed: r for r in kept}
-        for episode in meta["episodes"]:  # what each episode was asked, and where
-            r = drawn[episode["episode_seed"]]
-            episode.update(instruction=r.instruction, layout_file=r.layout)
-        with atomic_output(meta_path) as tmp:
-            tmp.write_text(json.dumps(meta, indent=2))
-        steps = [r.steps for r in kept] or [0]
-        summary = LayoutSummary(
-            layout=plan.env_layout,
-            env_id=ENV_ID,
-            attempted=len(records),
-            kept=len(kept),
-            successes=successes,
-            success_rate=successes / max(len(records), 1),
-            failures_by_stage=dict(Counter(r.failure for r in records if r.failure)),
-            steps_mean=sum(steps) / len(steps),
-            steps_max=max(steps),
-            wall_time_s=round(time.perf_counter() - t0, 2),
-            seeds=[r.seed for r in kept],
-            files=["trajectory.h5", "trajectory.json", "summary.json"],
-        )
-        (work / "summary.json").write_text(json.dumps(asdict(summary), indent=2))
-        staging = work / "dataset"
-        staging.mkdir()
-        for name in summary.files:
-            (work / name).replace(staging / name)
-        for video in sorted(work.glob("seed_*.mp4")):
-            video.replace(staging / video.name)
-        staging.rename(target)  # a folder that appeared meanwhile is not replaced
+        if plan.ray is not None:
+            # Ray only where a run asks for it
+            from embodied_envs.pipelines.on_ray import collect_on_ray
+
+            records, parts, videos, store, ran = collect_on_ray(plan, out, progress)
+        else:
+            records, ran = _collect_here(plan, work, progress)
+            parts, videos = sorted(work.glob("part*.h5")), sorted(work.glob("seed_*.mp4"))
+            store = None
+        summary = _write_dataset(plan, work, target, records, parts, videos, t0, ran)
+        if store is not None:
+            store.remove()
         return summary
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+def _collect_here(plan: CollectPlan, work: Path, progress) -> tuple[list[Episode], tuple]:
+    """The episodes on this machine (``workers`` processes), recorded into ``work``: their
+    records in seed order and (workers, nodes)."""
+    tasks = [
+        (plan, seeds, quota, str(work), f"part{k:03d}")
+        for k, (seeds, quota) in enumerate(plan.blocks())
+    ]
+    parts = run(
+        _worker,
+        tasks,
+        len(tasks) if plan.workers > 1 else 1,
+        on_progress=None if progress is None else lambda rec: progress(Episode(**rec)),
+    )
+    records = sorted((r for part in parts for r in part), key=lambda r: r.seed)
+    return records, (len(tasks), 1)
+
+
+def _write_dataset(plan, work, target, records, parts, videos, t0, ran) -> LayoutSummary:
+    """The dataset of the episodes ``records`` (seed order; ``parts``: the files their kept
+    ones were recorded in, in seed order; ``videos``) made in ``work`` and renamed to
+    ``target``; ``ran``: (workers, nodes)."""
+    layout = plan.layout if isinstance(plan.layout, str) else f"{plan.dataset_name} (a layout set)"
+    kept = [r for r in records if r.kept]
+    successes = sum(r.success for r in records)
+    if plan.only_success and len(kept) < plan.num:
+        raise CollectError(
+            f"{layout}: {len(kept)} of {plan.num} successful demonstrations after "
+            f"{len(records)} attempts (success rate {successes / max(len(records), 1):.0%})."
+            " Fix: raise --max-attempts, or check the layout with `embodied-envs demo`."
+        )
+    staged = work / "trajectory.h5"
+    merge_trajectories(str(staged), [str(p) for p in parts])
+    meta_path = staged.with_suffix(".json")
+    meta = json.loads(meta_path.read_text())
+    meta[RECORD_KEY] = scene_record(plan.files)  # replay checks the scene is unchanged
+    # gymnasium's module:id form: ManiSkill's replay_trajectory and baselines import the
+    # plugin themselves
+    meta["env_info"]["env_id"] = ENTRY_ID
+    drawn = {r.seed: r for r in kept}
+    for episode in meta["episodes"]:  # what each episode was asked, and where
+        r = drawn[episode["episode_seed"]]
+        episode.update(instruction=r.instruction, layout_file=r.layout)
+    with atomic_output(meta_path) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2))
+    steps = [r.steps for r in kept] or [0]
+    summary = LayoutSummary(
+        layout=plan.env_layout,
+        env_id=ENV_ID,
+        attempted=len(records),
+        kept=len(kept),
+        successes=successes,
+        success_rate=successes / max(len(records), 1),
+        failures_by_stage=dict(Counter(r.failure for r in records if r.failure)),
+        steps_mean=sum(steps) / len(steps),
+        steps_max=max(steps),
+        wall_time_s=round(time.perf_counter() - t0, 2),
+        seeds=[r.seed for r in kept],
+        workers=ran[0],
+        nodes=ran[1],
+        files=["trajectory.h5", "trajectory.json", "summary.json"],
+    )
+    (work / "summary.json").write_text(json.dumps(asdict(summary), indent=2))
+    staging = work / "dataset"
+    staging.mkdir()
+    for name in summary.files:
+        (work / name).replace(staging / name)
+    for video in videos:
+        shutil.copyfile(video, staging / video.name)
+    staging.rename(target)  # a folder that appeared meanwhile is not replaced
+    return summary

@@ -65,8 +65,11 @@ class EvalPlan:
             ``none`` (nothing is filmed).
         video_episodes: the first episodes of each entry of ``layouts`` (seeds ``seed`` ..
             ``seed + video_episodes - 1``) that are filmed; later ones are not rendered.
-        workers: processes (1: in this process).
+        workers: processes (1: in this process); with ``ray``, the episodes running at once
+            (0: the cluster's CPUs).
         env_kwargs: further ``gym.make`` keywords (``--config`` files).
+        ray: None: on this machine; else on Ray (``pipelines/on_ray.py``): ``local`` (a Ray
+            started for the run), ``auto`` or a cluster's address.
     """
 
     policy: str
@@ -79,6 +82,7 @@ class EvalPlan:
     video_episodes: int = 2
     workers: int = 1
     env_kwargs: dict = field(default_factory=dict)
+    ray: str | None = None
 
     def env_make_kwargs(self, layout: str | tuple[str, ...], render: bool) -> dict:
         control = "pd_joint_pos" if self.policy == "expert" else self.control_mode
@@ -244,6 +248,24 @@ def plot_summary(summary: dict, results: list[Episode], path: Path) -> None:
     plt.close(fig)
 
 
+def _evaluate_here(plan: EvalPlan, video_dir: Path, progress) -> list[Episode]:
+    """The episodes on this machine (``workers`` processes), in task order."""
+    try:
+        return run(
+            _run_episode,
+            [(lay, seed, str(video_dir)) for lay, seed in plan.tasks()],
+            plan.workers,
+            initializer=_init_runner,
+            initargs=(plan,),
+            on_result=progress,
+        )
+    except WorkerError as e:
+        raise EvalError(f"evaluation stopped: {e}") from None
+    finally:
+        if plan.workers <= 1 and _RUNNER is not None:  # this process's envs
+            _RUNNER.close()
+
+
 def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dict:
     """Run the evaluation and write its files under ``out`` (see the module docstring).
 
@@ -261,29 +283,23 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
             "remove that folder"
         )
     out.mkdir(parents=True, exist_ok=True)
-    video_dir = out / "videos"
-    tasks = plan.tasks()
-    try:
-        results = run(
-            _run_episode,
-            [(lay, seed, str(video_dir)) for lay, seed in tasks],
-            plan.workers,
-            initializer=_init_runner,
-            initargs=(plan,),
-            on_result=progress,
-        )
-    except WorkerError as e:
-        raise EvalError(f"evaluation stopped: {e}") from None
-    finally:
-        if plan.workers <= 1 and _RUNNER is not None:  # this process's envs
-            _RUNNER.close()
+    store = None
+    if plan.ray is not None:
+        # Ray only where a run asks for it
+        from embodied_envs.pipelines.on_ray import evaluate_on_ray
+
+        results, store, ran = evaluate_on_ray(plan, out, progress)
+    else:
+        results, ran = _evaluate_here(plan, out / "videos", progress), (plan.workers, 1)
     order = {lay: i for i, lay in enumerate(plan.files())}
     results.sort(key=lambda r: (order[r.layout], r.seed))
-    summary = summarize(plan, results)
+    summary = summarize(plan, results) | dict(workers=ran[0], nodes=ran[1])
     with atomic_output(out / "episodes.json") as tmp:
         tmp.write_text(json.dumps([episode_json(r) for r in results], indent=2))
     with atomic_output(out / "summary.json") as tmp:  # its presence marks a complete run
         tmp.write_text(json.dumps(summary, indent=2))
+    if store is not None:  # complete: nothing to resume
+        store.remove()
     try:  # the summary is written: a plot that cannot be drawn must not lose it
         plot_summary(summary, results, out / "summary.png")
     except Exception as e:  # matplotlib's, whatever they are: one line
