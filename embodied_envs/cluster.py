@@ -26,6 +26,7 @@ import hashlib
 import io
 import json
 import os
+import re
 import shutil
 import tempfile
 import zipfile
@@ -107,42 +108,56 @@ def _walk(paths: Iterable[str | Path]) -> list[Path]:
 
 @dataclasses.dataclass(frozen=True)
 class Bundle:
-    """The job's files in the object store: the driver's folder ``root`` holding them all, their
-    zip (``ref``: a Ray object reference to its bytes) and their hash (``digest``)."""
+    """The job's files in the object store: groups of files, each under its driver folder
+    (``roots``: the group's common folder), their zip (``ref``: a Ray object reference to its
+    bytes) and their hash (``digest``)."""
 
-    root: str
+    roots: tuple[str, ...]
     digest: str
     ref: Any
 
     @classmethod
-    def put(cls, paths: Iterable[str | Path]) -> Bundle:
-        """Zips the files and folders ``paths`` (relative to their common folder) into the
-        object store.
+    def put(cls, *groups: Iterable[str | Path]) -> Bundle:
+        """Zips each group of files and folders (relative to the group's common folder: a
+        layout and its asset folders keep their relative places) into the object store.
 
         Raises:
-            ClusterError: the zip is over ``MAX_BUNDLE_BYTES``.
+            ClusterError: a group's files share no folder but ``/``, or the zip is over
+                ``MAX_BUNDLE_BYTES``.
         """
         import ray
 
-        files = _walk(paths)
-        root = os.path.commonpath([str(f.parent) for f in files])
-        digest, buffer = hashlib.sha256(), io.BytesIO()
+        digest, buffer, roots = hashlib.sha256(), io.BytesIO(), []
         with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
-            for f in files:
-                name, data = f.relative_to(root).as_posix(), f.read_bytes()
-                digest.update(f"{name}\0{len(data)}\0".encode() + data)
-                z.writestr(zipfile.ZipInfo(name, ZIP_TIME), data, zipfile.ZIP_DEFLATED)
+            for group in groups:
+                files = _walk(group)
+                if not files:
+                    continue
+                root = os.path.commonpath([str(f.parent) for f in files])
+                if root == os.sep:
+                    raise ClusterError(
+                        f"{files[0]} and {files[-1]} share no folder but {os.sep}: a Ray job "
+                        "sends a layout and its asset folders as one folder. Fix: keep them "
+                        "under one folder"
+                    )
+                roots.append(root)
+                for f in files:
+                    name = f"{len(roots) - 1}/{f.relative_to(root).as_posix()}"
+                    data = f.read_bytes()
+                    digest.update(f"{name}\0{len(data)}\0".encode() + data)
+                    z.writestr(zipfile.ZipInfo(name, ZIP_TIME), data, zipfile.ZIP_DEFLATED)
         if buffer.tell() > MAX_BUNDLE_BYTES:
             raise ClusterError(
-                f"the files under {root} that the episodes read (layouts, asset folders, "
-                f"splat) are {buffer.tell() / 2**20:.0f} MiB zipped, over the "
+                f"the files under {', '.join(roots)} that the episodes read (layouts, asset "
+                f"folders, splat) are {buffer.tell() / 2**20:.0f} MiB zipped, over the "
                 f"{MAX_BUNDLE_BYTES // 2**20} MiB a Ray job sends. Fix: smaller asset folders "
                 "(a lighter splat), or run without --ray"
             )
-        return cls(root, digest.hexdigest(), ray.put(buffer.getvalue()))
+        return cls(tuple(roots), digest.hexdigest(), ray.put(buffer.getvalue()))
 
-    def unpacked(self) -> str:
-        """On a worker: the folder holding this node's copy of the files (unpacked once)."""
+    def unpacked(self) -> Paths:
+        """On a worker: this node's copy of the files (unpacked once per node), as the map
+        from the driver's folders to it."""
         import ray
 
         folder = Path(tempfile.gettempdir()) / BUNDLE_FOLDER / self.digest
@@ -155,33 +170,37 @@ class Bundle:
                 work.rename(folder)
             except OSError:  # another worker of this node unpacked it first
                 shutil.rmtree(work, ignore_errors=True)
-        return str(folder)
+        return Paths(tuple((root, str(folder / str(k))) for k, root in enumerate(self.roots)))
 
 
 @dataclasses.dataclass(frozen=True)
 class Paths:
-    """Maps paths between the driver's folder ``driver`` and a node's copy ``node`` of it, in
-    strings, containers and dataclasses (their fields)."""
+    """Maps paths between the driver's folders and a node's copies of them (``pairs``: driver
+    folder, node folder), in strings, containers and dataclasses (their fields): a folder's
+    name followed by ``/`` or ending the string, longest first, in one pass."""
 
-    driver: str
-    node: str
+    pairs: tuple[tuple[str, str], ...]
 
     def to_node(self, value):
-        return _mapped(value, self.driver, self.node)
+        return _mapped(value, dict(self.pairs))
 
     def to_driver(self, value):
-        return _mapped(value, self.node, self.driver)
+        return _mapped(value, {node: driver for driver, node in self.pairs})
 
 
-def _mapped(value, old: str, new: str):
+def _mapped(value, table: dict[str, str]):
+    if not table:
+        return value
     if isinstance(value, str):
-        return value.replace(old, new)
+        names = sorted(table, key=len, reverse=True)
+        pattern = "|".join(re.escape(n) for n in names)
+        return re.sub(f"({pattern})(?=/|$)", lambda m: table[m.group(1)], value)
     if isinstance(value, list | tuple):
-        return type(value)(_mapped(v, old, new) for v in value)
+        return type(value)(_mapped(v, table) for v in value)
     if isinstance(value, dict):
-        return {_mapped(k, old, new): _mapped(v, old, new) for k, v in value.items()}
+        return {_mapped(k, table): _mapped(v, table) for k, v in value.items()}
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        changes = {f.name: _mapped(getattr(value, f.name), old, new)
+        changes = {f.name: _mapped(getattr(value, f.name), table)
                    for f in dataclasses.fields(value) if f.init}  # fmt: skip
         return dataclasses.replace(value, **changes)
     return value
@@ -208,7 +227,7 @@ def _task(fn: Callable, bundle: Bundle, args: tuple):
     import ray
 
     os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
-    paths = Paths(bundle.root, bundle.unpacked())
+    paths = bundle.unpacked()
     try:
         result = fn(*paths.to_node(args))
     except Exception as e:  # the message names the driver's files, as the local run's does

@@ -18,6 +18,7 @@ import dataclasses
 import fcntl
 import functools
 import json
+import logging
 import math
 import os
 import shutil
@@ -56,6 +57,7 @@ FIXED_HAND_DESC = (
     "(collect --fixed-hand: demos for pd_ee_delta_pos)"
 )
 OBS_MODES = ("none", "state", "rgb", "rgbd")
+MANISKILL_LOGGER = "mani_skill "  # ManiSkill's logger's name (mani_skill/utils/logging_utils.py)
 
 
 class CollectError(RuntimeError):
@@ -208,6 +210,17 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
     return records
 
 
+@contextlib.contextmanager
+def _quiet(logger: logging.Logger):
+    """``logger`` at WARNING within the block."""
+    level = logger.level
+    logger.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
 WORK_PREFIX = ".collect-"  # work folders in --out while a dataset is being made
 _HELD: dict[str, tuple[int, int]] = {}  # folders this process holds: path -> (fd, depth)
 
@@ -351,7 +364,8 @@ def _write_dataset(plan, work, target, records, parts, videos, t0, ran) -> Layou
             " Fix: raise --max-attempts, or check the layout with `embodied-envs demo`."
         )
     staged = work / "trajectory.h5"
-    merge_trajectories(str(staged), [str(p) for p in parts])
+    with _quiet(logging.getLogger(MANISKILL_LOGGER)):  # its INFO line per part: one per seed
+        merge_trajectories(str(staged), [str(p) for p in parts])
     meta_path = staged.with_suffix(".json")
     meta = json.loads(meta_path.read_text())
     meta[RECORD_KEY] = scene_record(plan.files)  # replay checks the scene is unchanged

@@ -104,7 +104,7 @@ def collect_on_ray(plan: CollectPlan, out: Path, progress):
     order), the ``.h5`` files of the kept ones, their videos, the resume store and (workers,
     nodes)."""
     with session(plan.ray, plan.workers):
-        bundle = Bundle.put(p for f in plan.files for p in scene_paths(f))
+        bundle = Bundle.put([p for f in plan.files for p in scene_paths(f)])
         store = ResumeStore(out / f"{RESUME_PREFIX}{plan.dataset_name}", fingerprint(plan, bundle))
         records = {int(k.split("_")[1]): _episode_of(store.path(k)) for k in store.keys()}
         last = plan.seed + plan.attempts()
@@ -178,7 +178,7 @@ def evaluate_on_ray(plan: EvalPlan, out: Path, progress):
             sent = dataclasses.replace(plan, policy=plan.policy.replace(
                 plan.policy.rpartition(":")[0] or plan.policy, str(file), 1))  # fmt: skip
         paths = [p for entry in plan.layouts for p in scene_paths(entry)]
-        bundle = Bundle.put(paths + ([file] if file is not None else []))
+        bundle = Bundle.put(paths, [file] if file is not None else [])
         store = ResumeStore(out / f"{RESUME_PREFIX}eval", fingerprint(plan, bundle))
         tasks = plan.tasks()
         keys = [f"{k:06d}" for k in range(len(tasks))]

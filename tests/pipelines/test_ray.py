@@ -184,3 +184,17 @@ def test_a_policy_raising_on_a_worker_is_the_local_one_line_error(cluster, tmp_p
         "0 of episode seed 0 (default.json)"
     ]
     assert [ln for ln in res.stdout.splitlines() if ln.startswith("error:")] == line
+
+
+def test_paths_map_whole_folder_names_both_ways():
+    from embodied_envs.cluster import Paths
+    from embodied_envs.pipelines.episodes import Episode
+
+    paths = Paths((("/data/scene", "/tmp/n/0"), ("/data/scene/policies", "/tmp/n/1")))
+    episode = Episode("/data/scene/layouts/a.json", 3, True, False, 10, 1.0,
+                      plan_failures=["/data/scenery/x: /data/scene/policies/p.py"])  # fmt: skip
+    node = paths.to_node(episode)
+    assert node.layout == "/tmp/n/0/layouts/a.json" and node.seed == 3
+    assert node.plan_failures == ["/data/scenery/x: /tmp/n/1/p.py"], "whole names, longest first"
+    assert paths.to_driver(node) == episode
+    assert paths.to_node({"/data/scene": ("/data/scene",)}) == {"/tmp/n/0": ("/tmp/n/0",)}
