@@ -119,6 +119,7 @@ def wait_for(condition, seconds: float = 600) -> None:
         time.sleep(0.2)
 
 
+@pytest.mark.slow  # 2-4 minutes on the shared 2-core machine (CI runs it)
 def test_a_worker_killed_mid_run_costs_a_retry_not_the_run(cluster, one_worker, tmp_path):
     proc = cli(collect_args(tmp_path, 8, "--ray", "auto"), tmp_path, cluster,
                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)  # fmt: skip
@@ -132,6 +133,7 @@ def test_a_worker_killed_mid_run_costs_a_retry_not_the_run(cluster, one_worker, 
     assert_same_episodes(tmp_path / "default", one_worker, range(700, 704))
 
 
+@pytest.mark.slow  # 2-4 minutes on the shared 2-core machine (CI runs it)
 def test_an_interrupted_driver_resumes_with_the_same_out(cluster, one_worker, tmp_path):
     args = collect_args(tmp_path, 4, "--ray", "auto")
     proc = cli(args, tmp_path, cluster, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
