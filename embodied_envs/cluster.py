@@ -89,7 +89,7 @@ def ray_session(address: str | None, cpus: int | None = None):
 
 def cluster_cpus() -> int:
     """The connected cluster's CPUs (at least 1)."""
-    import ray
+    import ray  # only where a command runs on Ray
 
     return max(1, int(ray.cluster_resources().get("CPU", 1)))
 
@@ -125,7 +125,7 @@ class Bundle:
             ClusterError: a group's files share no folder but ``/``, or the zip is over
                 ``MAX_BUNDLE_BYTES``.
         """
-        import ray
+        import ray  # only where a command runs on Ray
 
         digest, buffer, roots = hashlib.sha256(), io.BytesIO(), []
         with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
@@ -158,7 +158,7 @@ class Bundle:
     def unpacked(self) -> Paths:
         """On a worker: this node's copy of the files (unpacked once per node), as the map
         from the driver's folders to it."""
-        import ray
+        import ray  # only where a command runs on Ray
 
         folder = Path(tempfile.gettempdir()) / BUNDLE_FOLDER / self.digest
         if not folder.is_dir():
@@ -224,7 +224,7 @@ def cached(kind: str, key: Any, make: Callable[[], Any], close: Callable[[Any], 
 def _task(fn: Callable, bundle: Bundle, args: tuple):
     """A Ray task: ``fn(*args)`` on this node's copy of the files; the result (paths back on
     the driver's), this node's id and this process's id."""
-    import ray
+    import ray  # only where a command runs on Ray
 
     os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
     paths = bundle.unpacked()
@@ -268,8 +268,8 @@ def run_tasks(
         Exception: what a task raised, as it raised it.
         ClusterError: a task's worker process died more than ``TASK_RETRIES`` times.
     """
-    import ray
-    from ray.exceptions import RayError, RayTaskError
+    import ray  # only where a command runs on Ray
+    from ray.exceptions import RayError, RayTaskError  # as ray, above
 
     remote = ray.remote(num_cpus=1, max_retries=TASK_RETRIES)(_task)
     pending: dict[Any, tuple] = {}

@@ -227,8 +227,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
         ls = self.layout_scene
         start = ls.episodes.draw(env_idx, self._batched_episode_rng)
-        # the CPU simulation's tensors are made on the CPU anyway: no device mode, whose hook
-        # runs on every torch call (1-2 ms of a reset)
+        # no device mode on the CPU (its hook on every torch call: 1-2 ms of a reset)
         with torch.device(self.device) if self.gpu_sim_enabled else contextlib.nullcontext():
             agents.reset_arms(
                 agents.all_agents(self), self.robot_entries, self.robot_bases, self.robot_rests,

@@ -31,10 +31,22 @@ from pathlib import Path
 import gymnasium as gym
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
 
+from embodied_envs.cluster import Ran, cached, run_tasks
 from embodied_envs.datasets.recorder import EpisodeRecorder
 from embodied_envs.datasets.records import RECORD_KEY, scene_record
 from embodied_envs.paths import atomic_output
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode
+from embodied_envs.pipelines.on_ray import (
+    RESUME_PREFIX,
+    Bundle,
+    ResumeStore,
+    episode_of,
+    fingerprint,
+    in_flight,
+    save_episode,
+    scene_paths,
+    session,
+)
 from embodied_envs.registration import ENTRY_ID, ENV_ID
 from embodied_envs.solvers.pick_place import SolverConfig
 from embodied_envs.workers import report, run, started
@@ -317,9 +329,6 @@ def _collect_into(plan: CollectPlan, out: Path, target: Path, progress):
     t0 = time.perf_counter()
     try:
         if plan.ray is not None:
-            # Ray only where a run asks for it
-            from embodied_envs.pipelines.on_ray import collect_on_ray
-
             records, parts, videos, store, ran = collect_on_ray(plan, out, progress)
         else:
             records, ran = _collect_here(plan, work, progress)
@@ -404,3 +413,66 @@ def _write_dataset(plan, work, target, records, parts, videos, t0, ran) -> Layou
         shutil.copyfile(video, staging / video.name)
     staging.rename(target)  # a folder that appeared meanwhile is not replaced
     return summary
+
+
+# --- on Ray (pipelines/on_ray.py) ------------------------------------------------------------
+def _collect_seed(plan: CollectPlan, seed: int):
+    """On a worker: the episode of ``seed`` recorded as the local workers record it; the
+    episode, its ``.h5`` bytes (None when not kept), its ``.json`` and its videos."""
+    env = cached("collect", plan, lambda: make_env(plan), lambda e: e.close())
+    with tempfile.TemporaryDirectory(prefix="embodied-envs-seed-") as tmp:
+        rec = recorder(env, plan, tmp, "part")
+        try:
+            episode = record_seed(rec, plan, seed)
+        finally:
+            rec.close_files()
+        folder = Path(tmp)
+        h5 = (folder / "part.h5").read_bytes() if episode.kept else None
+        meta = json.loads((folder / "part.json").read_text())
+        videos = {p.name: p.read_bytes() for p in folder.glob("seed_*.mp4")}
+    return episode, h5, meta, videos
+
+
+def collect_on_ray(plan: CollectPlan, out: Path, progress):
+    """``plan``'s episodes on Ray: the records of the seeds one local worker would run (seed
+    order), the ``.h5`` files of the kept ones, their videos, the resume store and (workers,
+    nodes)."""
+    with session(plan.ray, plan.workers):
+        bundle = Bundle.put([p for f in plan.files for p in scene_paths(f)])
+        store = ResumeStore(out / f"{RESUME_PREFIX}{plan.dataset_name}", fingerprint(plan, bundle))
+        records = {int(k.split("_")[1]): episode_of(store.path(k)) for k in store.keys()}
+        last = plan.seed + plan.attempts()
+        walk = {"next": plan.seed, "kept": 0, "done": False}
+
+        def settled() -> bool:
+            """Walks the seeds that arrived in order: done once ``num`` are kept (or all
+            attempts ran), as one local worker stops."""
+            while not walk["done"] and walk["next"] < last and walk["next"] in records:
+                walk["kept"] += records[walk["next"]].kept
+                walk["next"] += 1
+                walk["done"] = walk["kept"] >= plan.num
+            return walk["done"] or walk["next"] >= last
+
+        def arrived(task, result) -> bool:
+            (_, seed), (episode, h5, meta, videos) = task, result
+            files = {**videos, "part.json": json.dumps(meta).encode()}
+            if h5 is not None:
+                files["part.h5"] = h5
+            save_episode(store, f"seed_{seed:06d}", episode, **files)
+            records[seed] = episode
+            if progress is not None:
+                progress(episode)
+            return settled()
+
+        if progress is not None:
+            for seed in sorted(records):
+                progress(records[seed])
+        ran = Ran()
+        if not settled():
+            todo = ((plan, s) for s in range(plan.seed, last) if s not in records)
+            run_tasks(_collect_seed, bundle, todo, in_flight(plan), arrived, ran)
+        ran_seeds = [records[s] for s in range(plan.seed, walk["next"])]
+        folders = [store.path(f"seed_{r.seed:06d}") for r in ran_seeds if r.kept]
+        parts = [f / "part.h5" for f in folders]
+        videos = [v for f in folders for v in sorted(f.glob("seed_*.mp4"))]
+    return ran_seeds, parts, videos, store, (max(ran.workers, 1), max(ran.nodes, 1))

@@ -28,9 +28,11 @@ Policies: :mod:`embodied_envs.pipelines.policies`.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import statistics
+import tempfile
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -38,8 +40,20 @@ from pathlib import Path
 
 import gymnasium as gym
 
+from embodied_envs.cluster import Ran, cached, run_tasks
 from embodied_envs.paths import atomic_output
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode, write_video
+from embodied_envs.pipelines.on_ray import (
+    RESUME_PREFIX,
+    Bundle,
+    ResumeStore,
+    episode_of,
+    fingerprint,
+    in_flight,
+    save_episode,
+    scene_paths,
+    session,
+)
 from embodied_envs.pipelines.policies import EvalError, Policy, load_policy, policy_driver
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 from embodied_envs.workers import WorkerError, run, started
@@ -186,6 +200,74 @@ def _run_episode(layout: str | tuple[str, ...], seed: int, video_dir: str) -> Ep
     return _RUNNER.run(layout, seed, Path(video_dir))
 
 
+# --- on Ray (pipelines/on_ray.py) ------------------------------------------------------------
+def _eval_episode(plan: EvalPlan, layout, seed: int):
+    """On a worker: the episode of ``seed`` in ``layout`` as a local worker runs it; the
+    episode and its video's bytes (None when none was kept)."""
+    runner = cached("eval", plan, lambda: EpisodeRunner(plan), EpisodeRunner.close)
+    with tempfile.TemporaryDirectory(prefix="embodied-envs-seed-") as tmp:
+        episode = runner.run(layout, seed, Path(tmp))
+        video = (Path(tmp) / episode.video).read_bytes() if episode.video else None
+    return episode, video
+
+
+def policy_file(spec: str) -> Path | None:
+    """The file a ``--policy`` value names (``file.py:factory``, a TorchScript file), if any."""
+    name = spec.rpartition(":")[0] if ":" in spec else spec
+    path = Path(name)
+    return path.resolve() if name.endswith((".py", ".pt", ".ts")) and path.is_file() else None
+
+
+def evaluate_on_ray(plan: EvalPlan, out: Path, progress):
+    """``plan``'s episodes on Ray, each video written under ``out/videos`` as it arrives: the
+    episodes (in task order), the resume store and (workers, nodes).
+
+    Raises:
+        Exception: what an episode raised on a worker, naming the driver's files and the
+            ``--policy`` value as given.
+    """
+    with session(plan.ray, plan.workers):
+        file = policy_file(plan.policy)
+        sent = plan
+        if file is not None:  # the policy's file travels with the job, named absolutely
+            sent = dataclasses.replace(plan, policy=plan.policy.replace(
+                plan.policy.rpartition(":")[0] or plan.policy, str(file), 1))  # fmt: skip
+        paths = [p for entry in plan.layouts for p in scene_paths(entry)]
+        bundle = Bundle.put(paths, [file] if file is not None else [])
+        store = ResumeStore(out / f"{RESUME_PREFIX}eval", fingerprint(plan, bundle))
+        tasks = plan.tasks()
+        keys = [f"{k:06d}" for k in range(len(tasks))]
+        key_of = dict(zip(tasks, keys, strict=True))
+        results = {k: episode_of(store.path(k)) for k in store.keys() if k in keys}
+        if progress is not None:
+            for key in sorted(results):
+                progress(results[key])
+
+        def arrived(task, result) -> bool:
+            episode, video = result
+            key = key_of[task[1:]]
+            if video is not None:
+                (out / "videos").mkdir(exist_ok=True)
+                with atomic_output(out / "videos" / episode.video) as tmp:
+                    tmp.write_bytes(video)
+            save_episode(store, key, episode)
+            results[key] = episode
+            if progress is not None:
+                progress(episode)
+            return False
+
+        ran = Ran()
+        todo = ((sent, *task) for k, task in zip(keys, tasks, strict=True) if k not in results)
+        try:
+            run_tasks(_eval_episode, bundle, todo, in_flight(plan), arrived, ran)
+        except Exception as e:  # the policy named as the user gave it, as a local run does
+            if sent is not plan:
+                e.args = tuple(a.replace(sent.policy, plan.policy) if isinstance(a, str) else a
+                               for a in e.args)  # fmt: skip
+            raise
+    return [results[k] for k in keys], store, (max(ran.workers, 1), max(ran.nodes, 1))
+
+
 # --- the whole evaluation ------------------------------------------------------------------
 def summarize(plan: EvalPlan, results: list[Episode]) -> dict:
     """Success rate with its 95% Wilson interval, overall and per layout, and lengths."""
@@ -285,9 +367,6 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
     out.mkdir(parents=True, exist_ok=True)
     store = None
     if plan.ray is not None:
-        # Ray only where a run asks for it
-        from embodied_envs.pipelines.on_ray import evaluate_on_ray
-
         results, store, ran = evaluate_on_ray(plan, out, progress)
     else:
         results, ran = _evaluate_here(plan, out / "videos", progress), (plan.workers, 1)
