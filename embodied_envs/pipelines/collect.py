@@ -35,18 +35,8 @@ from embodied_envs.cluster import Ran, cached, run_tasks
 from embodied_envs.datasets.recorder import EpisodeRecorder
 from embodied_envs.datasets.records import RECORD_KEY, scene_record
 from embodied_envs.paths import atomic_output
+from embodied_envs.pipelines import on_ray
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode
-from embodied_envs.pipelines.on_ray import (
-    RESUME_PREFIX,
-    Bundle,
-    ResumeStore,
-    episode_of,
-    fingerprint,
-    in_flight,
-    save_episode,
-    scene_paths,
-    session,
-)
 from embodied_envs.registration import ENTRY_ID, ENV_ID
 from embodied_envs.solvers.pick_place import SolverConfig
 from embodied_envs.workers import report, run, started
@@ -437,10 +427,10 @@ def collect_on_ray(plan: CollectPlan, out: Path, progress):
     """``plan``'s episodes on Ray: the records of the seeds one local worker would run (seed
     order), the ``.h5`` files of the kept ones, their videos, the resume store and (workers,
     nodes)."""
-    with session(plan.ray, plan.workers):
-        bundle = Bundle.put([p for f in plan.files for p in scene_paths(f)])
-        store = ResumeStore(out / f"{RESUME_PREFIX}{plan.dataset_name}", fingerprint(plan, bundle))
-        records = {int(k.split("_")[1]): episode_of(store.path(k)) for k in store.keys()}
+    with on_ray.session(plan.ray, plan.workers):
+        bundle = on_ray.Bundle.put([p for f in plan.files for p in on_ray.scene_paths(f)])
+        store = on_ray.resume_store(out, plan.dataset_name, plan, bundle)
+        records = {int(k.split("_")[1]): on_ray.episode_of(store.path(k)) for k in store.keys()}
         last = plan.seed + plan.attempts()
         walk = {"next": plan.seed, "kept": 0, "done": False}
 
@@ -458,7 +448,7 @@ def collect_on_ray(plan: CollectPlan, out: Path, progress):
             files = {**videos, "part.json": json.dumps(meta).encode()}
             if h5 is not None:
                 files["part.h5"] = h5
-            save_episode(store, f"seed_{seed:06d}", episode, **files)
+            on_ray.save_episode(store, f"seed_{seed:06d}", episode, **files)
             records[seed] = episode
             if progress is not None:
                 progress(episode)
@@ -470,7 +460,7 @@ def collect_on_ray(plan: CollectPlan, out: Path, progress):
         ran = Ran()
         if not settled():
             todo = ((plan, s) for s in range(plan.seed, last) if s not in records)
-            run_tasks(_collect_seed, bundle, todo, in_flight(plan), arrived, ran)
+            run_tasks(_collect_seed, bundle, todo, on_ray.in_flight(plan), arrived, ran)
         ran_seeds = [records[s] for s in range(plan.seed, walk["next"])]
         folders = [store.path(f"seed_{r.seed:06d}") for r in ran_seeds if r.kept]
         parts = [f / "part.h5" for f in folders]

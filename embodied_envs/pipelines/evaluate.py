@@ -42,18 +42,8 @@ import gymnasium as gym
 
 from embodied_envs.cluster import Ran, cached, run_tasks
 from embodied_envs.paths import atomic_output
+from embodied_envs.pipelines import on_ray
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode, write_video
-from embodied_envs.pipelines.on_ray import (
-    RESUME_PREFIX,
-    Bundle,
-    ResumeStore,
-    episode_of,
-    fingerprint,
-    in_flight,
-    save_episode,
-    scene_paths,
-    session,
-)
 from embodied_envs.pipelines.policies import EvalError, Policy, load_policy, policy_driver
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
 from embodied_envs.workers import WorkerError, run, started
@@ -226,19 +216,19 @@ def evaluate_on_ray(plan: EvalPlan, out: Path, progress):
         Exception: what an episode raised on a worker, naming the driver's files and the
             ``--policy`` value as given.
     """
-    with session(plan.ray, plan.workers):
+    with on_ray.session(plan.ray, plan.workers):
         file = policy_file(plan.policy)
         sent = plan
         if file is not None:  # the policy's file travels with the job, named absolutely
             sent = dataclasses.replace(plan, policy=plan.policy.replace(
                 plan.policy.rpartition(":")[0] or plan.policy, str(file), 1))  # fmt: skip
-        paths = [p for entry in plan.layouts for p in scene_paths(entry)]
-        bundle = Bundle.put(paths, [file] if file is not None else [])
-        store = ResumeStore(out / f"{RESUME_PREFIX}eval", fingerprint(plan, bundle))
+        paths = [p for entry in plan.layouts for p in on_ray.scene_paths(entry)]
+        bundle = on_ray.Bundle.put(paths, [file] if file is not None else [])
+        store = on_ray.resume_store(out, "eval", plan, bundle)
         tasks = plan.tasks()
         keys = [f"{k:06d}" for k in range(len(tasks))]
         key_of = dict(zip(tasks, keys, strict=True))
-        results = {k: episode_of(store.path(k)) for k in store.keys() if k in keys}
+        results = {k: on_ray.episode_of(store.path(k)) for k in store.keys() if k in keys}
         if progress is not None:
             for key in sorted(results):
                 progress(results[key])
@@ -250,7 +240,7 @@ def evaluate_on_ray(plan: EvalPlan, out: Path, progress):
                 (out / "videos").mkdir(exist_ok=True)
                 with atomic_output(out / "videos" / episode.video) as tmp:
                     tmp.write_bytes(video)
-            save_episode(store, key, episode)
+            on_ray.save_episode(store, key, episode)
             results[key] = episode
             if progress is not None:
                 progress(episode)
@@ -259,7 +249,7 @@ def evaluate_on_ray(plan: EvalPlan, out: Path, progress):
         ran = Ran()
         todo = ((sent, *task) for k, task in zip(keys, tasks, strict=True) if k not in results)
         try:
-            run_tasks(_eval_episode, bundle, todo, in_flight(plan), arrived, ran)
+            run_tasks(_eval_episode, bundle, todo, on_ray.in_flight(plan), arrived, ran)
         except Exception as e:  # the policy named as the user gave it, as a local run does
             if sent is not plan:
                 e.args = tuple(a.replace(sent.policy, plan.policy) if isinstance(a, str) else a

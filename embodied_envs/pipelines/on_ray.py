@@ -60,6 +60,12 @@ def fingerprint(plan, bundle: Bundle) -> dict:
     return {"plan": settings, "files_sha256": bundle.digest}
 
 
+def resume_store(out: Path, name: str, plan, bundle: Bundle) -> ResumeStore:
+    """The store of a run of ``plan`` named ``name`` in ``out`` (what an interrupted run of the
+    same plan and files received is kept)."""
+    return ResumeStore(out / f"{RESUME_PREFIX}{name}", fingerprint(plan, bundle))
+
+
 def in_flight(plan) -> int:
     """The tasks a plan runs at once: its ``workers``, else the cluster's CPUs."""
     return plan.workers or cluster_cpus()
