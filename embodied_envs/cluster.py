@@ -39,6 +39,7 @@ import embodied_envs
 from embodied_envs.paths import atomic_output
 
 RAY_LOCAL = "local"  # --ray without an address: a Ray of this machine, started for the command
+WORKER_NICENESS = 0  # a local Ray's worker processes: the command's priority (Ray's default 15)
 TASK_RETRIES = 3  # runs again of a task whose worker process died (Ray's max_retries)
 LOCAL_OBJECT_STORE_BYTES = 256 * 2**20  # a local Ray's object store (job files, results)
 MAX_BUNDLE_BYTES = 128 * 2**20  # the job's files, zipped: held once per node in the store
@@ -70,12 +71,17 @@ def ray_session(address: str | None, cpus: int | None = None):
         runtime_env={"py_modules": [package]},
     )
     if address is None and not os.environ.get("RAY_ADDRESS"):
+        # a new Ray even where a cluster runs ("local"); its workers at the command's priority,
+        # as --workers processes (Ray's default nice 15 starves them on a busy machine: their
+        # imports took 5-7x a plain process's)
+        address = "local"
         kwargs.update(num_cpus=cpus, include_dashboard=False,
-                      object_store_memory=LOCAL_OBJECT_STORE_BYTES)  # fmt: skip
+                      object_store_memory=LOCAL_OBJECT_STORE_BYTES,
+                      _system_config={"worker_niceness": WORKER_NICENESS})  # fmt: skip
     try:
         ray.init(address=address, **kwargs)
     except ConnectionError as e:
-        where = address or os.environ.get("RAY_ADDRESS")
+        where = os.environ.get("RAY_ADDRESS") if address is None else address
         raise ClusterError(
             f"--ray {where}: no running Ray cluster there ({' '.join(str(e).split())}). Fix: "
             "start one (ray start --head), give its address, or give --ray without a value for "
