@@ -6,6 +6,9 @@ import argparse
 import os
 from pathlib import Path
 
+from tqdm import tqdm
+
+from embodied_envs.cluster import RAY_LOCAL
 from embodied_envs.config import MAX_IMAGE_SIDE, MAX_SEED, ConfigError, load_config
 from embodied_envs.layout.sets import LayoutSet, spec_name
 from embodied_envs.paths import default_layout
@@ -116,6 +119,48 @@ LAYOUT_HELP = "layout file(s); a folder or glob is a layout set (each episode dr
 def note_workers(workers: int) -> None:
     if workers > (os.cpu_count() or 1):
         print(f"note: --workers {workers} is more than this machine's {os.cpu_count()} cores")
+
+
+def add_ray_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--ray",
+        nargs="?",
+        const=RAY_LOCAL,
+        default=None,
+        metavar="ADDRESS",
+        help="run the episodes as Ray tasks (docs/scaling.md): without a value on a Ray of this "
+        "machine started for the command (or the cluster RAY_ADDRESS names); auto or host:port: "
+        "a running cluster. --workers then caps the episodes running at once (default: the "
+        "cluster's CPUs); an interrupted run resumes when run again with the same --out",
+    )
+
+
+def ran_on(workers: int, nodes: int) -> str:
+    """Where a Ray run's episodes ran, in words (after a command's result line)."""
+    return f", {workers} Ray worker{'s' * (workers != 1)} on {nodes} node{'s' * (nodes != 1)}"
+
+
+class EpisodeBar:
+    """One progress bar over a command's episodes, with the successes so far; called with
+    each episode as it ends."""
+
+    def __init__(self, total: int, desc: str):
+        self.bar = tqdm(total=total, desc=desc, unit="episode")
+        self.successes = 0
+
+    def __call__(self, episode) -> None:
+        self.successes += bool(episode.success)
+        self.bar.set_postfix_str(f"success {self.successes}/{self.bar.n + 1}", refresh=False)
+        self.bar.update(1)
+
+    def close(self) -> None:
+        self.bar.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def add_config_argument(parser: argparse.ArgumentParser) -> None:

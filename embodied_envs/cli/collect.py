@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tqdm import tqdm
-
 from embodied_envs.cli.args import (
     LAYOUT_HELP,
+    EpisodeBar,
     add_config_argument,
+    add_ray_argument,
     check_seed_span,
     checked_layouts,
     env_config,
@@ -16,9 +16,11 @@ from embodied_envs.cli.args import (
     layout_value,
     note_workers,
     positive_int,
+    ran_on,
     seed_int,
     writable_dir,
 )
+from embodied_envs.cluster import ClusterError
 from embodied_envs.robots import EXPERT_MODES
 
 # env keywords collect sets itself: a --config file may not set them
@@ -42,8 +44,8 @@ def add_parser(sub) -> None:
             "format per --layout value: OUT/<layout stem>/trajectory.h5, trajectory.json, "
             "summary.json (a folder or glob: one dataset over the layout set, named after the "
             "folder; each episode's seed draws its layout). "
-            "Shards: collect disjoint seed ranges (--seed) on several machines and join them "
-            "with python -m mani_skill.trajectory.merge_trajectory."
+            "Several machines: --ray on a Ray cluster (docs/scaling.md), or disjoint seed ranges "
+            "(--seed) joined with python -m mani_skill.trajectory.merge_trajectory."
         ),
     )
     p.add_argument("--layout", nargs="+", default=None, help=LAYOUT_HELP)
@@ -65,6 +67,7 @@ def add_parser(sub) -> None:
         help="with --only-success: seeds tried at most (default 2 x --num)",
     )
     p.add_argument("--workers", type=positive_int, default=None, help="processes (default 1)")
+    add_ray_argument(p)
     p.add_argument("--video", action="store_true", help="also an MP4 per kept episode")
     p.add_argument(
         "--fixed-hand",
@@ -86,10 +89,11 @@ def add_parser(sub) -> None:
 def cmd_collect(args) -> int:
     # the pipeline imports the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.collect import CollectError, CollectPlan, owned_output
+    from embodied_envs.pipelines.on_ray import session
 
     config = env_config(args.config, OWNED_KEYS)
     layouts = checked_layouts(args.layout)
-    workers = args.workers or 1
+    workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs
     # the seeds every worker will use (the same for every layout) are valid seeds
     blocks = CollectPlan(
         layout="", num=args.num, seed=args.seed, only_success=args.only_success,
@@ -98,9 +102,10 @@ def cmd_collect(args) -> int:
     last = max(s for seeds, _ in blocks for s in seeds)
     check_seed_span(args.seed, last - args.seed + 1, "episode seeds")
     writable_dir(args.out)
-    note_workers(workers)
+    if not args.ray:
+        note_workers(workers)
     try:
-        with owned_output(args.out):  # one run writes to --out at a time
+        with owned_output(args.out), session(args.ray, workers):  # one run per --out
             failed = 0
             for name, files in layouts:
                 failed += not _collect_one(name, files, args, workers, config)
@@ -131,21 +136,24 @@ def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
         fixed_hand=args.fixed_hand,
         control_mode=args.control_mode,
         env_kwargs=config,
+        ray=args.ray,
     )
-    with tqdm(total=plan.attempts(), desc=label, unit="episode") as bar:
+    with EpisodeBar(plan.attempts(), label) as bar:
         try:
-            s = collect(plan, args.out, progress=lambda r: bar.update(1))
+            s = collect(plan, args.out, progress=bar)
         except CollectError as e:
             bar.close()
             print(f"error: {e}")
             return False
+        except ClusterError:
+            raise
         except Exception as e:  # a worker's env or solver failed: one line, not a traceback
             bar.close()
             print(failure_line(f"collecting {label} failed", e))
             return False
     print(
         f"{label}: {s.kept} demonstrations ({s.successes}/{s.attempted} successful, "
-        f"{s.success_rate:.0%}), mean {s.steps_mean:.0f} steps, {s.wall_time_s:.0f} s -> "
-        f"{args.out / name}"
+        f"{s.success_rate:.0%}), mean {s.steps_mean:.0f} steps, {s.wall_time_s:.0f} s"
+        f"{ran_on(s.workers, s.nodes) if args.ray else ''} -> {args.out / name}"
     )
     return True

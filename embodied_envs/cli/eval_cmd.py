@@ -5,12 +5,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from tqdm import tqdm
-
 from embodied_envs.cli.args import (
     DEBUG_ENV,
     LAYOUT_HELP,
+    EpisodeBar,
     add_config_argument,
+    add_ray_argument,
     check_seed_span,
     checked_layouts,
     env_config,
@@ -18,9 +18,11 @@ from embodied_envs.cli.args import (
     layout_value,
     note_workers,
     positive_int,
+    ran_on,
     seed_int,
     writable_dir,
 )
+from embodied_envs.cluster import ClusterError
 from embodied_envs.pipelines.evaluate import VIDEO_CHOICES, EvalError, EvalPlan, evaluate
 from embodied_envs.pipelines.policies import BUILTIN_POLICIES
 
@@ -84,7 +86,8 @@ def add_parser(sub) -> None:
         help="with --video all|fail: film only the first N episodes of each layout (seeds "
         "S .. S+N-1; default 2). A filmed episode costs ~50x an unfilmed one on the CPU",
     )
-    p.add_argument("--workers", type=positive_int, default=1, help="processes")
+    p.add_argument("--workers", type=positive_int, default=None, help="processes (default 1)")
+    add_ray_argument(p)
     add_config_argument(p)
     p.set_defaults(func=cmd_eval, builds_env=True)
 
@@ -98,7 +101,9 @@ def cmd_eval(args) -> int:
         )
     check_seed_span(args.seed, args.episodes, "episodes")
     writable_dir(args.out)
-    note_workers(args.workers)
+    workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs
+    if not args.ray:
+        note_workers(workers)
     plan = EvalPlan(
         policy=args.policy,
         layouts=tuple(layout_value(files) for _, files in layouts),
@@ -108,20 +113,23 @@ def cmd_eval(args) -> int:
         control_mode=args.control_mode,
         video=args.video,
         video_episodes=args.video_episodes,
-        workers=args.workers,
+        workers=workers,
         env_kwargs=config
         if args.max_episode_steps is None
         else dict(config, max_episode_steps=args.max_episode_steps),
+        ray=args.ray,
     )
-    with tqdm(total=len(plan.tasks()), desc=f"eval {args.policy}", unit="episode") as bar:
+    with EpisodeBar(len(plan.tasks()), f"eval {args.policy}") as bar:
         try:
-            s = evaluate(plan, args.out, progress=lambda r: bar.update(1))
+            s = evaluate(plan, args.out, progress=bar)
         except EvalError as e:
             bar.close()
             if e.__cause__ is not None and os.environ.get(DEBUG_ENV):
                 raise  # the policy's own traceback
             print(f"error: {e}")
             return 1
+        except ClusterError:
+            raise
         except Exception as e:  # an env or a policy failed in a worker: one line
             bar.close()
             print(failure_line("evaluation failed", e))
@@ -130,7 +138,8 @@ def cmd_eval(args) -> int:
     print(
         f"{args.policy}: {s['successes']}/{s['episodes']} successful ({s['success_rate']:.0%}, "
         f"95% interval {lo:.0%}-{hi:.0%}), fail {s['fail_rate']:.0%}, median "
-        f"{s['steps_median']:.0f} steps -> {args.out}"
+        f"{s['steps_median']:.0f} steps{ran_on(s['workers'], s['nodes']) if args.ray else ''} "
+        f"-> {args.out}"
     )
     for layout, b in s["per_layout"].items():
         print(f"  {Path(layout).name}: {b['successes']}/{b['episodes']} ({b['success_rate']:.0%})")

@@ -15,6 +15,7 @@ from embodied_envs.cli import (
     replay,
     splat_cmds,
 )
+from embodied_envs.cluster import ClusterError
 from embodied_envs.config import ConfigError
 from embodied_envs.datasets.records import DatasetError
 from embodied_envs.layout import LayoutError, PlacementError
@@ -49,7 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except (
-        ConfigError, DatasetError, LayoutError, PlacementError, SplatFileError, WorkerError
+        ClusterError, ConfigError, DatasetError, LayoutError, PlacementError, SplatFileError,
+        WorkerError,
     ) as e:  # fmt: skip
         print(f"error: {e}", file=sys.stderr)
         return 1

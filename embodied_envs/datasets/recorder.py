@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 from mani_skill.utils import common
-from mani_skill.utils.wrappers.record import RecordEpisode
+from mani_skill.utils.io_utils import dump_json
+from mani_skill.utils.wrappers.record import RecordEpisode, clean_trajectories
 
 # the per-step fields of ManiSkill's trajectory buffer (``record.Step``), in its order
 FIELDS = ("state", "observation", "action", "reward", "terminated", "truncated", "done",
@@ -77,6 +78,17 @@ class EpisodeRecorder(RecordEpisode):
     def close(self):
         self._fold()
         return super().close()
+
+    def close_files(self) -> None:
+        """Writes and closes this recorder's ``.h5`` and ``.json`` as ``close`` does, leaving
+        the env open (``collect --ray``: a new recorder wraps it for the next task)."""
+        self._fold()
+        if self.save_trajectory and not self._closed:
+            self._closed = True
+            if self.clean_on_close:
+                clean_trajectories(self._h5_file, self._json_data)
+            dump_json(self._json_path, self._json_data, indent=2)
+            self._h5_file.close()
 
 
 def _copied(value):

@@ -22,15 +22,23 @@ class DatasetError(RuntimeError):
     """A dataset that cannot be replayed here (names the file and the fix)."""
 
 
+def scene_folders(layout_file) -> list[tuple[Path, dict[str, Path]]]:
+    """Each layout file of ``layout_file`` (one, or a set's, in order) with its asset folders
+    (node -> folder, sorted by node): every file its episodes read."""
+    out = []
+    for file in layout_files(layout_file):
+        layout = load_layout(file, check_files=False)
+        out.append((file, {node: layout.asset_dir(node) for node in sorted(layout.assets)}))
+    return out
+
+
 def layout_content_hash(layout_file) -> str:
     """SHA-256 of the layout files (one, or a set's, in order) and of every file in their asset
     folders (names and bytes; an asset pool's members are files of its folder)."""
     digest = hashlib.sha256()
-    for file in layout_files(layout_file):
-        layout = load_layout(file, check_files=False)
+    for file, folders in scene_folders(layout_file):
         digest.update(file.read_bytes())
-        for node in sorted(layout.assets):
-            folder = layout.asset_dir(node)
+        for node, folder in folders.items():
             for path in sorted(p for p in folder.rglob("*") if p.is_file()):
                 digest.update(f"{node}/{path.relative_to(folder).as_posix()}\0".encode())
                 digest.update(path.read_bytes())

@@ -8,6 +8,7 @@ structs directly and give the same values:
 - :func:`cpu_state_dict`: ``BaseEnv.get_state_dict`` in one pass (``RecordEpisode`` records it
   every step; ManiSkill's pass cost 0.12 of 1.7 ms per recorded control step);
 - :func:`positions`: an actor's position per env as a numpy array;
+- :func:`raw_poses`: actors' raw poses in one array (the task's starts at a reset);
 - :func:`restart_sleep_timers`: every moving body woken, as in a new scene.
 
 They read ManiSkill's private fields through ``embodied_envs/internals.py`` (the one module
@@ -28,6 +29,16 @@ from embodied_envs.internals import bodies, entities, link_components, px_articu
 def positions(actor) -> np.ndarray:
     """``actor.pose.p`` as a numpy array ``(num_envs, 3)``, read from its SAPIEN entities."""
     return np.array([entity.pose.p for entity in entities(actor)])
+
+
+def raw_poses(actors) -> np.ndarray:
+    """``(1, len(actors), 7)``: each actor's ``pose.raw_pose`` of the one env (position, then
+    scalar-first quaternion), read from its SAPIEN entities in one array."""
+    parts = []
+    for actor in actors:
+        pose = entities(actor)[0].pose
+        parts += (pose.p, pose.q)
+    return np.concatenate(parts).astype(np.float32).reshape(1, -1, 7)
 
 
 def cpu_state_dict(env) -> dict:

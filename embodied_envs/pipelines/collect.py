@@ -18,6 +18,7 @@ import dataclasses
 import fcntl
 import functools
 import json
+import logging
 import math
 import os
 import shutil
@@ -30,9 +31,11 @@ from pathlib import Path
 import gymnasium as gym
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
 
+from embodied_envs.cluster import Ran, cached, run_tasks
 from embodied_envs.datasets.recorder import EpisodeRecorder
 from embodied_envs.datasets.records import RECORD_KEY, scene_record
 from embodied_envs.paths import atomic_output
+from embodied_envs.pipelines import on_ray
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode
 from embodied_envs.registration import ENTRY_ID, ENV_ID
 from embodied_envs.solvers.pick_place import SolverConfig
@@ -56,6 +59,7 @@ FIXED_HAND_DESC = (
     "(collect --fixed-hand: demos for pd_ee_delta_pos)"
 )
 OBS_MODES = ("none", "state", "rgb", "rgbd")
+MANISKILL_LOGGER = "mani_skill "  # ManiSkill's logger's name (mani_skill/utils/logging_utils.py)
 
 
 class CollectError(RuntimeError):
@@ -83,6 +87,9 @@ class CollectPlan:
             each step's joint targets as that mode's action, graded on the run they make.
         env_kwargs: further ``gym.make`` keywords (from ``--config`` files), recorded with the
             dataset's ``env_kwargs``.
+        ray: None: on this machine; else on Ray (``pipelines/on_ray.py``): ``local`` (a Ray
+            started for the run), ``auto`` or a cluster's address; ``workers`` then caps the
+            episodes running at once (default: the cluster's CPUs).
     """
 
     layout: str | tuple[str, ...]
@@ -98,6 +105,7 @@ class CollectPlan:
     fixed_hand: bool = False
     control_mode: str = "pd_joint_pos"
     env_kwargs: dict = field(default_factory=dict)
+    ray: str | None = None
 
     @property
     def files(self) -> list[str]:
@@ -137,15 +145,14 @@ class LayoutSummary:
     steps_max: int
     wall_time_s: float
     seeds: list[int]
+    workers: int = 1  # processes that ran episodes
+    nodes: int = 1  # machines they ran on
     files: list[str] = field(default_factory=list)
 
 
-def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name: str) -> list:
-    """One worker's block of seeds: one env recorded by ManiSkill's RecordEpisode
-    (``datasets/recorder.py``: its files, cheaper per step) into
-    ``out_dir/name.h5``; a record per episode is reported (the parent's progress bar) and all
-    are returned."""
-    env = gym.make(
+def make_env(plan: CollectPlan):
+    """The env a worker collects ``plan`` in (one CPU env, not yet recorded)."""
+    return gym.make(
         ENV_ID,
         **plan.env_kwargs,
         layout_file=plan.env_layout,
@@ -155,7 +162,12 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         render_mode=film_mode(plan.files) if plan.video else None,
         sim_backend="physx_cpu",
     )
-    env = EpisodeRecorder(
+
+
+def recorder(env, plan: CollectPlan, out_dir: str, name: str) -> EpisodeRecorder:
+    """``env`` recorded by ManiSkill's RecordEpisode (``datasets/recorder.py``: its files,
+    cheaper per step) into ``out_dir/name.h5``."""
+    return EpisodeRecorder(
         env,
         output_dir=out_dir,
         trajectory_name=name,
@@ -166,16 +178,30 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
         source_desc=SOURCE_DESC + (FIXED_HAND_DESC if plan.fixed_hand else ""),
         video_fps=int(round(1 / env.unwrapped.control_timestep)),
     )
+
+
+def record_seed(env: EpisodeRecorder, plan: CollectPlan, seed: int) -> Episode:
+    """The episode of ``seed``, by the expert, recorded by ``env`` (kept in its file when it
+    succeeded or ``plan`` keeps every episode; with its video when filming): what every worker,
+    local or on Ray, does per seed."""
     drive = functools.partial(expert, config=SolverConfig(fixed_hand=plan.fixed_hand))
+    episode = run_episode(env, seed, drive)
+    episode.kept = episode.success or not plan.only_success
+    env.flush_trajectory(save=episode.kept)
+    if plan.video:
+        env.flush_video(name=f"seed_{seed:06d}", save=episode.kept)
+    return episode
+
+
+def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name: str) -> list:
+    """One worker's block of seeds: one env recorded into ``out_dir/name.h5``; a record per
+    episode is reported (the parent's progress bar) and all are returned."""
+    env = recorder(make_env(plan), plan, out_dir, name)
     started()
     kept, records = 0, []
     try:
         for seed in seeds:
-            episode = run_episode(env, seed, drive)
-            episode.kept = episode.success or not plan.only_success
-            env.flush_trajectory(save=episode.kept)
-            if plan.video:
-                env.flush_video(name=f"seed_{seed:06d}", save=episode.kept)
+            episode = record_seed(env, plan, seed)
             kept += episode.kept
             records.append(episode)
             report(asdict(episode))
@@ -184,6 +210,17 @@ def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name:
     finally:
         env.close()
     return records
+
+
+@contextlib.contextmanager
+def _quiet(logger: logging.Logger):
+    """``logger`` at WARNING within the block."""
+    level = logger.level
+    logger.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 WORK_PREFIX = ".collect-"  # work folders in --out while a dataset is being made
@@ -280,66 +317,152 @@ def _collect_into(plan: CollectPlan, out: Path, target: Path, progress):
     to ``target`` when complete."""
     work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{plan.dataset_name}.", dir=out))
     t0 = time.perf_counter()
-    layout = plan.layout if isinstance(plan.layout, str) else f"{plan.dataset_name} (a layout set)"
     try:
-        tasks = [
-            (plan, seeds, quota, str(work), f"part{k:03d}")
-            for k, (seeds, quota) in enumerate(plan.blocks())
-        ]
-        parts = run(
-            _worker,
-            tasks,
-            len(tasks) if plan.workers > 1 else 1,
-            on_progress=None if progress is None else lambda rec: progress(Episode(**rec)),
-        )
-        records = [r for part in parts for r in part]
-        records.sort(key=lambda r: r.seed)
-        kept = [r for r in records if r.kept]
-        successes = sum(r.success for r in records)
-        if plan.only_success and len(kept) < plan.num:
-            raise CollectError(
-                f"{layout}: {len(kept)} of {plan.num} successful demonstrations after "
-                f"{len(records)} attempts (success rate {successes / max(len(records), 1):.0%})."
-                " Fix: raise --max-attempts, or check the layout with `embodied-envs demo`."
-            )
-        parts = sorted(work.glob("part*.h5"))
-        staged = work / "trajectory.h5"
-        merge_trajectories(str(staged), [str(p) for p in parts])
-        meta_path = staged.with_suffix(".json")
-        meta = json.loads(meta_path.read_text())
-        meta[RECORD_KEY] = scene_record(plan.files)  # replay checks the scene is unchanged
-        # gymnasium's module:id form: ManiSkill's replay_trajectory and baselines import the
-        # plugin themselves
-        meta["env_info"]["env_id"] = ENTRY_ID
-        drawn = {r.seed: r for r in kept}
-        for episode in meta["episodes"]:  # what each episode was asked, and where
-            r = drawn[episode["episode_seed"]]
-            episode.update(instruction=r.instruction, layout_file=r.layout)
-        with atomic_output(meta_path) as tmp:
-            tmp.write_text(json.dumps(meta, indent=2))
-        steps = [r.steps for r in kept] or [0]
-        summary = LayoutSummary(
-            layout=plan.env_layout,
-            env_id=ENV_ID,
-            attempted=len(records),
-            kept=len(kept),
-            successes=successes,
-            success_rate=successes / max(len(records), 1),
-            failures_by_stage=dict(Counter(r.failure for r in records if r.failure)),
-            steps_mean=sum(steps) / len(steps),
-            steps_max=max(steps),
-            wall_time_s=round(time.perf_counter() - t0, 2),
-            seeds=[r.seed for r in kept],
-            files=["trajectory.h5", "trajectory.json", "summary.json"],
-        )
-        (work / "summary.json").write_text(json.dumps(asdict(summary), indent=2))
-        staging = work / "dataset"
-        staging.mkdir()
-        for name in summary.files:
-            (work / name).replace(staging / name)
-        for video in sorted(work.glob("seed_*.mp4")):
-            video.replace(staging / video.name)
-        staging.rename(target)  # a folder that appeared meanwhile is not replaced
+        if plan.ray is not None:
+            records, parts, videos, store, ran = collect_on_ray(plan, out, progress)
+        else:
+            records, ran = _collect_here(plan, work, progress)
+            parts, videos = sorted(work.glob("part*.h5")), sorted(work.glob("seed_*.mp4"))
+            store = None
+        summary = _write_dataset(plan, work, target, records, parts, videos, t0, ran)
+        if store is not None:
+            store.remove()
         return summary
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+def _collect_here(plan: CollectPlan, work: Path, progress) -> tuple[list[Episode], tuple]:
+    """The episodes on this machine (``workers`` processes), recorded into ``work``: their
+    records in seed order and (workers, nodes)."""
+    tasks = [
+        (plan, seeds, quota, str(work), f"part{k:03d}")
+        for k, (seeds, quota) in enumerate(plan.blocks())
+    ]
+    parts = run(
+        _worker,
+        tasks,
+        len(tasks) if plan.workers > 1 else 1,
+        on_progress=None if progress is None else lambda rec: progress(Episode(**rec)),
+    )
+    records = sorted((r for part in parts for r in part), key=lambda r: r.seed)
+    return records, (len(tasks), 1)
+
+
+def _write_dataset(plan, work, target, records, parts, videos, t0, ran) -> LayoutSummary:
+    """The dataset of the episodes ``records`` (seed order; ``parts``: the files their kept
+    ones were recorded in, in seed order; ``videos``) made in ``work`` and renamed to
+    ``target``; ``ran``: (workers, nodes)."""
+    layout = plan.layout if isinstance(plan.layout, str) else f"{plan.dataset_name} (a layout set)"
+    kept = [r for r in records if r.kept]
+    successes = sum(r.success for r in records)
+    if plan.only_success and len(kept) < plan.num:
+        raise CollectError(
+            f"{layout}: {len(kept)} of {plan.num} successful demonstrations after "
+            f"{len(records)} attempts (success rate {successes / max(len(records), 1):.0%})."
+            " Fix: raise --max-attempts, or check the layout with `embodied-envs demo`."
+        )
+    staged = work / "trajectory.h5"
+    with _quiet(logging.getLogger(MANISKILL_LOGGER)):  # its INFO line per part: one per seed
+        merge_trajectories(str(staged), [str(p) for p in parts])
+    meta_path = staged.with_suffix(".json")
+    meta = json.loads(meta_path.read_text())
+    meta[RECORD_KEY] = scene_record(plan.files)  # replay checks the scene is unchanged
+    # gymnasium's module:id form: ManiSkill's replay_trajectory and baselines import the
+    # plugin themselves
+    meta["env_info"]["env_id"] = ENTRY_ID
+    drawn = {r.seed: r for r in kept}
+    for episode in meta["episodes"]:  # what each episode was asked, and where
+        r = drawn[episode["episode_seed"]]
+        episode.update(instruction=r.instruction, layout_file=r.layout)
+    with atomic_output(meta_path) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2))
+    steps = [r.steps for r in kept] or [0]
+    summary = LayoutSummary(
+        layout=plan.env_layout,
+        env_id=ENV_ID,
+        attempted=len(records),
+        kept=len(kept),
+        successes=successes,
+        success_rate=successes / max(len(records), 1),
+        failures_by_stage=dict(Counter(r.failure for r in records if r.failure)),
+        steps_mean=sum(steps) / len(steps),
+        steps_max=max(steps),
+        wall_time_s=round(time.perf_counter() - t0, 2),
+        seeds=[r.seed for r in kept],
+        workers=ran[0],
+        nodes=ran[1],
+        files=["trajectory.h5", "trajectory.json", "summary.json"],
+    )
+    (work / "summary.json").write_text(json.dumps(asdict(summary), indent=2))
+    staging = work / "dataset"
+    staging.mkdir()
+    for name in summary.files:
+        (work / name).replace(staging / name)
+    for video in videos:
+        shutil.copyfile(video, staging / video.name)
+    staging.rename(target)  # a folder that appeared meanwhile is not replaced
+    return summary
+
+
+# --- on Ray (pipelines/on_ray.py) ------------------------------------------------------------
+def _collect_seed(plan: CollectPlan, seed: int):
+    """On a worker: the episode of ``seed`` recorded as the local workers record it; the
+    episode, its ``.h5`` bytes (None when not kept), its ``.json`` and its videos."""
+    env = cached("collect", plan, lambda: make_env(plan), lambda e: e.close())
+    with tempfile.TemporaryDirectory(prefix="embodied-envs-seed-") as tmp:
+        rec = recorder(env, plan, tmp, "part")
+        try:
+            episode = record_seed(rec, plan, seed)
+        finally:
+            rec.close_files()
+        folder = Path(tmp)
+        h5 = (folder / "part.h5").read_bytes() if episode.kept else None
+        meta = json.loads((folder / "part.json").read_text())
+        videos = {p.name: p.read_bytes() for p in folder.glob("seed_*.mp4")}
+    return episode, h5, meta, videos
+
+
+def collect_on_ray(plan: CollectPlan, out: Path, progress):
+    """``plan``'s episodes on Ray: the records of the seeds one local worker would run (seed
+    order), the ``.h5`` files of the kept ones, their videos, the resume store and (workers,
+    nodes)."""
+    with on_ray.session(plan.ray, plan.workers):
+        bundle = on_ray.Bundle.put([p for f in plan.files for p in on_ray.scene_paths(f)])
+        store = on_ray.resume_store(out, plan.dataset_name, plan, bundle)
+        records = {int(k.split("_")[1]): on_ray.episode_of(store.path(k)) for k in store.keys()}
+        last = plan.seed + plan.attempts()
+        walk = {"next": plan.seed, "kept": 0, "done": False}
+
+        def settled() -> bool:
+            """Walks the seeds that arrived in order: done once ``num`` are kept (or all
+            attempts ran), as one local worker stops."""
+            while not walk["done"] and walk["next"] < last and walk["next"] in records:
+                walk["kept"] += records[walk["next"]].kept
+                walk["next"] += 1
+                walk["done"] = walk["kept"] >= plan.num
+            return walk["done"] or walk["next"] >= last
+
+        def arrived(task, result) -> bool:
+            (_, seed), (episode, h5, meta, videos) = task, result
+            files = {**videos, "part.json": json.dumps(meta).encode()}
+            if h5 is not None:
+                files["part.h5"] = h5
+            on_ray.save_episode(store, f"seed_{seed:06d}", episode, **files)
+            records[seed] = episode
+            if progress is not None:
+                progress(episode)
+            return settled()
+
+        if progress is not None:
+            for seed in sorted(records):
+                progress(records[seed])
+        ran = Ran()
+        if not settled():
+            todo = ((plan, s) for s in range(plan.seed, last) if s not in records)
+            run_tasks(_collect_seed, bundle, todo, on_ray.in_flight(plan), arrived, ran)
+        ran_seeds = [records[s] for s in range(plan.seed, walk["next"])]
+        folders = [store.path(f"seed_{r.seed:06d}") for r in ran_seeds if r.kept]
+        parts = [f / "part.h5" for f in folders]
+        videos = [v for f in folders for v in sorted(f.glob("seed_*.mp4"))]
+    return ran_seeds, parts, videos, store, (max(ran.workers, 1), max(ran.nodes, 1))

@@ -28,9 +28,11 @@ Policies: :mod:`embodied_envs.pipelines.policies`.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import statistics
+import tempfile
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -38,7 +40,9 @@ from pathlib import Path
 
 import gymnasium as gym
 
+from embodied_envs.cluster import Ran, cached, run_tasks
 from embodied_envs.paths import atomic_output
+from embodied_envs.pipelines import on_ray
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode, write_video
 from embodied_envs.pipelines.policies import EvalError, Policy, load_policy, policy_driver
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
@@ -65,8 +69,11 @@ class EvalPlan:
             ``none`` (nothing is filmed).
         video_episodes: the first episodes of each entry of ``layouts`` (seeds ``seed`` ..
             ``seed + video_episodes - 1``) that are filmed; later ones are not rendered.
-        workers: processes (1: in this process).
+        workers: processes (1: in this process); with ``ray``, the episodes running at once
+            (0: the cluster's CPUs).
         env_kwargs: further ``gym.make`` keywords (``--config`` files).
+        ray: None: on this machine; else on Ray (``pipelines/on_ray.py``): ``local`` (a Ray
+            started for the run), ``auto`` or a cluster's address.
     """
 
     policy: str
@@ -79,6 +86,7 @@ class EvalPlan:
     video_episodes: int = 2
     workers: int = 1
     env_kwargs: dict = field(default_factory=dict)
+    ray: str | None = None
 
     def env_make_kwargs(self, layout: str | tuple[str, ...], render: bool) -> dict:
         control = "pd_joint_pos" if self.policy == "expert" else self.control_mode
@@ -182,6 +190,74 @@ def _run_episode(layout: str | tuple[str, ...], seed: int, video_dir: str) -> Ep
     return _RUNNER.run(layout, seed, Path(video_dir))
 
 
+# --- on Ray (pipelines/on_ray.py) ------------------------------------------------------------
+def _eval_episode(plan: EvalPlan, layout, seed: int):
+    """On a worker: the episode of ``seed`` in ``layout`` as a local worker runs it; the
+    episode and its video's bytes (None when none was kept)."""
+    runner = cached("eval", plan, lambda: EpisodeRunner(plan), EpisodeRunner.close)
+    with tempfile.TemporaryDirectory(prefix="embodied-envs-seed-") as tmp:
+        episode = runner.run(layout, seed, Path(tmp))
+        video = (Path(tmp) / episode.video).read_bytes() if episode.video else None
+    return episode, video
+
+
+def policy_file(spec: str) -> Path | None:
+    """The file a ``--policy`` value names (``file.py:factory``, a TorchScript file), if any."""
+    name = spec.rpartition(":")[0] if ":" in spec else spec
+    path = Path(name)
+    return path.resolve() if name.endswith((".py", ".pt", ".ts")) and path.is_file() else None
+
+
+def evaluate_on_ray(plan: EvalPlan, out: Path, progress):
+    """``plan``'s episodes on Ray, each video written under ``out/videos`` as it arrives: the
+    episodes (in task order), the resume store and (workers, nodes).
+
+    Raises:
+        Exception: what an episode raised on a worker, naming the driver's files and the
+            ``--policy`` value as given.
+    """
+    with on_ray.session(plan.ray, plan.workers):
+        file = policy_file(plan.policy)
+        sent = plan
+        if file is not None:  # the policy's file travels with the job, named absolutely
+            sent = dataclasses.replace(plan, policy=plan.policy.replace(
+                plan.policy.rpartition(":")[0] or plan.policy, str(file), 1))  # fmt: skip
+        paths = [p for entry in plan.layouts for p in on_ray.scene_paths(entry)]
+        bundle = on_ray.Bundle.put(paths, [file] if file is not None else [])
+        store = on_ray.resume_store(out, "eval", plan, bundle)
+        tasks = plan.tasks()
+        keys = [f"{k:06d}" for k in range(len(tasks))]
+        key_of = dict(zip(tasks, keys, strict=True))
+        results = {k: on_ray.episode_of(store.path(k)) for k in store.keys() if k in keys}
+        if progress is not None:
+            for key in sorted(results):
+                progress(results[key])
+
+        def arrived(task, result) -> bool:
+            episode, video = result
+            key = key_of[task[1:]]
+            if video is not None:
+                (out / "videos").mkdir(exist_ok=True)
+                with atomic_output(out / "videos" / episode.video) as tmp:
+                    tmp.write_bytes(video)
+            on_ray.save_episode(store, key, episode)
+            results[key] = episode
+            if progress is not None:
+                progress(episode)
+            return False
+
+        ran = Ran()
+        todo = ((sent, *task) for k, task in zip(keys, tasks, strict=True) if k not in results)
+        try:
+            run_tasks(_eval_episode, bundle, todo, on_ray.in_flight(plan), arrived, ran)
+        except Exception as e:  # the policy named as the user gave it, as a local run does
+            if sent is not plan:
+                e.args = tuple(a.replace(sent.policy, plan.policy) if isinstance(a, str) else a
+                               for a in e.args)  # fmt: skip
+            raise
+    return [results[k] for k in keys], store, (max(ran.workers, 1), max(ran.nodes, 1))
+
+
 # --- the whole evaluation ------------------------------------------------------------------
 def summarize(plan: EvalPlan, results: list[Episode]) -> dict:
     """Success rate with its 95% Wilson interval, overall and per layout, and lengths."""
@@ -244,6 +320,24 @@ def plot_summary(summary: dict, results: list[Episode], path: Path) -> None:
     plt.close(fig)
 
 
+def _evaluate_here(plan: EvalPlan, video_dir: Path, progress) -> list[Episode]:
+    """The episodes on this machine (``workers`` processes), in task order."""
+    try:
+        return run(
+            _run_episode,
+            [(lay, seed, str(video_dir)) for lay, seed in plan.tasks()],
+            plan.workers,
+            initializer=_init_runner,
+            initargs=(plan,),
+            on_result=progress,
+        )
+    except WorkerError as e:
+        raise EvalError(f"evaluation stopped: {e}") from None
+    finally:
+        if plan.workers <= 1 and _RUNNER is not None:  # this process's envs
+            _RUNNER.close()
+
+
 def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dict:
     """Run the evaluation and write its files under ``out`` (see the module docstring).
 
@@ -261,29 +355,20 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
             "remove that folder"
         )
     out.mkdir(parents=True, exist_ok=True)
-    video_dir = out / "videos"
-    tasks = plan.tasks()
-    try:
-        results = run(
-            _run_episode,
-            [(lay, seed, str(video_dir)) for lay, seed in tasks],
-            plan.workers,
-            initializer=_init_runner,
-            initargs=(plan,),
-            on_result=progress,
-        )
-    except WorkerError as e:
-        raise EvalError(f"evaluation stopped: {e}") from None
-    finally:
-        if plan.workers <= 1 and _RUNNER is not None:  # this process's envs
-            _RUNNER.close()
+    store = None
+    if plan.ray is not None:
+        results, store, ran = evaluate_on_ray(plan, out, progress)
+    else:
+        results, ran = _evaluate_here(plan, out / "videos", progress), (plan.workers, 1)
     order = {lay: i for i, lay in enumerate(plan.files())}
     results.sort(key=lambda r: (order[r.layout], r.seed))
-    summary = summarize(plan, results)
+    summary = summarize(plan, results) | dict(workers=ran[0], nodes=ran[1])
     with atomic_output(out / "episodes.json") as tmp:
         tmp.write_text(json.dumps([episode_json(r) for r in results], indent=2))
     with atomic_output(out / "summary.json") as tmp:  # its presence marks a complete run
         tmp.write_text(json.dumps(summary, indent=2))
+    if store is not None:  # complete: nothing to resume
+        store.remove()
     try:  # the summary is written: a plot that cannot be drawn must not lose it
         plot_summary(summary, results, out / "summary.png")
     except Exception as e:  # matplotlib's, whatever they are: one line

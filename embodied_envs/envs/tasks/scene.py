@@ -13,6 +13,7 @@ from scipy.spatial import ConvexHull
 
 from embodied_envs.envs.agents import is_grasping, tcp_pose, tcp_position_cpu
 from embodied_envs.envs.contacts import grasped_cpu
+from embodied_envs.envs.fast_reads import raw_poses
 from embodied_envs.envs.tasks import KIND_IDS, RULES, place
 from embodied_envs.envs.tasks.state import OPEN_FRACTION, TaskState
 from embodied_envs.internals import bodies, entities, px_articulations
@@ -165,22 +166,37 @@ class TaskScene:
             finger_span=finger_span,
         )
 
-    def destinations(self, rows, rec_pose, start, goal) -> torch.Tensor:
+    def destinations(self, rows, rec_pose, start, goal):
         """``(b, m, 3)`` each mover's destination for an episode of the envs ``rows (b,)``: on
         the receptacle (its raw pose ``rec_pose (b, 7)`` now), ``MOVE_SHIFT`` along the
         direction from ``start (b, m, 3)`` (``move``), or over the ``goal (b, 3)`` on the
-        table (a place on the table)."""
-        def t(x):
-            return torch.as_tensor(x, device=start.device)[rows.cpu()].to(start.device)
+        table (a place on the table). Torch tensors, or numpy arrays (the CPU simulation's
+        one env: a tenth of torch's cost per call)."""
+        if isinstance(start, np.ndarray):
+            xp, cat = np, np.concatenate
+
+            def t(x):
+                return np.asarray(x)[rows]
+
+            def like(x, shape):
+                return np.broadcast_to(x, shape)
+        else:
+            xp, cat = torch, torch.cat
+
+            def t(x):
+                return torch.as_tensor(x, device=start.device)[rows.cpu()].to(start.device)
+
+            def like(x, shape):
+                return x.expand(shape)
 
         rot = quat_matrix(rec_pose[:, 3:])
         on_rec = rec_pose[:, None, :3] + (rot[:, None] @ t(self.dest_local)[..., None])[..., 0]
-        on_table = torch.cat([goal[:, None, :2].expand_as(start[..., :2]), on_rec[..., 2:]], -1)
-        place = torch.where(t(self.rec_is_table)[:, None, None], on_table, on_rec)
-        shifted = start.clone()
+        on_table = cat([like(goal[:, None, :2], start[..., :2].shape), on_rec[..., 2:]], -1)
+        place = xp.where(t(self.rec_is_table)[:, None, None], on_table, on_rec)
+        shifted = start.copy() if xp is np else start.clone()
         shifted[..., :2] += t(self.direction)[:, None] * MOVE_SHIFT
         is_move = (t(self.kinds) == KIND_IDS["move"])[:, None, None]
-        return torch.where(is_move, shifted, place)
+        return xp.where(is_move, shifted, place)
 
 
 def _hull_points(vertices: np.ndarray) -> np.ndarray:
@@ -273,20 +289,29 @@ class TaskReader:
     def begin_episode(self, env_idx: torch.Tensor, goal) -> torch.Tensor:
         """Record the envs' mover starts and destinations after their poses were set
         (``goal (b, 3)``: those envs' pick goals); returns the destinations ``(b, m, 3)``."""
-        goal = torch.as_tensor(goal, device=self.env.device)
-        poses = torch.stack([a.pose.raw_pose[env_idx] for a in self.ts.movers], 1)
-        centres = torch.as_tensor(self.ts.centres, device=poses.device)[env_idx.to(poses.device)]
-        start = poses[..., :3] + (quat_matrix(poses[..., 3:]) @ centres[..., None])[..., 0]
-        rec = self.ts.receptacle.pose.raw_pose[env_idx]
-        dest = self.ts.destinations(env_idx, rec, start, goal)
         if self.gpu:
+            goal = torch.as_tensor(goal, device=self.env.device)
+            poses = torch.stack([a.pose.raw_pose[env_idx] for a in self.ts.movers], 1)
+            centres = torch.as_tensor(self.ts.centres, device=poses.device)
+            centres = centres[env_idx.to(poses.device)]
+            start = poses[..., :3] + (quat_matrix(poses[..., 3:]) @ centres[..., None])[..., 0]
+            rec = self.ts.receptacle.pose.raw_pose[env_idx]
+            dest = self.ts.destinations(env_idx, rec, start, goal)
             self.start[env_idx], self.dest[env_idx] = start, dest
             self.fresh[env_idx] = True
-        else:
-            idx = env_idx.cpu().numpy()
-            self.start[idx], self.dest[idx] = start.cpu().numpy(), dest.cpu().numpy()
-            self.fresh[idx] = True
-        return dest
+            return dest
+        # the one env's, in numpy: read from SAPIEN at once (ManiSkill's reads and torch's
+        # per-call cost: 0.8 ms of a reset)
+        idx = env_idx.cpu().numpy()
+        raw = raw_poses([*self.ts.movers, self.ts.receptacle])
+        poses, rec = raw[:, :-1], raw[:, -1]
+        centres = self.ts.centres[idx]
+        start = poses[..., :3] + (quat_matrix(poses[..., 3:]) @ centres[..., None])[..., 0]
+        goal = goal.cpu().numpy() if isinstance(goal, torch.Tensor) else np.asarray(goal)
+        dest = self.ts.destinations(idx, rec, start, goal.astype(np.float32))
+        self.start[idx], self.dest[idx] = start, dest
+        self.fresh[idx] = True
+        return torch.from_numpy(dest)
 
     def _read(self):
         """The TCP, the robot's joint positions, the raw poses ``(n, m + 1, 7)`` of the movers

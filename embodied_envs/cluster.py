@@ -1,0 +1,358 @@
+"""Episodes on a Ray cluster (``collect --ray``, ``eval --ray``): connecting, the files a job
+sends with it, tasks with retries, and the driver's resumable store.
+
+- :func:`ray_session`: Ray for one command. No address: a local Ray is started for the command
+  (or the cluster ``RAY_ADDRESS`` names); ``auto`` or ``host:port`` connects to a running
+  cluster, as ``ray.init(address=...)`` does. The package's code travels with the job (Ray's
+  ``py_modules``), so every node runs the driver's code; its dependencies (the set-up's venv)
+  must be installed on every node.
+- :class:`Bundle`: the files the episodes read (layouts, their asset folders with the splat, a
+  policy file) as one zip in Ray's object store, unpacked once per node under the temporary
+  folder; no shared filesystem is assumed. Paths in a task's arguments are mapped onto the
+  node's copy, and paths in its results and error messages back onto the driver's
+  (:class:`Paths`).
+- :func:`run_tasks`: one Ray task per episode, at most ``in_flight`` at once, results handed to
+  the driver as they arrive. A task whose worker process dies (killed, out of memory, its node
+  lost) runs again, up to :data:`TASK_RETRIES` times; an exception a task raises comes back as
+  it was raised (its message naming the driver's files), not as Ray's traceback.
+- :class:`ResumeStore`: what a driver has received, kept in its output folder, so that a run
+  interrupted and started again with the same output and plan keeps it and does the rest.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import json
+import os
+import re
+import shutil
+import tempfile
+import zipfile
+from collections.abc import Callable, Iterable
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import embodied_envs
+from embodied_envs.paths import atomic_output
+
+RAY_LOCAL = "local"  # --ray without an address: a Ray of this machine, started for the command
+WORKER_NICENESS = 0  # a local Ray's worker processes: the command's priority (Ray's default 15)
+TASK_RETRIES = 3  # runs again of a task whose worker process died (Ray's max_retries)
+LOCAL_OBJECT_STORE_BYTES = 256 * 2**20  # a local Ray's object store (job files, results)
+MAX_BUNDLE_BYTES = 128 * 2**20  # the job's files, zipped: held once per node in the store
+BUNDLE_FOLDER = "embodied_envs-ray"  # per node, under the temporary folder: unpacked bundles
+ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # every zip member's date: a bundle's bytes follow its files
+
+
+class ClusterError(RuntimeError):
+    """Ray cannot run the job (no cluster at the address, too large a job, a worker lost)."""
+
+
+@contextmanager
+def ray_session(address: str | None, cpus: int | None = None):
+    """Ray for one command, shut down (or disconnected) after it.
+
+    Args:
+        address: None: a local Ray with ``cpus`` CPUs (default: the machine's), unless
+            ``RAY_ADDRESS`` names a cluster; ``auto`` or ``host:port``: a running cluster.
+        cpus: a local Ray's CPUs.
+
+    Raises:
+        ClusterError: no running cluster at ``address``.
+    """
+    import ray  # only where a command runs on Ray
+
+    package = str(Path(embodied_envs.__file__).parent)
+    kwargs: dict[str, Any] = dict(
+        log_to_driver=False,  # workers' warnings would break the progress bar's line
+        runtime_env={"py_modules": [package]},
+    )
+    if address is None and not os.environ.get("RAY_ADDRESS"):
+        # a new Ray even where a cluster runs ("local"); its workers at the command's priority,
+        # as --workers processes (Ray's default nice 15 starves them on a busy machine: their
+        # imports took 5-7x a plain process's)
+        address = "local"
+        kwargs.update(num_cpus=cpus, include_dashboard=False,
+                      object_store_memory=LOCAL_OBJECT_STORE_BYTES,
+                      _system_config={"worker_niceness": WORKER_NICENESS})  # fmt: skip
+    try:
+        ray.init(address=address, **kwargs)
+    except ConnectionError as e:
+        where = os.environ.get("RAY_ADDRESS") if address is None else address
+        raise ClusterError(
+            f"--ray {where}: no running Ray cluster there ({' '.join(str(e).split())}). Fix: "
+            "start one (ray start --head), give its address, or give --ray without a value for "
+            "a Ray of this machine alone"
+        ) from None
+    try:
+        yield
+    finally:
+        ray.shutdown()
+
+
+def cluster_cpus() -> int:
+    """The connected cluster's CPUs (at least 1)."""
+    import ray  # only where a command runs on Ray
+
+    return max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+
+# --- the job's files -----------------------------------------------------------------------
+def _walk(paths: Iterable[str | Path]) -> list[Path]:
+    files: set[Path] = set()
+    for p in paths:
+        p = Path(p).resolve()
+        if p.is_dir():
+            files.update(q.resolve() for q in p.rglob("*") if q.is_file())
+        elif p.is_file():
+            files.add(p)
+    return sorted(files)
+
+
+@dataclasses.dataclass(frozen=True)
+class Bundle:
+    """The job's files in the object store: groups of files, each under its driver folder
+    (``roots``: the group's common folder), their zip (``ref``: a Ray object reference to its
+    bytes) and their hash (``digest``)."""
+
+    roots: tuple[str, ...]
+    digest: str
+    ref: Any
+
+    @classmethod
+    def put(cls, *groups: Iterable[str | Path]) -> Bundle:
+        """Zips each group of files and folders (relative to the group's common folder: a
+        layout and its asset folders keep their relative places) into the object store.
+
+        Raises:
+            ClusterError: a group's files share no folder but ``/``, or the zip is over
+                ``MAX_BUNDLE_BYTES``.
+        """
+        import ray  # only where a command runs on Ray
+
+        digest, buffer, roots = hashlib.sha256(), io.BytesIO(), []
+        with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
+            for group in groups:
+                files = _walk(group)
+                if not files:
+                    continue
+                root = os.path.commonpath([str(f.parent) for f in files])
+                if root == os.sep:
+                    raise ClusterError(
+                        f"{files[0]} and {files[-1]} share no folder but {os.sep}: a Ray job "
+                        "sends a layout and its asset folders as one folder. Fix: keep them "
+                        "under one folder"
+                    )
+                roots.append(root)
+                for f in files:
+                    name = f"{len(roots) - 1}/{f.relative_to(root).as_posix()}"
+                    data = f.read_bytes()
+                    digest.update(f"{name}\0{len(data)}\0".encode() + data)
+                    z.writestr(zipfile.ZipInfo(name, ZIP_TIME), data, zipfile.ZIP_DEFLATED)
+        if buffer.tell() > MAX_BUNDLE_BYTES:
+            raise ClusterError(
+                f"the files under {', '.join(roots)} that the episodes read (layouts, asset "
+                f"folders, splat) are {buffer.tell() / 2**20:.0f} MiB zipped, over the "
+                f"{MAX_BUNDLE_BYTES // 2**20} MiB a Ray job sends. Fix: smaller asset folders "
+                "(a lighter splat), or run without --ray"
+            )
+        return cls(tuple(roots), digest.hexdigest(), ray.put(buffer.getvalue()))
+
+    def unpacked(self) -> Paths:
+        """On a worker: this node's copy of the files (unpacked once per node), as the map
+        from the driver's folders to it."""
+        import ray  # only where a command runs on Ray
+
+        folder = Path(tempfile.gettempdir()) / BUNDLE_FOLDER / self.digest
+        if not folder.is_dir():
+            folder.parent.mkdir(parents=True, exist_ok=True)
+            work = Path(tempfile.mkdtemp(prefix=f".{self.digest}.", dir=folder.parent))
+            data = ray.get(self.ref)
+            zipfile.ZipFile(io.BytesIO(data)).extractall(work)
+            try:
+                work.rename(folder)
+            except OSError:  # another worker of this node unpacked it first
+                shutil.rmtree(work, ignore_errors=True)
+        return Paths(tuple((root, str(folder / str(k))) for k, root in enumerate(self.roots)))
+
+
+@dataclasses.dataclass(frozen=True)
+class Paths:
+    """Maps paths between the driver's folders and a node's copies of them (``pairs``: driver
+    folder, node folder), in strings, containers and dataclasses (their fields): a folder's
+    name followed by ``/`` or ending the string, longest first, in one pass."""
+
+    pairs: tuple[tuple[str, str], ...]
+
+    def to_node(self, value):
+        return _mapped(value, dict(self.pairs))
+
+    def to_driver(self, value):
+        return _mapped(value, {node: driver for driver, node in self.pairs})
+
+
+def _mapped(value, table: dict[str, str]):
+    if not table:
+        return value
+    if isinstance(value, str):
+        names = sorted(table, key=len, reverse=True)
+        pattern = "|".join(re.escape(n) for n in names)
+        return re.sub(f"({pattern})(?=/|$)", lambda m: table[m.group(1)], value)
+    if isinstance(value, list | tuple):
+        return type(value)(_mapped(v, table) for v in value)
+    if isinstance(value, dict):
+        return {_mapped(k, table): _mapped(v, table) for k, v in value.items()}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        changes = {f.name: _mapped(getattr(value, f.name), table)
+                   for f in dataclasses.fields(value) if f.init}  # fmt: skip
+        return dataclasses.replace(value, **changes)
+    return value
+
+
+# --- tasks ---------------------------------------------------------------------------------
+_CACHED: dict[str, tuple[Any, Any]] = {}  # per worker process: kind -> (key, object)
+
+
+def cached(kind: str, key: Any, make: Callable[[], Any], close: Callable[[Any], None]) -> Any:
+    """In a worker process: the object of ``kind`` made for ``key`` (an env, a runner), made on
+    first use and kept for the next tasks; one for another key replaces it (``close``)."""
+    if kind in _CACHED and _CACHED[kind][0] == key:
+        return _CACHED[kind][1]
+    if kind in _CACHED:
+        close(_CACHED.pop(kind)[1])
+    _CACHED[kind] = (key, make())
+    return _CACHED[kind][1]
+
+
+def _task(fn: Callable, bundle: Bundle, args: tuple):
+    """A Ray task: ``fn(*args)`` on this node's copy of the files; the result (paths back on
+    the driver's), this node's id and this process's id."""
+    import ray  # only where a command runs on Ray
+
+    os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+    paths = bundle.unpacked()
+    try:
+        result = fn(*paths.to_node(args))
+    except Exception as e:  # the message names the driver's files, as the local run's does
+        e.args = paths.to_driver(e.args)
+        raise
+    return paths.to_driver(result), ray.get_runtime_context().get_node_id(), os.getpid()
+
+
+@dataclasses.dataclass
+class Ran:
+    """Where a job's tasks ran: the (node, process) pairs."""
+
+    places: set = dataclasses.field(default_factory=set)
+
+    @property
+    def workers(self) -> int:
+        return len(self.places)
+
+    @property
+    def nodes(self) -> int:
+        return len({node for node, _ in self.places})
+
+
+def run_tasks(
+    fn: Callable,
+    bundle: Bundle,
+    tasks: Iterable[tuple],
+    in_flight: int,
+    on_result: Callable[[tuple, Any], bool],
+    ran: Ran,
+) -> None:
+    """``fn(*task)`` as Ray tasks on the cluster, for ``tasks`` taken in order as they are
+    needed, at most ``in_flight`` at once; ``on_result(task, result)`` in the driver as each
+    ends, and returning True stops the job (the tasks still running are cancelled). ``ran``
+    gathers where they ran.
+
+    Raises:
+        Exception: what a task raised, as it raised it.
+        ClusterError: a task's worker process died more than ``TASK_RETRIES`` times.
+    """
+    import ray  # only where a command runs on Ray
+    from ray.exceptions import RayError, RayTaskError  # as ray, above
+
+    remote = ray.remote(num_cpus=1, max_retries=TASK_RETRIES)(_task)
+    pending: dict[Any, tuple] = {}
+    source = iter(tasks)
+
+    def fill() -> None:
+        for task in source:
+            pending[remote.remote(fn, bundle, task)] = task
+            if len(pending) >= in_flight:
+                return
+
+    try:
+        fill()
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            task = pending.pop(done[0])
+            try:
+                result, node, pid = ray.get(done[0])
+            except RayTaskError as e:  # the task's own exception, without Ray's traceback
+                cause = e.cause if isinstance(e.cause, Exception) else RuntimeError(str(e))
+                raise cause from None
+            except RayError as e:
+                text = " ".join(str(e).split())[:300]
+                raise ClusterError(
+                    f"a Ray task ({fn.__name__}{task[1:]}) was lost {TASK_RETRIES + 1} times: "
+                    f"{type(e).__name__}: {text}. Fix: see the worker logs (ray logs), or fewer "
+                    "tasks per node"
+                ) from None
+            ran.places.add((node, pid))
+            if on_result(task, result):
+                return
+            fill()
+    finally:
+        for ref in pending:
+            ray.cancel(ref, force=True)
+
+
+# --- the driver's resumable store ----------------------------------------------------------
+class ResumeStore:
+    """A driver's received results in ``folder`` (in its output folder): one sub-folder per key,
+    written under a temporary name and renamed, for the plan ``fingerprint`` (a JSON-able
+    value). A folder left by a run of another plan is refused."""
+
+    PLAN = "plan.json"
+
+    def __init__(self, folder: Path, fingerprint: Any):
+        self.folder = Path(folder)
+        text = json.dumps(fingerprint, sort_keys=True, indent=1)
+        plan = self.folder / self.PLAN
+        if plan.is_file() and plan.read_text() != text:
+            raise ClusterError(
+                f"{self.folder} holds an interrupted run of other settings (see its "
+                f"{self.PLAN}). Fix: run again with that run's flags to resume it, or remove "
+                "that folder"
+            )
+        self.folder.mkdir(parents=True, exist_ok=True)
+        if not plan.is_file():
+            with atomic_output(plan) as tmp:
+                tmp.write_text(text)
+
+    def keys(self) -> list[str]:
+        return sorted(p.name for p in self.folder.iterdir()
+                      if p.is_dir() and not p.name.startswith("."))  # fmt: skip
+
+    def path(self, key: str) -> Path:
+        return self.folder / key
+
+    def save(self, key: str, files: dict[str, bytes]) -> Path:
+        """Keeps ``files`` (name -> bytes) under ``key``, whole or not at all."""
+        work = Path(tempfile.mkdtemp(prefix=f".{key}.", dir=self.folder))
+        for name, data in files.items():
+            (work / name).write_bytes(data)
+        final = self.path(key)
+        shutil.rmtree(final, ignore_errors=True)
+        work.rename(final)
+        return final
+
+    def remove(self) -> None:
+        shutil.rmtree(self.folder, ignore_errors=True)
+

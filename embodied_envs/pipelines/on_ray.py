@@ -1,0 +1,82 @@
+"""What ``collect`` and ``eval`` share on a Ray cluster (``--ray``; their own parts are in
+``collect.py`` and ``evaluate.py``): one Ray task per episode seed, the
+same per-seed episode function as the local workers, so a seed's episode is the same on
+either (the env starts every seed's episode from a new PhysX scene: nothing depends on what a
+worker ran before).
+
+Each task runs in a worker process that keeps its env (or its evaluation runner) for the next
+task, reads the job's files from its node's copy (``cluster.Bundle``: layouts, asset folders,
+splat, a policy file) and sends back what it recorded: the episode, its ``.h5`` and ``.json``,
+its video. The driver keeps each arrival in ``OUT/.resume-<name>/`` (``cluster.ResumeStore``)
+and writes the dataset or the evaluation from them in seed order, as the local run does; a run
+interrupted and started again with the same ``--out`` and flags keeps what arrived and runs the
+rest. ``collect --only-success`` runs seeds in order, a few ahead, and keeps the first ``num``
+successes in seed order: the seeds one local worker keeps.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+from embodied_envs.cluster import RAY_LOCAL, Bundle, ResumeStore, cluster_cpus, ray_session
+from embodied_envs.datasets.records import scene_folders
+from embodied_envs.pipelines.episodes import Episode
+from embodied_envs.workers import started
+
+RESUME_PREFIX = ".resume-"  # in --out: what an interrupted --ray run received
+RUN_KEYS = ("workers", "ray")  # plan fields that do not change the episodes (not in resume)
+
+
+@contextlib.contextmanager
+def session(address: str | None, workers: int):
+    """Ray for a run: none for ``address`` None; the caller's, if it connected already;
+    otherwise ``address``'s (``RAY_LOCAL``: a Ray of this machine with ``workers`` CPUs, 0:
+    all). The driver builds no env: its start-up ends here (``workers.started``)."""
+    if address is None:
+        yield
+        return
+    import ray  # only where a run asks for Ray
+
+    if ray.is_initialized():
+        yield
+        return
+    with ray_session(None if address == RAY_LOCAL else address, workers or None):
+        started()
+        yield
+
+
+def scene_paths(layout) -> list[Path]:
+    """The layout files of ``layout`` (a file or a set) and their asset folders."""
+    return [p for file, folders in scene_folders(layout) for p in (file, *folders.values())]
+
+
+def fingerprint(plan, bundle: Bundle) -> dict:
+    """What a resumed run must share with the run it resumes: the plan's episode settings
+    and the bytes of the files they read."""
+    settings = {k: v for k, v in asdict(plan).items() if k not in RUN_KEYS}
+    return {"plan": settings, "files_sha256": bundle.digest}
+
+
+def resume_store(out: Path, name: str, plan, bundle: Bundle) -> ResumeStore:
+    """The store of a run of ``plan`` named ``name`` in ``out`` (what an interrupted run of the
+    same plan and files received is kept)."""
+    return ResumeStore(out / f"{RESUME_PREFIX}{name}", fingerprint(plan, bundle))
+
+
+def in_flight(plan) -> int:
+    """The tasks a plan runs at once: its ``workers``, else the cluster's CPUs."""
+    return plan.workers or cluster_cpus()
+
+
+def episode_of(folder: Path) -> Episode:
+    """The episode a :class:`ResumeStore` entry holds."""
+    return Episode(**json.loads((folder / "episode.json").read_text()))
+
+
+def save_episode(store: ResumeStore, key: str, episode: Episode, **files: bytes) -> None:
+    store.save(key, {"episode.json": json.dumps(asdict(episode)).encode(), **files})
+
+

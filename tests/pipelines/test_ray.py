@@ -1,0 +1,202 @@
+"""`collect --ray` and `eval --ray` on a real Ray cluster of two nodes on this machine
+(``ray.cluster_utils.Cluster``, one CPU each), started by the tests: the same data as one local
+worker, a killed worker, an interrupted driver resumed, a worker's error as the local line."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from conftest import DEFAULT_LAYOUT
+
+ray = pytest.importorskip("ray")
+from ray.cluster_utils import Cluster  # noqa: E402
+
+CLI = [sys.executable, "-m", "embodied_envs.cli.main"]
+NODE = dict(num_cpus=1, object_store_memory=128 * 2**20)  # two of these: the check's 2 CPUs
+SEED = 700
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    c = Cluster(initialize_head=True, head_node_args=dict(NODE, include_dashboard=False))
+    c.add_node(**NODE)
+    c.wait_for_nodes()
+    yield c.address
+    c.shutdown()
+
+
+def cli(args, cwd, address=None, **popen):
+    """The command line, with ``RAY_ADDRESS`` naming the test's cluster (``--ray auto``)."""
+    env = dict(os.environ, MS_SKIP_ASSET_DOWNLOAD_PROMPT="1", OMP_NUM_THREADS="1")
+    if address is not None:
+        env["RAY_ADDRESS"] = address
+    if popen:
+        return subprocess.Popen(CLI + args, cwd=cwd, env=env, **popen)
+    return subprocess.run(CLI + args, cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=900)  # fmt: skip
+
+
+def collect_args(out: Path, num: int, *extra) -> list[str]:
+    return ["collect", "--num", str(num), "--seed", str(SEED), "--out", str(out), *extra]
+
+
+def arrays(dataset: Path) -> dict[int, dict[str, np.ndarray]]:
+    """Per episode seed: every array of its trajectory (actions, env states, success...)."""
+    meta = json.loads((dataset / "trajectory.json").read_text())
+    out = {}
+    with h5py.File(dataset / "trajectory.h5") as f:
+        for e in meta["episodes"]:
+            leaves = {}
+            f[f"traj_{e['episode_id']}"].visititems(
+                lambda name, obj, leaves=leaves: leaves.__setitem__(name, obj[()])
+                if isinstance(obj, h5py.Dataset) else None
+            )  # fmt: skip
+            out[e["episode_seed"]] = leaves
+    return out
+
+
+def assert_same_episodes(got: Path, expected: Path, seeds) -> None:
+    a, b = arrays(got), arrays(expected)
+    for seed in seeds:
+        assert a[seed].keys() == b[seed].keys(), seed
+        for name in a[seed]:
+            assert np.array_equal(a[seed][name], b[seed][name]), f"seed {seed}: {name}"
+
+
+@pytest.fixture(scope="module")
+def one_worker(tmp_path_factory):
+    """The reference: ``collect --workers 1`` of the default layout, seeds 700-703."""
+    out = tmp_path_factory.mktemp("local")
+    res = cli(collect_args(out, 4, "--workers", "1"), out)
+    assert res.returncode == 0, res.stdout + res.stderr
+    return out / "default"
+
+
+def test_collect_on_two_nodes_equals_one_local_worker(cluster, one_worker, tmp_path):
+    res = cli(collect_args(tmp_path, 4, "--ray", "auto"), tmp_path, cluster)
+    assert res.returncode == 0, res.stdout + res.stderr
+    got = tmp_path / "default"
+    meta, ref = (json.loads((d / "trajectory.json").read_text()) for d in (got, one_worker))
+    assert meta == ref, "the same trajectory.json: env_info, episodes, seeds, scene record"
+    assert [e["episode_seed"] for e in meta["episodes"]] == [700, 701, 702, 703]
+    assert meta["env_info"]["env_kwargs"]["layout_file"] == str(DEFAULT_LAYOUT)
+    assert_same_episodes(got, one_worker, range(700, 704))
+    summary, ref_summary = (json.loads((d / "summary.json").read_text()) for d in (got, one_worker))
+    differs = {k for k in summary if summary[k] != ref_summary[k]}
+    assert differs <= {"wall_time_s", "workers", "nodes"}, differs
+    assert summary["nodes"] == 2 and summary["workers"] >= 2, "both nodes' CPUs ran episodes"
+    assert "Ray workers on 2 nodes" in res.stdout
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["default"], "no work folder left"
+
+
+def running_tasks() -> list[int]:
+    """Ray worker processes running a task of ours (Ray names them ``ray::_task``)."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if proc.name.isdigit() and (proc / "cmdline").read_bytes().startswith(b"ray::_task"):
+                found.append(int(proc.name))
+        except OSError:
+            continue
+    return found
+
+
+def arrived(out: Path) -> list[Path]:
+    return sorted((out / ".resume-default").glob("seed_*"))
+
+
+def wait_for(condition, seconds: float = 600) -> None:
+    deadline = time.time() + seconds
+    while not condition():
+        assert time.time() < deadline, "timed out"
+        time.sleep(0.2)
+
+
+@pytest.mark.slow  # 2-4 minutes on the shared 2-core machine (CI runs it)
+def test_a_worker_killed_mid_run_costs_a_retry_not_the_run(cluster, one_worker, tmp_path):
+    proc = cli(collect_args(tmp_path, 8, "--ray", "auto"), tmp_path, cluster,
+               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)  # fmt: skip
+    wait_for(lambda: len(arrived(tmp_path)) >= 1 and running_tasks())
+    victim = running_tasks()[0]
+    os.kill(victim, signal.SIGKILL)  # mid-episode: workers run their next seed at once
+    output, _ = proc.communicate(timeout=900)
+    assert proc.returncode == 0, output
+    meta = json.loads((tmp_path / "default" / "trajectory.json").read_text())
+    assert [e["episode_seed"] for e in meta["episodes"]] == list(range(700, 708)), "each once"
+    assert_same_episodes(tmp_path / "default", one_worker, range(700, 704))
+
+
+@pytest.mark.slow  # 2-4 minutes on the shared 2-core machine (CI runs it)
+def test_an_interrupted_driver_resumes_with_the_same_out(cluster, one_worker, tmp_path):
+    args = collect_args(tmp_path, 4, "--ray", "auto")
+    proc = cli(args, tmp_path, cluster, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wait_for(lambda: len(arrived(tmp_path)) >= 2)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    kept = arrived(tmp_path)[0]  # marked: the next run keeps it rather than running it again
+    record = json.loads((kept / "episode.json").read_text())
+    (kept / "episode.json").write_text(json.dumps(dict(record, instruction="first run's")))
+    res = cli(args, tmp_path, cluster)
+    assert res.returncode == 0, res.stdout + res.stderr
+    meta = json.loads((tmp_path / "default" / "trajectory.json").read_text())
+    assert [e["episode_seed"] for e in meta["episodes"]] == [700, 701, 702, 703]
+    marked = [e["episode_seed"] for e in meta["episodes"] if e["instruction"] == "first run's"]
+    assert marked == [record["seed"]], "what the first run received is kept"
+    assert_same_episodes(tmp_path / "default", one_worker, range(700, 704))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["default"], "the store is removed"
+
+
+def test_eval_on_ray_writes_the_local_summary(cluster, tmp_path):
+    args = ["eval", "--policy", "zero", "--episodes", "4", "--max-episode-steps", "20"]
+    local = cli([*args, "--out", str(tmp_path / "local")], tmp_path)
+    res = cli([*args, "--ray", "auto", "--out", str(tmp_path / "ray")], tmp_path, cluster)
+    assert local.returncode == 0 and res.returncode == 0, res.stdout + res.stderr
+    a, b = (json.loads((tmp_path / d / "episodes.json").read_text()) for d in ("ray", "local"))
+    assert a == b and [e["seed"] for e in a] == [0, 1, 2, 3]
+    summary, ref = (json.loads((tmp_path / d / "summary.json").read_text())
+                    for d in ("ray", "local"))  # fmt: skip
+    assert {k for k in summary if summary[k] != ref[k]} <= {"workers", "nodes"}
+    assert summary["episodes"] == 4 and summary["nodes"] == 2
+
+
+POLICY = '''
+def make(env):
+    def act(obs):
+        raise ValueError("weights not loaded")
+    return act
+'''
+
+
+def test_a_policy_raising_on_a_worker_is_the_local_one_line_error(cluster, tmp_path):
+    (tmp_path / "bad.py").write_text(POLICY)
+    args = ["eval", "--policy", "bad.py:make", "--episodes", "1", "--max-episode-steps", "5"]
+    local = cli([*args, "--out", "local"], tmp_path)
+    res = cli([*args, "--ray", "auto", "--out", "ray"], tmp_path, cluster)
+    assert local.returncode == res.returncode == 1
+    line = [ln for ln in local.stdout.splitlines() if ln.startswith("error:")]
+    assert line == [
+        "error: --policy bad.py:make: the policy raised ValueError: weights not loaded at step "
+        "0 of episode seed 0 (default.json)"
+    ]
+    assert [ln for ln in res.stdout.splitlines() if ln.startswith("error:")] == line
+
+
+def test_paths_map_whole_folder_names_both_ways():
+    from embodied_envs.cluster import Paths
+    from embodied_envs.pipelines.episodes import Episode
+
+    paths = Paths((("/data/scene", "/tmp/n/0"), ("/data/scene/policies", "/tmp/n/1")))
+    episode = Episode("/data/scene/layouts/a.json", 3, True, False, 10, 1.0,
+                      plan_failures=["/data/scenery/x: /data/scene/policies/p.py"])  # fmt: skip
+    node = paths.to_node(episode)
+    assert node.layout == "/tmp/n/0/layouts/a.json" and node.seed == 3
+    assert node.plan_failures == ["/data/scenery/x: /tmp/n/1/p.py"], "whole names, longest first"
+    assert paths.to_driver(node) == episode
+    assert paths.to_node({"/data/scene": ("/data/scene",)}) == {"/tmp/n/0": ("/tmp/n/0",)}
