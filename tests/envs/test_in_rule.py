@@ -32,7 +32,8 @@ class Scene:
         ts, layout = u.task_scene, u.layouts[0]
         self.rec = asset_geometry(layout.asset_spec(ts.tasks[0].receptacle))
         pose = ts.receptacle.pose.raw_pose[0].numpy().astype(np.float64)
-        self.rec_p, self.rec_rot = pose[:3], sapien.Pose(q=pose[3:]).to_transformation_matrix()[:3, :3]
+        self.rec_p = pose[:3]
+        self.rec_rot = sapien.Pose(q=pose[3:]).to_transformation_matrix()[:3, :3]
         self.points = ts.hulls[0] - ts.centres[0][:, None]  # movers' points about their centres
         self.table_z = float(u.layout_scene.top_z[0])
         self.rim_xy = np.abs(self.rec.footprint()).max(0)  # the footprint's half sizes

@@ -31,9 +31,9 @@ TABLE_TOP = 0.76  # m: the task layouts' table top (a can's centre stands 0.06 a
 
 @dataclass(frozen=True)
 class Upright:
-    """One test layout: ``base`` (a layout file under the checkout) with ``movers`` manipulated, every
-    other node a distractor, ``swap`` nodes replaced (old -> :class:`Swap`) and ``sentence``
-    its task."""
+    """One test layout: ``base`` (a layout file under the checkout) with ``movers``
+    manipulated, every other node a distractor, ``swap`` nodes replaced (old ->
+    :class:`Swap`) and ``sentence`` its task."""
 
     name: str
     base: str
