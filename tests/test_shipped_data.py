@@ -1,7 +1,7 @@
 """Every generator of shipped data in tools/make/ writes, into a temporary folder, what is
 shipped, byte for byte: the assets and the room's splat (make_assets.py, mesh_to_splat.py), the
-layouts (make_layouts.py), the grasp zoo (make_grasp_zoo.py) and the bad-input corpus
-(make_bad_inputs.py). A failure names the files that differ and the script that writes them."""
+layouts (make_layouts.py), the grasp zoo (make_grasp_zoo.py), the upright-mover layouts
+(make_upright.py) and the bad-input corpus (make_bad_inputs.py). A failure names the files that differ and the script that writes them."""
 
 import importlib.util
 import sys
@@ -14,6 +14,7 @@ SHIPPED = {
     "assets": DATA / "assets",
     "layouts": DATA / "layouts",
     "zoo": ROOT / "tests" / "data" / "zoo",
+    "upright": ROOT / "tests" / "data" / "upright",
     "bad_inputs": ROOT / "tests" / "data" / "bad_inputs",
 }
 
@@ -85,6 +86,11 @@ def test_make_layouts_reproduces_the_shipped_layouts(tmp_path, tool):
 def test_make_grasp_zoo_reproduces_the_shipped_zoo(tmp_path, tool):
     tool("make_grasp_zoo").main(["--out", str(tmp_path)])
     assert_same_files(tmp_path, SHIPPED["zoo"], "tools/make/make_grasp_zoo.py")
+
+
+def test_make_upright_reproduces_the_shipped_upright_layouts(tmp_path, tool):
+    tool("make_upright").main(["--out", str(tmp_path)])
+    assert_same_files(tmp_path, SHIPPED["upright"], "tools/make/make_upright.py")
 
 
 def test_make_bad_inputs_reproduces_the_shipped_corpus(tmp_path, tool):

@@ -214,6 +214,17 @@ def test_a_mover_rests_on_a_curved_floor_where_its_lowest_ring_meets_it():
     assert resting_height(bowl.parts, np.array([0.03, 0.0]), ring, bowl.max_z) > centre + 0.01
 
 
+def test_an_episode_that_fails_says_which_condition(scenes):
+    """``run_episode`` (demo, collect, eval): the can never moved is reported beside the bowl."""
+    from embodied_envs.pipelines.episodes import run_episode
+
+    s = scenes("can_in_small_bowl")
+    episode = run_episode(s.env, 0, drive=lambda tally, obs, seed: [])
+    assert not episode.success and episode.steps == 0
+    assert episode.unmet == ["can: not over the receptacle, touching the table"]
+    assert episode.failure == "execution (can: not over the receptacle, touching the table)"
+
+
 def test_the_failure_reason_names_the_conditions():
     from embodied_envs.pipelines.episodes import Episode
 
