@@ -1,7 +1,8 @@
 """Every generator of shipped data in tools/make/ writes, into a temporary folder, what is
 shipped, byte for byte: the assets and the room's splat (make_assets.py, mesh_to_splat.py), the
 layouts (make_layouts.py), the grasp zoo (make_grasp_zoo.py), the upright-mover layouts
-(make_upright.py) and the bad-input corpus (make_bad_inputs.py). A failure names the files that differ and the script that writes them."""
+(make_upright.py) and the bad-input corpus (make_bad_inputs.py). A failure names the files
+that differ and the script that writes them."""
 
 import importlib.util
 import sys

@@ -240,14 +240,9 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         if not self.gpu_sim_enabled:  # bodies settle as in a new scene, whatever ran before
             fast_reads.restart_sleep_timers(self.scene)
 
-    def _goal(self):
-        """The goal marker's position, as the task reader's arrays hold it."""
-        gpu = self.task_reader.gpu
-        return self.goal_site.pose.p if gpu else fast_reads.positions(self.goal_site)
-
     def _rules(self):
         """The task state now and each present kind's rule results (``envs/tasks``)."""
-        return self.task_reader.rules(self._goal())
+        return self.task_reader.rules(self.task_reader.goal())
 
     def evaluate(self):
         state, results = self._rules()
@@ -258,11 +253,6 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         off = self.layout_scene.off_table(points, self.fail_drop) & self.task_reader.can_fall
         info["fail"] = as_tensor(some(off, 1), self.device)
         return info
-
-    def unmet_conditions(self) -> list[list[str]]:
-        """Per env, the conditions of success not met now, in words: ``"can: not at rest"``
-        per mover that misses any (``envs/tasks/unmet.py``); ``[]`` where it succeeds."""
-        return self.task_reader.unmet(self._goal())
 
     def _before_control_step(self):
         self.task_reader.before_step()  # the arm's speeds: its displacement over each step

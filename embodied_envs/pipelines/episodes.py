@@ -41,7 +41,7 @@ class Episode:
         instruction: its task in words.
         plan_failures: the expert's failed plans (``"stage: why"``); empty for a policy.
         unmet: on failure, the conditions of success its end missed, per mover
-            (``"can: not released, not at rest"``, ``env.unmet_conditions()``).
+            (``"can: not released, not at rest"``, ``env.task_reader.unmet()``).
         wall_time_s: seconds from the reset to its end.
         kept: ``collect``: whether it went into the dataset.
         video: ``eval``: its video's file name, if one was kept.
@@ -168,7 +168,7 @@ def run_episode(
         episode_return=round(tally.ret, 6),
         instruction=u.instructions[0],
         plan_failures=list(failures),
-        unmet=[] if success else u.unmet_conditions()[0],
+        unmet=[] if success else u.task_reader.unmet()[0],
         wall_time_s=time.perf_counter() - t0,
         frames=tally.frames,
     )

@@ -1,7 +1,7 @@
 """"In" as a person means it, by set poses in the env (the movers teleported, nothing
 stepped): a mover resting on the receptacle's inner floor, or on another mover in it, is in
 it however tall it is; one on the rim, leaning on the outer wall, held above or beside it is
-not, and ``unmet_conditions`` says which condition fails. The layouts are
+not, and ``task_reader.unmet()`` says which condition fails. The layouts are
 ``tests/data/upright`` (``tools/make/make_upright.py``): cans and bottles, 12 and 22 cm tall,
 in bowls 4.4-5.9 cm deep and a 1.4 cm tray, and the grasp zoo's shallow bowl."""
 
@@ -72,7 +72,7 @@ class Scene:
         return np.array([*(foot - low)[:2], self.table_z - low[2]]), q
 
     def grade(self) -> tuple[bool, list[str]]:
-        return bool(self.u.evaluate()["success"][0]), self.u.unmet_conditions()[0]
+        return bool(self.u.evaluate()["success"][0]), self.u.task_reader.unmet()[0]
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +91,7 @@ SINGLE = ["can_in_bowl", "bottle_in_bowl", "can_in_small_bowl", "can_in_tray", "
 def test_an_upright_mover_on_the_floor_is_in_however_tall(name, scenes):
     s = scenes(name)
     s.put(0, s.centre_on(0, (0.0, 0.0)))
-    centre_z = s.u.task_reader.state(s.u._goal()).in_receptacle[0, 0, 2]
+    centre_z = s.u.task_reader.state(s.u.task_reader.goal()).in_receptacle[0, 0, 2]
     assert centre_z > s.rec.max_z  # its centre above the rim: the old rule's "not in"
     assert s.grade() == (True, [])
 

@@ -156,6 +156,13 @@ def as_torch(s: state.TaskState) -> state.TaskState:
                                            in_receptacle=np.array([[[0.09, 0, 0.02]]])), False),
         ("standing on its rim (in)", dict(bottom=np.array([[0.09]]),
                                           in_receptacle=np.array([[[0, 0, 0.08]]])), False),
+        ("on the rim, sunk 5 mm into it (in)", dict(bottom=np.array([[0.085]]),
+                                                    in_receptacle=np.array([[[0, 0, 0.075]]])),
+         False),
+        ("lying on its inner walls, 2 cm under the rim (in)",
+         dict(bottom=np.array([[0.07]]), in_receptacle=np.array([[[0, 0, 0.05]]])), True),
+        ("tall, centre above the rim, on its floor (in)",
+         dict(movers=np.array([[[0, 0, 0.14]]]), in_receptacle=np.array([[[0, 0, 0.10]]])), True),
     ],
 )  # fmt: skip
 def test_place_success_truth_table(case, over, success):

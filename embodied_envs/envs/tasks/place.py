@@ -8,10 +8,11 @@ grasped; fingers open or the hand away, ``state.released``) and in its pose:
   receptacle, not leaning on its outer wall from the table), and
 
   - "on": at most ``TOUCH`` above the receptacle's top (not hovering);
-  - "in": below the middle of the receptacle's depth, between its floor (the lowest surface
-    under its opening) and its top: it stands or lies on the inner floor, however tall it is,
-    not on the rim; a receptacle whose floor lies less than ``MIN_DEPTH`` under its top has
-    no inside;
+  - "in": more than ``TOUCH`` below the receptacle's top (its rim), or half its depth where
+    that is less (its floor, the lowest surface under its opening, less than ``2 TOUCH`` under
+    the rim: a tray): it stands or lies on the inner floor or walls, however tall it is, not
+    on the rim (a mover on the rim touches the rim); a receptacle whose floor lies less than
+    ``MIN_DEPTH`` under its top has no inside;
 
   or resting on another mover in its pose (:func:`stacked`);
 - the table: its lowest point within ``TOUCH`` of the top.
@@ -63,8 +64,8 @@ class Bounds:
         low: ``(n, 1)`` the lowest a mover's lowest point rests on a receptacle object
             (``OFF_TABLE`` over the table's top); ``-inf`` where the receptacle is the table.
         high: ``(n, 1)`` the highest a mover's lowest point rests above the support's top:
-            ``TOUCH``; for "in" on an object, minus half its depth (``-inf`` where it has
-            none: ``MIN_DEPTH``).
+            ``TOUCH``; for "in" on an object, ``-TOUCH`` or minus half its depth, whichever is
+            nearer the top (``-inf`` where it has none: ``MIN_DEPTH``).
     """
 
     normals: Any
@@ -78,7 +79,8 @@ class Bounds:
         (normals, offsets), xp = footprint, array_module(rim)
         low = xp.where(rec_is_table, -math.inf, table_z + OFF_TABLE)
         depth = rim - floor
-        inside = xp.where(depth >= MIN_DEPTH, -depth / 2, -math.inf)
+        below = xp.minimum(depth / 2, xp.full_like(depth, TOUCH))  # under the rim, at least
+        inside = xp.where(depth >= MIN_DEPTH, -below, -math.inf)
         high = xp.where(is_in & ~rec_is_table, inside, TOUCH)
         return cls(normals[:, None], offsets[:, None] - EDGE_TOLERANCE, low[:, None],
                    high[:, None])  # fmt: skip

@@ -11,6 +11,7 @@ import torch
 from mani_skill.utils.structs import Actor
 from scipy.spatial import ConvexHull
 
+from embodied_envs.envs import fast_reads
 from embodied_envs.envs.agents import is_grasping, tcp_pose, tcp_position_cpu
 from embodied_envs.envs.contacts import grasped_cpu
 from embodied_envs.envs.tasks import KIND_IDS, RULES, place
@@ -411,10 +412,16 @@ class TaskReader:
         state = self.state(goal, full=self.kinds != ["pick"])
         return state, {k: RULES[k].evaluate(state) for k in self.kinds}
 
-    def unmet(self, goal) -> list[list[str]]:
-        """Per env, the conditions of success its movers miss now, in words
+    def goal(self):
+        """The goal marker's position now, as this reader's arrays hold it."""
+        site = self.env.goal_site
+        return site.pose.p if self.gpu else fast_reads.positions(site)
+
+    def unmet(self) -> list[list[str]]:
+        """Per env, the conditions of success its movers miss now, in words: ``"can: not at
+        rest"`` per mover that misses any; ``[]`` where it succeeds
         (:func:`~embodied_envs.envs.tasks.unmet.unmet_conditions`)."""
-        state, results = self.rules(goal)
+        state, results = self.rules(self.goal())
         return unmet_conditions(state, results, self.ts.tasks)
 
     def by_kind(self, results: dict, key: str) -> torch.Tensor:
