@@ -233,3 +233,22 @@ def test_the_failure_reason_names_the_conditions():
     assert ep.failure == "execution (can: not released; can2: not at rest)"
     ep.plan_failures = ["carry: no plan"]
     assert ep.failure == "carry (can: not released; can2: not at rest)"
+
+
+@pytest.mark.parametrize("name, seed", [("can_in_small_bowl", 0), ("bottle_in_tray", 1)])
+def test_the_expert_stands_a_tall_mover_in_it(name, seed):
+    """The expert's place ends in the pose the rule calls "in" (before: 0 of 10 seeds of every
+    upright layout, the movers in place and graded "execution"; docs/tasks.md "The expert")."""
+    from embodied_envs.solvers.pick_place import PickPlaceSolver
+
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(UPRIGHT / f"{name}.json"),
+                   obs_mode="state", control_mode="pd_joint_pos")  # fmt: skip
+    try:
+        env.reset(seed=seed)
+        result = PickPlaceSolver(env, seed=seed).solve()
+        u = env.unwrapped
+        assert result.success.all(), u.task_reader.unmet()
+        centre = u.task_reader.state(u.task_reader.goal()).in_receptacle[0, 0, 2]
+        assert centre > u.task_scene.rim[0]  # standing, its centre above the rim
+    finally:
+        env.close()
