@@ -14,11 +14,22 @@ from conftest import ROOT
 from mani_skill.utils.structs import Pose
 
 from embodied_envs.envs.tasks import place, state
-from embodied_envs.envs.tasks.scene import resting_height, support_heights
+from embodied_envs.envs.tasks.scene import support_heights
 from embodied_envs.layout.assets import asset_geometry
 
 UPRIGHT = ROOT / "tests" / "data" / "upright"
 TILT = np.deg2rad(30)  # a mover leaning on the receptacle's outer wall
+
+
+def resting_height(parts, xy: np.ndarray, points: np.ndarray, default: float) -> float:
+    """The height, in the receptacle's frame (its convex ``parts``), of a mover's centre at
+    ``xy`` standing as it is (``points (V, 3)``: its collision points about its centre) on the
+    receptacle: the lowest at which none of its points is under the surface straight below it
+    (a can near a bowl's curved wall stands on the ring of its base that meets the wall; on
+    the rim, on the rim). ``default``: the surface's height where no part is under any point."""
+    heights = support_heights(parts, xy + points[:, :2], -np.inf) - points[:, 2]
+    best = heights.max()
+    return float(best) if np.isfinite(best) else default - float(points[:, 2].min())
 
 
 class Scene:
@@ -196,9 +207,10 @@ def test_a_receptacle_without_an_inside_holds_nothing_in_it():
     assert place.evaluate(on)["success"][0]
 
 
-def test_a_mover_rests_on_a_curved_floor_where_its_lowest_ring_meets_it():
-    """The expert's destination (``resting_height``): a can off the centre of the zoo's
-    shallow bowl, on its sloped wall, no point under the surface, one on it."""
+def test_support_heights_follow_a_curved_floor():
+    """``support_heights`` (the floor the rule measures depth from; the poses above): a can
+    off the centre of the zoo's shallow bowl, on its sloped wall, no point under the surface,
+    one on it."""
     from embodied_envs.layout.assets import parse_urdf
 
     bowl = asset_geometry(parse_urdf(ROOT / "tests/data/zoo/assets/shallow_bowl/shallow_bowl.urdf"))

@@ -380,17 +380,15 @@ def test_several_movers_leave_equal_gaps_on_the_receptacle():
     box = np.array([[x, y, z] for x in (-0.13, 0.13) for y in (-0.08, 0.08) for z in (0, 0.01)])
     rec = SimpleNamespace(parts=(box,), max_z=0.01)
     poly = np.array([[-0.13, -0.08], [0.13, -0.08], [0.13, 0.08], [-0.13, 0.08]])
-    can = np.array([[x, y, z] for x in (-0.033, 0.033) for y in (-0.033, 0.033)
-                    for z in (-0.06, 0.06)])  # its collision points about its centre  # fmt: skip
-    dest = _destinations(rec, poly, [can, can], [0.066, 0.066])
+    dest = _destinations(rec, poly, [-0.06, -0.06], [np.zeros(3)] * 2, [0.066, 0.066])
     length = SPREAD * 0.26
     gap = (length - 2 * 0.066) / 3
     assert dest[:, 0] == pytest.approx([-length / 2 + gap + 0.033, length / 2 - gap - 0.033])
     assert dest[1, 0] - dest[0, 0] - 0.066 == pytest.approx(gap) and gap > 0.03
     assert dest[:, 1] == pytest.approx([0, 0]) and dest[:, 2] == pytest.approx([0.07, 0.07])
-    one = _destinations(rec, poly, [can], [0.066])  # one mover: the middle
+    one = _destinations(rec, poly, [-0.06], [np.zeros(3)], [0.066])  # one mover: the middle
     assert one[0, :2] == pytest.approx([0, 0])
-    wide = _destinations(rec, poly, [can, can], [0.2, 0.2])  # no room
+    wide = _destinations(rec, poly, [-0.06] * 2, [np.zeros(3)] * 2, [0.2, 0.2])  # no room
     assert wide[:, 0] == pytest.approx([-length / 6, length / 6])
 
 

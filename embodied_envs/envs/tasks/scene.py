@@ -169,8 +169,7 @@ class TaskScene:
             floors.append(rec.max_z if rec_nodes[i] == layout.context else cavity_floor(rec, poly))
             widths = [2 * np.linalg.norm(h[:, :2] - c[:2], axis=1).max()
                       for h, c in zip(hulls[-1], centres[-1], strict=True)]  # fmt: skip
-            about = [h - c for h, c in zip(hulls[-1], centres[-1], strict=True)]
-            dests.append(_destinations(rec, poly, about, widths))
+            dests.append(_destinations(rec, poly, [g.min_z for g in geoms], centres[-1], widths))
         size = max(len(h) for hs in hulls for h in hs)
         hulls = np.array([[np.concatenate([h, np.repeat(h[:1], size - len(h), 0)]) for h in hs]
                           for hs in hulls], np.float32)  # fmt: skip
@@ -231,22 +230,11 @@ def _yaws(robot_poses: np.ndarray) -> np.ndarray:
     return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 
-def resting_height(parts: tuple[np.ndarray, ...], xy: np.ndarray, points: np.ndarray,
-                   default: float) -> float:
-    """The height, in the receptacle's frame (its convex ``parts``), of a mover's centre at
-    ``xy`` resting there as it stands (``points (V, 3)``: its collision points about its
-    centre): the lowest at which none of its points is under the receptacle's surface straight
-    below it (a can on a bowl's curved floor rests on its rim's lowest ring that touches).
-    ``default`` is the surface's height where no part is under any point."""
-    heights = support_heights(parts, xy + points[:, :2], -np.inf) - points[:, 2]
-    best = heights.max()
-    return float(best) if np.isfinite(best) else default - float(points[:, 2].min())
-
-
-def _destinations(rec, poly: np.ndarray, points: list[np.ndarray], widths: list[float]):
+def _destinations(
+    rec, poly: np.ndarray, mover_min_z: list[float], centres, widths: list[float]
+) -> np.ndarray:
     """``(m, 3)`` in the receptacle's frame: each mover's centre resting upright on the
-    receptacle's top surface (:func:`resting_height`; ``points``: each mover's collision
-    points about its centre), spread along its footprint's longer side. Along ``SPREAD`` of
+    receptacle's top surface, spread along its footprint's longer side. Along ``SPREAD`` of
     that side, the movers (``widths``: each one's largest width, whatever its turn) leave equal
     gaps between each other and the ends: room for the fingers around the mover put down next
     to one placed before (two cans on a tray: 3.4 cm gaps instead of 1.2 at equal spacing of
@@ -254,16 +242,16 @@ def _destinations(rec, poly: np.ndarray, points: list[np.ndarray], widths: list[
     centre = poly.mean(0)
     extent = poly.max(0) - poly.min(0)
     axis = np.eye(2)[int(np.argmax(extent))]
-    m, length = len(points), SPREAD * extent.max()
+    m, length = len(mover_min_z), SPREAD * extent.max()
     gap = (length - sum(widths)) / (m + 1)
     out = []
-    for k, pts in enumerate(points):
+    for k, min_z in enumerate(mover_min_z):
         if gap > 0:
             at = -length / 2 + (k + 1) * gap + sum(widths[:k]) + widths[k] / 2
         else:
             at = ((k + 1) / (m + 1) - 0.5) * length
         xy = centre + at * axis
-        out.append([*xy, resting_height(rec.parts, xy, pts, rec.max_z)])
+        out.append([*xy, support_height(rec.parts, xy, rec.max_z) - min_z + centres[k][2]])
     return np.array(out)
 
 
