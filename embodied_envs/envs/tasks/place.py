@@ -30,6 +30,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from embodied_envs.envs.tasks.state import (
     DROP_GAP,
     OFF_TABLE,
@@ -113,6 +115,9 @@ def stacked(s: TaskState, pose, free):
     unread (``None``: one mover): ``pose``."""
     if s.top is None or pose.shape[1] < 2:
         return pose
+    if isinstance(pose, np.ndarray) and not some(free & ~pose, None):
+        return pose  # no mover could rest on another (numpy: on tensors a branch on values
+        # would wait for the GPU): most steps, the movers on the table or in their pose
     c = numbers(s.bottom)
     bottom, top = s.bottom[:, :, None], s.top[:, None, :]  # (n, j, k): j on k
     mid = (s.bottom + s.top)[:, None, :] * c.HALF
