@@ -198,6 +198,16 @@ def as_torch(s: state.TaskState) -> state.TaskState:
     return state.TaskState(**{k: to(v) for k, v in vars(s).items()})
 
 
+def test_on_likewise_a_mover_on_one_on_the_top_is_on_it():
+    """"On": the second standing on the first, which stands on the top (2 cm rim), is on it;
+    the second 2 cm over the first's top is not."""
+    on = two_movers((0.02, 0.14), (0.12, 0.12), (0.0, 0.0), is_in=False)
+    hovering = two_movers((0.02, 0.16), (0.12, 0.12), (0.0, 0.0), is_in=False)
+    for s, success in ((on, True), (hovering, False)):
+        for t in (s, as_torch(s)):
+            assert bool(place.evaluate(t)["success"][0]) is success
+
+
 def test_a_receptacle_without_an_inside_holds_nothing_in_it():
     """A floor less than ``MIN_DEPTH`` under the top (a lid, a slab): never "in"; "on" it."""
     s = two_movers((0.02, 0.02), (0.1, 0.1), (-0.04, 0.04))
