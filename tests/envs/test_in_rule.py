@@ -14,7 +14,7 @@ from conftest import ROOT
 from mani_skill.utils.structs import Pose
 
 from embodied_envs.envs.tasks import place, state
-from embodied_envs.envs.tasks.scene import support_heights
+from embodied_envs.envs.tasks.scene import TaskReader, support_heights
 from embodied_envs.layout.assets import asset_geometry
 
 UPRIGHT = ROOT / "tests" / "data" / "upright"
@@ -83,7 +83,17 @@ class Scene:
         return np.array([*(foot - low)[:2], self.table_z - low[2]]), q
 
     def grade(self) -> tuple[bool, list[str]]:
-        return bool(self.u.evaluate()["success"][0]), self.u.task_reader.unmet()[0]
+        """Success and the unmet conditions, read as the CPU reads them (numpy) and as the GPU
+        does (tensors through ManiSkill's structs), which agree."""
+        u, arrays = self.u, self.u.task_reader
+        graded = bool(u.evaluate()["success"][0]), arrays.unmet()[0]
+        u.task_reader = TaskReader(u, u.task_scene, u.layout_scene.top_z, tensors=True)
+        u.task_reader.dest = torch.as_tensor(arrays.dest)
+        try:
+            assert (bool(u.evaluate()["success"][0]), u.task_reader.unmet()[0]) == graded
+        finally:
+            u.task_reader = arrays
+        return graded
 
 
 @pytest.fixture(scope="module")
