@@ -1,6 +1,6 @@
 """The package's dependency direction: which subpackages each one pulls in, no import cycles,
-and function-local imports only where they keep a command free of the simulator (said in a
-comment)."""
+function-local imports only where they keep a command free of the simulator (said in a
+comment), and ManiSkill's private fields reached from one module only (``internals.py``)."""
 
 import ast
 import json
@@ -16,25 +16,30 @@ PACKAGE = ROOT / "embodied_envs"
 # importing embodied_envs registers the env id: every import pulls in registration
 ALWAYS = {"registration"}
 # what importing each part may pull in (the README's "Where things are": layout -> scene ->
-# envs -> solvers -> pipelines -> cli, datasets beside solvers; splat, paths, workers stand alone)
+# envs -> solvers -> pipelines -> cli, datasets beside solvers; splat, paths, workers and
+# internals, ManiSkill's private fields, stand alone)
 ALLOWED = {
     "paths": set(),
     "workers": set(),
+    "internals": set(),
     "registration": set(),
     "splat": set(),
     "robots": set(),
     "layout": {"paths", "robots"},
     "config": {"layout", "paths", "robots"},
     "scene": {"layout", "paths", "robots"},
-    "envs": {"layout", "paths", "scene", "splat", "config", "robots"},
+    "envs": {"layout", "paths", "scene", "splat", "config", "robots", "internals"},
     # the expert records a control mode's actions as the converters compute them (solvers/modes.py)
-    "solvers": {"layout", "paths", "robots", "datasets", "config"},
-    "datasets": {"layout", "paths", "config", "robots"},
+    "solvers": {"layout", "paths", "robots", "datasets", "config", "internals"},
+    "datasets": {"layout", "paths", "config", "robots", "internals"},
     "pipelines": {
         "layout", "paths", "scene", "splat", "config", "envs", "solvers", "workers", "robots",
-        "datasets",
+        "datasets", "internals",
     },
-    "cli": {"layout", "paths", "splat", "config", "workers", "pipelines", "robots", "datasets"},
+    "cli": {
+        "layout", "paths", "splat", "config", "workers", "pipelines", "robots", "datasets",
+        "internals",
+    },
 }
 HEAVY = ("torch", "sapien", "mani_skill")  # the simulator: not for --help or layout commands
 
@@ -58,7 +63,7 @@ def test_each_part_pulls_in_only_what_is_below_it(part):
     parts, heavy = imported_by(part)
     assert parts <= ALLOWED[part], f"{part} imports {sorted(parts - ALLOWED[part])}"
     if part in ("paths", "workers", "registration", "splat", "robots", "layout", "config",
-                "datasets"):
+                "datasets", "internals"):
         assert not heavy, f"{part} imports {sorted(heavy)}"
 
 
@@ -183,3 +188,73 @@ def test_no_module_is_over_its_size():
         over.append(f"{ENV_FILE.relative_to(ROOT)}: {counts[ENV_FILE]} lines "
                     f"(limit {ENV_FILE_LINES} for the env file)")  # fmt: skip
     assert not over, "\n".join(over)
+
+
+# the one module that reads ManiSkill's and SAPIEN's private fields (behind named functions)
+PRIVATE_READER = PACKAGE / "internals.py"
+# private attributes of other objects that the package may reach elsewhere, each with its reason
+# (module, expression as ast.unparse writes it)
+PRIVATE_ALLOWED = {
+    # the standard library's documented exit without clean-up, for a forked worker process
+    ("embodied_envs/workers.py", "os._exit"),
+    # ProcessPoolExecutor keeps no public list of its processes: a failed run stops them at once
+    ("embodied_envs/workers.py", "pool._processes"),
+}
+
+
+def private_reaches(tree: ast.AST) -> list[tuple[int, str]]:
+    """``(line, expression)`` of each reach into a private attribute (one leading underscore)
+    of an object other than the code's own (``self``, ``cls``, ``super()``): ``x._name`` or
+    ``getattr(x, "_name")`` / ``setattr`` / ``hasattr`` with a literal name."""
+
+    def own(value: ast.AST) -> bool:
+        return (isinstance(value, ast.Name) and value.id in ("self", "cls")) or (
+            isinstance(value, ast.Call) and ast.unparse(value.func) == "super"
+        )
+
+    def private(name) -> bool:
+        return isinstance(name, str) and name.startswith("_") and not name.startswith("__")
+
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and private(node.attr) and not own(node.value):
+            found.append((node.lineno, ast.unparse(node)))
+        elif (
+            isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+            and node.func.id in ("getattr", "setattr", "hasattr", "delattr")
+            and len(node.args) >= 2 and isinstance(node.args[1], ast.Constant)
+            and private(node.args[1].value) and not own(node.args[0])
+        ):  # fmt: skip
+            found.append((node.lineno, ast.unparse(node)))
+    return sorted(found)
+
+
+def test_only_internals_reaches_private_fields_of_other_objects():
+    """ManiSkill's private fields (``._objs``, ``._bodies``, ``._controller_configs``, a
+    controller's ``._target_qpos``...) are read through ``embodied_envs/internals.py`` only: a
+    ManiSkill release that renames one breaks that module alone."""
+    reaches = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path == PRIVATE_READER:
+            continue
+        rel = str(path.relative_to(ROOT))
+        reaches += [f"{rel}:{line}: {expr}"
+                    for line, expr in private_reaches(ast.parse(path.read_text()))
+                    if (rel, expr) not in PRIVATE_ALLOWED]  # fmt: skip
+    assert not reaches, (
+        "private attributes of other objects reached outside embodied_envs/internals.py "
+        "(add a named function there):\n" + "\n".join(reaches)
+    )
+    assert private_reaches(ast.parse(PRIVATE_READER.read_text()))
+
+
+def test_a_reach_into_a_private_field_is_found():
+    code = (
+        "class A:\n"
+        "    def f(self, actor, agent):\n"
+        "        self._mine = super()._hook() + cls._x\n"
+        "        q = actor._objs[0].pose\n"
+        "        return getattr(agent, '_controller_configs'), agent.__dict__, hasattr(q, 'p')\n"
+    )
+    found = private_reaches(ast.parse(code))
+    assert found == [(4, "actor._objs"), (5, "getattr(agent, '_controller_configs')")]

@@ -1,15 +1,37 @@
 #!/usr/bin/env bash
-# Idempotent set-up: a .venv with torch (CPU build) first, the package with dev extras, and a
-# Vulkan device for SAPIEN (lavapipe from bookworm-backports when none is found).
+# Idempotent set-up: a .venv with torch (CPU build) first, the package with its dev and lerobot
+# extras at the versions of the lock (constraints.txt, made by tools/lock.sh), and a Vulkan device
+# for SAPIEN (lavapipe from bookworm-backports when none is found).
 # Re-running only checks; it installs what is missing and nothing more.
+# Overrides: PYTHON (the interpreter that makes the venv), VENV (its folder, default .venv),
+# LOCK (the constraints file, default constraints.txt; LOCK=none: the newest versions
+# pyproject.toml allows, as tools/lock.sh installs them to write the lock).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-VENV=$ROOT/.venv
+VENV=${VENV:-$ROOT/.venv}
 PY=${PYTHON:-python3}
+LOCK=${LOCK:-$ROOT/constraints.txt}
+EXTRAS=dev,lerobot  # the extras installed (and locked by tools/lock.sh)
+TORCH=torch==2.13.0  # without a lock: a CPU build on these machines (the lock pins its build)
 export PIP_DISABLE_PIP_VERSION_CHECK=1
 
 log() { printf '[setup] %s\n' "$*" >&2; }
+
+CONSTRAIN=()
+if [ "$LOCK" != none ]; then
+    if [ ! -f "$LOCK" ]; then
+        log "ERROR: no lock at $LOCK: run 'bash tools/lock.sh' to write it (or LOCK=none)."
+        exit 1
+    fi
+    CONSTRAIN=(-c "$LOCK")
+    # the lock's torch, build included (e.g. 2.13.0+cpu): never a CUDA build in its place
+    TORCH=$(grep -m1 -E '^torch==' "$LOCK" || true)
+    if [ -z "$TORCH" ]; then
+        log "ERROR: $LOCK pins no torch: re-run 'bash tools/lock.sh'."
+        exit 1
+    fi
+fi
 
 if [ ! -x "$VENV/bin/python" ]; then
     log "creating $VENV"
@@ -17,19 +39,20 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 VPY=$VENV/bin/python
 
-# torch first: torch==2.13.0 is a CPU build on these machines; anything that pulls torch
-# unpinned would otherwise fetch a multi-GB CUDA build.
+# torch first: anything that pulls torch unpinned would otherwise fetch a multi-GB CUDA build.
+# A lock's "+cpu" build needs a source that has it (a wheel folder or PyTorch's CPU index);
+# without one pip stops with "No matching distribution" instead of fetching CUDA.
 if ! "$VPY" -c "import torch" 2>/dev/null; then
-    log "installing torch==2.13.0"
-    "$VPY" -m pip install -q "torch==2.13.0"
+    log "installing $TORCH"
+    "$VPY" -m pip install -q "$TORCH"
 fi
 
-# Re-install the package only when pyproject.toml changed since the last install.
+# Re-install the package only when pyproject.toml or the lock changed since the last install.
 STAMP=$VENV/.embodied_envs.stamp
-HASH=$(sha256sum pyproject.toml | cut -d' ' -f1)
+HASH=$(cat pyproject.toml "${CONSTRAIN[@]:1}" | sha256sum | cut -d' ' -f1)
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$HASH" ] || ! "$VPY" -c "import embodied_envs" 2>/dev/null; then
-    log "installing embodied-envs[dev,lerobot] (editable)"
-    "$VPY" -m pip install -q -e ".[dev,lerobot]"
+    log "installing embodied-envs[$EXTRAS] (editable)${CONSTRAIN[*]:+, versions of ${LOCK#"$ROOT"/}}"
+    "$VPY" -m pip install -q "${CONSTRAIN[@]}" -e ".[$EXTRAS]"
     echo "$HASH" >"$STAMP"
 fi
 

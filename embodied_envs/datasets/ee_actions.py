@@ -30,6 +30,8 @@ from mani_skill.utils.geometry.rotation_conversions import (
     quaternion_to_matrix,
 )
 
+from embodied_envs.internals import ControllerState
+
 # steps at most that a converted demo holds its last target for its task to succeed (measured:
 # 1-7 on the default layout's demos that needed any)
 SETTLE_STEPS = 20
@@ -50,7 +52,7 @@ def _mover_offsets(env, ee_name: str) -> tuple[np.ndarray, np.ndarray] | None:
     u = env.unwrapped
     if getattr(u, "task_reader", None) is None:
         return None
-    state, _ = u._rules()
+    state, _ = u.task_rules()
     ee = common.to_numpy(u.main_agent.robot.links_map[ee_name].pose.p[0])
     return common.to_numpy(state.origins[0]) - ee, common.to_numpy(state.grasped[0])
 
@@ -99,7 +101,7 @@ def ee_action(arm, target_p: np.ndarray, target_q: np.ndarray) -> tuple[torch.Te
     pos_only = not hasattr(cfg, "rot_lower")
     if not cfg.use_delta:  # absolute pose: position and XYZ euler angles of the root frame
         return torch.cat([p, matrix_to_euler_angles(quaternion_to_matrix(q), "XYZ")], 1), False
-    current = arm._target_pose if cfg.use_target else arm.ee_pose_at_base
+    current = ControllerState(arm).target_pose if cfg.use_target else arm.ee_pose_at_base
     action = (p - current.p) / torch.as_tensor(cfg.pos_upper, device=device)
     clipped = bool((action.abs() > 1).any())
     action = action.clamp(-1, 1)

@@ -30,6 +30,8 @@ import numpy as np
 import torch
 from mani_skill.utils import common, gym_utils
 
+from embodied_envs.internals import ControllerState
+
 # what each mode's action is relative to: the joints now, or the controller's last target
 RELATIVE_TO = {"pd_joint_delta_pos": "qpos", "pd_joint_target_delta_pos": "target"}
 # control steps at most toward one recorded target (ManiSkill's converter takes 2)
@@ -48,7 +50,10 @@ def mode_action(controller, target: np.ndarray, mode: str) -> np.ndarray:
     ManiSkill's ``qpos_to_pd_joint_*`` compute it (its bounds may be lists here, one per joint,
     which ManiSkill's functions do not take)."""
     cfg = controller.config
-    now = controller._target_qpos if RELATIVE_TO[mode] == "target" else controller.qpos
+    if RELATIVE_TO[mode] == "target":
+        now = ControllerState(controller).target_qpos
+    else:
+        now = controller.qpos
     now = now.cpu().numpy()
     delta = target - (now[0] if np.ndim(target) == 1 else now)
     low, high = np.asarray(cfg.lower, np.float32), np.asarray(cfg.upper, np.float32)
@@ -100,7 +105,7 @@ def velocity_action(arm, qpos: np.ndarray) -> np.ndarray:
     """The normalised ``pd_joint_vel`` action of ``arm`` that moves its joints to ``qpos`` in
     one control step, unclipped (ManiSkill's ``qpos_to_pd_joint_vel`` with per-joint bounds)."""
     cfg = arm.config
-    qvel = (qpos - arm.qpos.cpu().numpy()[0]) * arm._control_freq
+    qvel = (qpos - arm.qpos.cpu().numpy()[0]) * ControllerState(arm).control_freq
     low, high = np.asarray(cfg.lower, np.float32), np.asarray(cfg.upper, np.float32)
     return gym_utils.inv_scale_action(qvel, low, high)
 

@@ -16,6 +16,7 @@ from mani_skill.utils.structs.pose import Pose
 
 from embodied_envs import robots
 from embodied_envs.envs import contacts
+from embodied_envs.internals import link_components
 
 
 def model_file(uid: str) -> str | None:
@@ -140,7 +141,7 @@ def tcp_pose(agent, entry: robots.Robot):
         return agent.robot.links_map[entry.tcp_link].pose
     if entry.tcp_tips is None or agent.scene.gpu_sim_enabled:
         return agent.tcp_pose
-    q = agent.finger1_link._objs[0].entity_pose.q
+    q = link_components(agent.finger1_link)[0].entity_pose.q
     return Pose.create_from_pq(
         torch.from_numpy(tcp_position_cpu(agent, entry)), torch.from_numpy(q[None])
     )
@@ -150,9 +151,9 @@ def tcp_position_cpu(agent, entry: robots.Robot) -> np.ndarray:
     """``(1, 3)``: the TCP position of the CPU simulation's one env, read from SAPIEN."""
     links = agent.robot.links_map
     if entry.tcp_link is not None:
-        return np.array([links[entry.tcp_link]._objs[0].entity_pose.p])
+        return np.array([link_components(links[entry.tcp_link])[0].entity_pose.p])
     if entry.tcp_tips is not None:  # float32 as the agent's tcp_pos computes it
-        a, b = (links[name]._objs[0].entity_pose.p for name in entry.tcp_tips)
+        a, b = (link_components(links[name])[0].entity_pose.p for name in entry.tcp_tips)
         return ((a + b) / np.float32(2))[None]
     return agent.tcp_pose.p.cpu().numpy()
 

@@ -19,6 +19,7 @@ import math
 import numpy as np
 import torch
 
+from embodied_envs.internals import bodies, link_components
 from embodied_envs.robots import PANDA_GRASP, FingerGrasp
 
 
@@ -39,8 +40,8 @@ def grasped_cpu(agent, objs, rule: FingerGrasp = PANDA_GRASP) -> np.ndarray:
     the target (with ``min_force`` > 0, one finger alone decides nothing else)."""
     scene = agent.scene
     # the rigid-body components (compared by identity, as ``==`` compares them)
-    fingers = agent.finger1_link._bodies[0], agent.finger2_link._bodies[0]
-    targets = [obj._bodies[0] for obj in objs]
+    fingers = bodies(agent.finger1_link)[0], bodies(agent.finger2_link)[0]
+    targets = [bodies(obj)[0] for obj in objs]
     slot = {body: k for k, body in enumerate(dict.fromkeys(targets))}
     # per target and finger, its contacts with the target and whether the finger is the
     # contact's first body (the impulses act on it) or the target is (they act on the target)
@@ -56,7 +57,7 @@ def grasped_cpu(agent, objs, rule: FingerGrasp = PANDA_GRASP) -> np.ndarray:
         side = 0 if finger == fingers[0] else 1 if finger == fingers[1] else None
         if side is not None:
             touching[k][side].append((contact, on_finger))
-    links = agent.finger1_link._objs[0], agent.finger2_link._objs[0]
+    links = link_components(agent.finger1_link)[0], link_components(agent.finger2_link)[0]
     step = scene.px.timestep
     held = [
         (all(touching[k]) or rule.min_force <= 0)

@@ -36,11 +36,11 @@ reading the state this module sets. Where ManiSkill's targets are NaN (the Fetch
 ``pd_joint_pos_vel`` scales its continuous joints' infinite limits), the NaNs' sign bits may
 differ.
 
-It reads ManiSkill internals: ``ArticulationJoint._objs`` and ``Articulation._objs`` (in
-``envs/fast_reads.PRIVATE_ATTRIBUTES``) and each covered controller's attributes in
-:data:`CONTROLLER_ATTRIBUTES`; ``tests/envs/test_fast_reads.py`` checks them all, so an upgrade
-that renames one fails there, and one that changes the controllers' arithmetic fails
-``tests/envs/test_fast_control.py``.
+It reads ManiSkill internals through ``embodied_envs/internals.py`` (``px_joints``,
+``px_articulations``, ``ControllerState``): the SAPIEN joints and articulation, and each covered
+controller's attributes in :data:`CONTROLLER_ATTRIBUTES`; ``tests/envs/test_fast_reads.py``
+checks them all, so an upgrade that renames one fails there, and one that changes the
+controllers' arithmetic fails ``tests/envs/test_fast_control.py``.
 """
 
 from __future__ import annotations
@@ -57,6 +57,8 @@ from mani_skill.agents.controllers.pd_joint_pos import (
 )
 from mani_skill.agents.controllers.pd_joint_pos_vel import PDJointPosVelController
 from mani_skill.agents.controllers.pd_joint_vel import PDJointVelController
+
+from embodied_envs.internals import ControllerState, px_articulations, px_joints
 
 F32 = np.float32
 HALF, ONE, ZERO = F32(0.5), F32(1.0), F32(0.0)
@@ -97,6 +99,7 @@ class _Part:
 
     def __init__(self, ctrl, cols: slice):
         self.ctrl, self.cols = ctrl, cols
+        self.state = ControllerState(ctrl)  # its private fields
 
     def set(self, action: torch.Tensor, x: np.ndarray, qpos: np.ndarray) -> None:
         """The controller's ``set_action``: here ManiSkill's, on its columns of ``action``
@@ -114,10 +117,10 @@ class _Joints(_Part):
 
     def __init__(self, ctrl, cols: slice):
         super().__init__(ctrl, cols)
-        self.px = [joint._objs[0] for joint in ctrl.joints]
+        self.px = [px_joints(joint)[0] for joint in ctrl.joints]
         self.idx = _indices(ctrl.active_joint_indices)
         self.scaling = None  # (clip low, clip high, centre, half range) of its columns
-        if ctrl._normalize_action:  # gym_utils.clip_and_scale_action, its constants once
+        if self.state.normalize_action:  # gym_utils.clip_and_scale_action, its constants once
             low, high = ctrl.action_space_low.cpu().numpy(), ctrl.action_space_high.cpu().numpy()
             with np.errstate(invalid="ignore"):  # infinite limits give NaN, as in torch
                 self.scaling = (-ONE, ONE, HALF * (high + low), HALF * (high - low))
@@ -136,7 +139,7 @@ class _Joints(_Part):
 
     def own_target(self) -> np.ndarray | None:
         """``_target_qpos`` as a numpy view, where ManiSkill's arithmetic on it stays float32."""
-        t = self.ctrl._target_qpos
+        t = self.state.target_qpos
         if (
             type(t) is not torch.Tensor or t.dtype != torch.float32 or t.device.type != "cpu"
             or t.requires_grad or t.shape != (1, len(self.idx))
@@ -146,14 +149,14 @@ class _Joints(_Part):
 
     def start(self, qpos: np.ndarray) -> np.ndarray:
         start = qpos[self.idx][None]  # a new array: ManiSkill's ``self.qpos``
-        self.ctrl._step = 0
-        self.ctrl._start_qpos = _tensor(start)
+        self.state.step = 0
+        self.state.start_qpos = _tensor(start)
         return start
 
     def finish(self, start: np.ndarray, target: np.ndarray) -> None:
         """ManiSkill's end of ``set_action``: interpolation steps, or the targets written."""
         if self.interpolate:
-            self.ctrl._step_size = _tensor((target - start) / F32(self.ctrl._sim_steps))
+            self.state.step_size = _tensor((target - start) / F32(self.state.sim_steps))
         else:
             self.write_targets(target)
 
@@ -178,7 +181,7 @@ class _JointPos(_Joints):
             target = (held if self.target else start) + x
         else:
             target = np.array(x)  # ``broadcast_to(action, shape).clone()``
-        self.ctrl._target_qpos = _tensor(target)
+        self.state.target_qpos = _tensor(target)
         self.finish(start, target)
         return True
 
@@ -191,8 +194,8 @@ class _Mimic(_Joints):
         self.control = _indices(ctrl.control_joint_indices)
         self.mimic = _indices(ctrl.mimic_joint_indices)
         self.mimic_control = _indices(ctrl.mimic_control_joint_indices)
-        self.multiplier = ctrl._multiplier.cpu().numpy()[None, :]
-        self.offset = ctrl._offset.cpu().numpy()[None, :]
+        self.multiplier = self.state.multiplier.cpu().numpy()[None, :]
+        self.offset = self.state.offset.cpu().numpy()[None, :]
 
     def set(self, action, x, qpos) -> None:
         target = self.own_target()
@@ -219,7 +222,7 @@ class _JointPosVel(_JointPos):
         if not self.positions(x[:, :nq], qpos):
             return _Part.set(self, action, x, qpos)
         velocities = np.array(x[:, nq:])
-        self.ctrl._target_qvel = _tensor(velocities)
+        self.state.target_qvel = _tensor(velocities)
         self.write_velocities(velocities)
 
 
@@ -309,7 +312,7 @@ class FastSetAction:
 
     def __init__(self, agent):
         self.agent = agent
-        self.px = agent.robot._objs[0]
+        self.px = px_articulations(agent.robot)[0]
         self.plans: dict[str, _Plan] = {}
 
     def plan(self) -> _Plan:

@@ -10,16 +10,11 @@ structs directly and give the same values:
 - :func:`positions`: an actor's position per env as a numpy array;
 - :func:`restart_sleep_timers`: every moving body woken, as in a new scene.
 
-They rely on the private attributes listed in :data:`PRIVATE_ATTRIBUTES` (ManiSkill 3.0.1);
+They read ManiSkill's private fields through ``embodied_envs/internals.py`` (the one module
+that reaches them; its ``PRIVATE_ATTRIBUTES``, ManiSkill 3.0.1), as ``envs/contacts.py``,
+``envs/tasks/scene.py``, ``envs/agents.py`` and ``envs/fast_control.py`` do;
 ``tests/envs/test_fast_reads.py`` checks each on a real CPU env, so an upgrade that renames or
-retypes one fails there, naming it. Two other modules read the same internals for the same
-reason, and the same test covers what they use: ``envs/contacts.py`` (``Link._bodies``,
-``Link._objs``, ``Actor._bodies``: the fingers' contacts) and ``envs/tasks/scene.py``
-(``Articulation._objs``, ``Link._objs``, ``Actor._objs``, ``Actor._bodies``: the task state).
-``envs/fast_control.py`` (ManiSkill's ``set_action`` in numpy) writes drive targets through
-``ArticulationJoint._objs`` and reads the controllers' attributes it lists in its
-``CONTROLLER_ATTRIBUTES``; the same test checks those. The expert reads its joints through
-``Articulation._objs`` too (``solvers/pick_place.py``, ``PickPlaceSolver._qpos``).
+retypes one fails there, naming it.
 """
 
 from __future__ import annotations
@@ -27,21 +22,12 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-# (ManiSkill struct, private attribute, what each item of it is): the ManiSkill internals this
-# module and the two above read; the structs are in mani_skill.utils.structs
-PRIVATE_ATTRIBUTES = (
-    ("Actor", "_objs", "sapien.Entity"),  # its pose
-    ("Actor", "_bodies", "PhysxRigidBodyComponent"),  # velocities, contacts
-    ("Link", "_objs", "PhysxArticulationLinkComponent"),  # entity_pose
-    ("Link", "_bodies", "PhysxArticulationLinkComponent"),  # velocities, contacts
-    ("Articulation", "_objs", "PhysxArticulation"),  # qpos, qvel
-    ("ArticulationJoint", "_objs", "PhysxArticulationJoint"),  # drive targets (fast_control)
-)
+from embodied_envs.internals import bodies, entities, link_components, px_articulations
 
 
 def positions(actor) -> np.ndarray:
     """``actor.pose.p`` as a numpy array ``(num_envs, 3)``, read from its SAPIEN entities."""
-    return np.array([entity.pose.p for entity in actor._objs])
+    return np.array([entity.pose.p for entity in entities(actor)])
 
 
 def cpu_state_dict(env) -> dict:
@@ -56,14 +42,14 @@ def cpu_state_dict(env) -> dict:
     for actor in registry.actors.values():
         if actor.px_body_type == "static":
             continue
-        pose, body = actor._objs[0].pose, actor._bodies[0]
+        pose, body = entities(actor)[0].pose, bodies(actor)[0]
         moving = actor.px_body_type == "dynamic"
         vel = (body.linear_velocity, body.angular_velocity) if moving else (zeros, zeros)
         parts += (pose.p, pose.q, *vel)
         rows.append((actors, actor.name, 13))
     for art in registry.articulations.values():
-        root, px = art.root, art._objs[0]
-        pose, body = root._objs[0].entity_pose, root._bodies[0]
+        root, px = art.root, px_articulations(art)[0]
+        pose, body = link_components(root)[0].entity_pose, bodies(root)[0]
         qpos, qvel = px.qpos, px.qvel
         parts += (pose.p, pose.q, body.linear_velocity, body.angular_velocity, qpos, qvel)
         rows.append((articulations, art.name, 13 + len(qpos) + len(qvel)))

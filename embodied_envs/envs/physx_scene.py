@@ -17,6 +17,8 @@ from __future__ import annotations
 import sapien
 from sapien import physx
 
+from embodied_envs.internals import viewer
+
 
 def renew_physx_system(scene) -> None:
     """Moves every entity of a CPU-simulation ManiSkill ``scene`` (one sub-scene) into a new
@@ -74,6 +76,6 @@ def before_reset(env) -> None:
     # system: after close() none stays alive with its bodies)
     if getattr(env.scene, "reset_before", False):
         renew_physx_system(env.scene)
-        if env._viewer is not None:
-            env._viewer.set_scene(env.scene.sub_scenes[0])
+        if viewer(env) is not None:
+            viewer(env).set_scene(env.scene.sub_scenes[0])
     env.scene.reset_before = True

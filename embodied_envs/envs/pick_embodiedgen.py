@@ -240,12 +240,12 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         if not self.gpu_sim_enabled:  # bodies settle as in a new scene, whatever ran before
             fast_reads.restart_sleep_timers(self.scene)
 
-    def _rules(self):
+    def task_rules(self):
         """The task state now and each present kind's rule results (``envs/tasks``)."""
         return self.task_reader.rules(self.task_reader.goal())
 
     def evaluate(self):
-        state, results = self._rules()
+        state, results = self.task_rules()
         self._last_rules = (state, results)
         info = {key: self.task_reader.by_kind(results, key) for key in ("success", *INFO_KEYS)}
         # a mover off the table, or the receptacle knocked off: one check for all
@@ -285,7 +285,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
         """Each env's kind's staged dense reward (``envs/tasks/<kind>.py`` ``reward``), from
         0 to that kind's ``MAX_REWARD`` (reached on success only)."""
-        state, results = self._last_rules if hasattr(self, "_last_rules") else self._rules()
+        state, results = self._last_rules if hasattr(self, "_last_rules") else self.task_rules()
         rewards = {k: {"reward": RULES[k].reward(state, res)} for k, res in results.items()}
         return self.task_reader.by_kind(rewards, "reward").float()
 

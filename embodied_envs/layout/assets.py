@@ -19,10 +19,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from PIL import Image
 from scipy.spatial import ConvexHull, QhullError
 
-from embodied_envs.layout.collision import convex_collision, obj_objects
+from embodied_envs.layout.collision import (
+    MIN_COLLISION_THICKNESS,
+    convex_collision,
+    obj_objects,
+    thickness,
+)
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.folders import resolve_path
 from embodied_envs.layout.pose import rpy_to_matrix, rpy_to_quat_wxyz
@@ -34,7 +38,6 @@ DEFAULT_DYNAMIC_FRICTION = 0.4  # when the URDF has no mu2
 RESTITUTION = 0.05
 DEFAULT_DENSITY = 1000.0  # kg/m^3, when the URDF gives no mass
 MASS_RANGE = (1e-3, 1e3)  # kg: a graspable or supporting object (a paper clip to a table)
-MIN_COLLISION_THICKNESS = 1e-3  # m: a collision mesh thinner than this along an axis is flat
 HEAVY_COLLISION_FACES = 50_000  # a collision mesh with more faces is warned about (cost)
 MAX_IMAGE_SIDE = 8192  # pixels a side of any image rendered or read: larger ones are refused
 
@@ -395,80 +398,15 @@ def _geometry(collision: MeshRef) -> AssetGeometry:
         )
     vertices = np.concatenate(parts)
     extent = vertices.max(0) - vertices.min(0)
-    if extent.min() < MIN_COLLISION_THICKNESS:
+    thin = thickness(vertices)
+    if thin < MIN_COLLISION_THICKNESS:
         raise LayoutError(
             f"{collision.path}: the collision mesh is flat ({extent.round(4).tolist()} m across"
-            f" x, y, z; under {MIN_COLLISION_THICKNESS} m in one): the object would sink through"
-            " its support. Fix: export a closed collision mesh with volume."
+            f" x, y, z; {thin:.4f} m at its thinnest, under {MIN_COLLISION_THICKNESS} m): the"
+            " object would sink through its support. Fix: export a closed collision mesh with"
+            " volume."
         )
     return AssetGeometry(vertices, tuple(parts), volume)
-
-
-MAX_TEXTURE_BYTES = 256 << 20  # a texture file larger than this is refused before reading
-
-
-def check_visual_mesh(spec: AssetSpec) -> None:
-    """The visual mesh loads and holds finite vertices (it is rendered as it is), and every
-    material and texture it names (OBJ ``mtllib``, ``map_*``) lies in the asset folder and
-    reads as an image of at most ``MAX_IMAGE_SIDE`` px a side: SAPIEN would otherwise fail
-    minutes later, without naming the node.
-
-    Raises:
-        LayoutError: naming the file and the first bad vertex, material or texture.
-    """
-    key = ("visual checked", FileVersion.of(spec.visual.path), spec.visual)
-    ASSET_FILES.get(key, lambda: _load_parts_checked(spec.visual, collision=False) and True)
-    if spec.visual.path.suffix.lower() == ".obj":
-        _check_materials(spec.visual.path, spec.urdf_path.parent)
-
-
-def _inside(path: Path, folder: Path, what: str, source: Path, name: str) -> Path:
-    """``path`` resolved, refused when outside ``folder`` or missing."""
-    path = resolve_path(path, f"{source}: {what}")
-    if not path.is_relative_to(folder):
-        raise LayoutError(
-            f"{source}: {what} {name} lies outside the asset folder {folder}. Fix: copy it into"
-            " the asset folder and name it relative to the file that uses it."
-        )
-    if not path.is_file():
-        raise LayoutError(f"{source}: {what} {name} does not exist (looked at {path}).")
-    return path
-
-
-def _check_materials(obj: Path, folder: Path) -> None:
-    with open(obj, "rb") as fh:
-        lines = [line for line in fh if line.startswith(b"mtllib") and len(line.split()) > 1]
-    libraries = [line.split(None, 1)[1].decode(errors="replace").strip() for line in lines]
-    for name in libraries:
-        mtl = _inside(obj.parent / name, folder, "material file", obj, name)
-        for line in mtl.read_text(errors="replace").splitlines():
-            words = line.split()
-            if words and (words[0].lower().startswith("map_") or words[0] in ("bump", "disp")):
-                tex_name = words[-1]  # options such as -s 1 1 1 come before the file name
-                tex = _inside(mtl.parent / tex_name, folder, "texture", mtl, tex_name)
-                key = ("texture checked", FileVersion.of(tex))
-                ASSET_FILES.get(key, lambda mtl=mtl, tex=tex: _check_texture(mtl, tex))
-
-
-def _check_texture(mtl: Path, tex: Path) -> bool:
-    size = tex.stat().st_size
-    if size > MAX_TEXTURE_BYTES:
-        raise LayoutError(
-            f"{mtl}: texture {tex.name} is {size:,} bytes, over {MAX_TEXTURE_BYTES:,}."
-            " Fix: downscale it."
-        )
-    try:
-        with Image.open(tex) as im:
-            w, h = im.size
-            im.verify()  # the file's structure (chunks, checksums), without decoding pixels
-    except Exception as e:  # PIL raises many types for unreadable images
-        raise LayoutError(f"{mtl}: texture {tex.name} is not a readable image ({e}).") from None
-    if max(w, h) > MAX_IMAGE_SIDE:
-        raise LayoutError(
-            f"{mtl}: texture {tex.name} is {w}x{h} px, over {MAX_IMAGE_SIDE} px a side (it would"
-            f" cost {w * h * 4 / 1e9:.1f} GB to load). Fix: downscale it."
-        )
-    return True
 
 
 def asset_geometry(spec: AssetSpec, version: FileVersion | None = None) -> AssetGeometry:

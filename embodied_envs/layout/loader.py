@@ -7,17 +7,13 @@ import json
 from pathlib import Path
 from typing import Any
 
-from embodied_envs.layout.assets import (
-    asset_geometry,
-    check_visual_mesh,
-    node_stem,
-    parse_urdf,
-)
+from embodied_envs.layout.assets import asset_geometry, node_stem, parse_urdf
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.folders import check_folder
 from embodied_envs.layout.placement.file_poses import check_file_poses
 from embodied_envs.layout.pools import asset_pools, with_assets
 from embodied_envs.layout.schema import LayoutInfo, label
+from embodied_envs.layout.visual import check_visual_mesh
 
 MAX_LAYOUT_BYTES = 1 << 20  # a layout file over this is refused before it is read
 

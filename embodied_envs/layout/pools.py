@@ -14,7 +14,8 @@ import os
 from pathlib import Path
 
 from embodied_envs.layout.assets import ASSET_FILES, FileVersion, urdf_path_for
-from embodied_envs.layout.schema import LayoutInfo
+from embodied_envs.layout.schema import LayoutInfo, label
+from embodied_envs.layout.task import TASK_FIELD, structured_spec
 
 
 def pool_members(layout: LayoutInfo, node: str) -> list[str] | None:
@@ -47,7 +48,8 @@ def with_assets(layout: LayoutInfo, choices: dict[str, str]) -> LayoutInfo:
 
     A drawn target is described by its member's folder name (``objs_desc``), and the layout's
     ``task_desc``, written for no asset in particular, gives way to that description, so the
-    instruction names the object the env holds.
+    instruction names the object the env holds: the task read from it is kept as the
+    structured ``relation["task_spec"]``, from which the instruction is built.
     """
     if not choices:
         return layout
@@ -56,8 +58,11 @@ def with_assets(layout: LayoutInfo, choices: dict[str, str]) -> LayoutInfo:
     relation = copy.deepcopy(layout.relation)
     for node, member in choices.items():
         desc[node] = Path(member).name.replace("_", " ")
-        if node == layout.target_node:
-            relation.pop("task_desc", None)
+        if node == layout.target_node and "task_desc" in relation:
+            # the grade stays the sentence's; the instruction is built from it (instruction)
+            relation.pop("task_desc")
+            if structured_spec(relation, label(layout.source)) is None:
+                relation[TASK_FIELD] = layout.task.spec()
     return dataclasses.replace(layout, assets=assets, objs_desc=desc, relation=relation)
 
 

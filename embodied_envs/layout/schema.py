@@ -23,7 +23,7 @@ from embodied_envs.layout.assets import AssetSpec, parse_urdf, urdf_path_for
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.folders import resolve_path
 from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE, LayoutPose
-from embodied_envs.layout.task import Task, resolve_task
+from embodied_envs.layout.task import Task, resolve_task, structured_spec
 from embodied_envs.paths import atomic_output
 from embodied_envs.robots import ROBOT_NAMES, SUPPORTED_ROBOTS
 
@@ -98,7 +98,7 @@ class LayoutInfo:
 
     @functools.cached_property
     def task(self) -> Task:
-        """The task graded in this layout (``layout/task.py``: ``relation.task``, else the
+        """The task graded in this layout (``layout/task.py``: ``relation.task_spec``, else the
         sentence ``relation.task_desc``, else picking the first manipulated object)."""
         return resolve_task(self, label(self.source))
 
@@ -117,11 +117,14 @@ class LayoutInfo:
 
     @property
     def instruction(self) -> str:
-        """The task in words, for language-conditioned policies: ``relation.task_desc``, or,
-        when the layout has none, a sentence built from the task and the objects' ``objs_desc``
-        (or their node names)."""
+        """The task in words, for language-conditioned policies (collect, the LeRobot export,
+        eval and ``env.unwrapped.instructions`` all read this one): the sentence the grade was
+        read from, ``relation.task_desc``; where the grade comes from the structured
+        ``relation.task_spec`` (or there is no sentence), a sentence built from the task and
+        the objects' ``objs_desc`` (or their node names)."""
         desc = self.relation.get("task_desc")
-        if isinstance(desc, str) and desc.strip():
+        graded_from_sentence = structured_spec(self.relation, label(self.source)) is None
+        if graded_from_sentence and isinstance(desc, str) and desc.strip():
             return " ".join(desc.split())
         names = {
             n: " ".join(str((self.objs_desc or {}).get(n) or n).replace("_", " ").split())

@@ -130,9 +130,9 @@ def wilson_interval(successes: int, n: int, z: float = WILSON_Z) -> tuple[float,
 
 def episode_json(episode: Episode) -> dict:
     """An episode as ``episodes.json`` holds it."""
-    return dict(layout=episode.layout, seed=episode.seed, success=episode.success,
-                fail=episode.fail, failure=episode.failure, steps=episode.steps,
-                video=episode.video,
+    return dict(layout=episode.layout, seed=episode.seed, instruction=episode.instruction,
+                success=episode.success, fail=episode.fail, failure=episode.failure,
+                steps=episode.steps, video=episode.video,
                 **{"return": episode.episode_return})  # fmt: skip
 
 

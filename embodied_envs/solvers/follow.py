@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from embodied_envs.internals import controller_configs
+
 MARGIN = 0.9  # part of each controller's limit the expert's targets use at most
 SPEED_SHARE = 0.8  # part of those limits the plans' joint speeds use: below MARGIN, so that a
 # target can get ahead of its path by the lag while moving with it
@@ -80,7 +82,7 @@ def follow_limits(agent, control_freq: float, arm_dof: int, margin: float = MARG
     """The limits for the first ``arm_dof`` joints of ``agent`` (a ManiSkill agent whose
     ``pd_joint_pos`` and ``pd_joint_delta_pos`` configs drive its arm, and ``pd_joint_vel``
     where it has one: the SO-100 and Koch have none)."""
-    configs = agent._controller_configs
+    configs = controller_configs(agent)
     pos = arm_config(configs, RECORDED_MODE, arm_dof)
     delta_config = arm_config(configs, JOINT_MODES[0], arm_dof)
     if pos is None or delta_config is None:

@@ -34,6 +34,7 @@ from mani_skill.utils import gym_utils
 
 from embodied_envs.datasets.ee_actions import ee_action, root_pose_of_target
 from embodied_envs.datasets.joint_actions import RELATIVE_TO, mode_action
+from embodied_envs.internals import controller_configs
 from embodied_envs.robots import EXPERT_MODES
 from embodied_envs.solvers.follow import (
     RECORDED_MODE,
@@ -64,13 +65,13 @@ class ModeError(ValueError):
 
 def drivable_modes(agent) -> list[str]:
     """The robot's control modes the expert records natively."""
-    return [m for m in EXPERT_MODES if m in agent._controller_configs]
+    return [m for m in EXPERT_MODES if m in controller_configs(agent)]
 
 
 def target_bounds(agent, configs: dict, arm_dof: int) -> tuple[np.ndarray, np.ndarray]:
     """``(low, high)`` of the arm's ``pd_joint_pos`` targets: its config's bounds, or the
     joints' limits where it has none (ManiSkill's action space in that mode). ``configs``:
-    ``agent._controller_configs`` (ManiSkill builds them anew on each read)."""
+    ``controller_configs(agent)`` (ManiSkill builds them anew on each read)."""
     config = arm_config(configs, RECORDED_MODE, arm_dof)
     if config.lower is not None:
         return _per_joint(config.lower, arm_dof), _per_joint(config.upper, arm_dof)
@@ -87,7 +88,7 @@ class ModeActions:
     def __init__(self, base, arm_dof: int):
         agent, mode = base.agent, base.control_mode
         self.mode, self.arm_dof = mode, arm_dof
-        configs = agent._controller_configs
+        configs = controller_configs(agent)
         self.bounds = target_bounds(agent, configs, arm_dof)  # of the expert's joint targets
         if mode not in EXPERT_MODES:
             raise ModeError(

@@ -36,6 +36,7 @@ from mani_skill.utils.geometry.trimesh_utils import get_component_mesh
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from embodied_envs.internals import link_components, px_joints
 from embodied_envs.solvers.screw import rest_to_rest
 
 STRAIGHT_BLOCKED = "the straight joint line is blocked"  # plan_to_pose(detour=False)
@@ -113,7 +114,7 @@ def link_points(robot) -> tuple[list[str], list[np.ndarray]]:
     its collision shapes' vertices in its frame (what :func:`joint_levers` measures)."""
     names, points = [], []
     for link in robot.get_links():
-        mesh = get_component_mesh(link._objs[0], to_world_frame=False)
+        mesh = get_component_mesh(link_components(link)[0], to_world_frame=False)
         if mesh is not None:
             names.append(link.get_name())
             points.append(np.asarray(mesh.vertices, dtype=np.float64))
@@ -136,7 +137,7 @@ def joint_levers(robot, planner: mplib.Planner, samples: int = 200, seed: int = 
     """
     model = planner.pinocchio_model
     # the planner's link names of the SAPIEN link components
-    named = {link._objs[0].get_name(): link.get_name() for link in robot.get_links()}
+    named = {link_components(link)[0].get_name(): link.get_name() for link in robot.get_links()}
     names, points = link_points(robot)
     owner = np.concatenate([np.full(len(p), k) for k, p in enumerate(points)])
     local = np.concatenate(points)
@@ -151,7 +152,7 @@ def joint_levers(robot, planner: mplib.Planner, samples: int = 200, seed: int = 
         return out
 
     joints = [
-        robot.active_joints_map[planner.user_joint_names[i]]._objs[0]
+        px_joints(robot.active_joints_map[planner.user_joint_names[i]])[0]
         for i in planner.move_group_joint_indices
     ]
     moved = [np.isin(owner, [k for k, n in enumerate(names) if n in beyond(j.child_link)])

@@ -26,6 +26,7 @@ import torch
 from mani_skill.utils.structs.pose import Pose
 from scipy.spatial import cKDTree
 
+from embodied_envs.internals import px_articulations
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers.driver import ArmDriver
@@ -226,7 +227,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
     def _qpos(self) -> np.ndarray:
         robot = self.base.agent.robot
         if not self.base.gpu_sim_enabled:  # the one env's joints, as get_qpos reads them
-            return robot._objs[0].qpos[None].astype(np.float64)
+            return px_articulations(robot)[0].qpos[None].astype(np.float64)
         return robot.get_qpos().cpu().numpy().astype(np.float64)
 
     def _fingers(self) -> np.ndarray:

@@ -1,6 +1,7 @@
-"""The ManiSkill and SAPIEN internals ``envs/fast_reads.py`` (and ``envs/contacts.py``,
-``envs/tasks/scene.py``) read on the CPU simulation exist, with the types those reads expect, on
-a real CPU env: a ManiSkill upgrade that renames or retypes one fails here, naming it and the
+"""The ManiSkill and SAPIEN internals ``embodied_envs/internals.py`` reads for the package
+(``envs/fast_reads.py``, ``envs/contacts.py``, ``envs/tasks/scene.py``, ``envs/fast_control.py``,
+the expert and the dataset converters) exist, with the types those reads expect, on a real CPU
+env: a ManiSkill upgrade that renames or retypes one fails here, naming it and the
 installed version, rather than as a wrong value or an AttributeError mid-episode."""
 
 import gymnasium as gym
@@ -14,10 +15,11 @@ from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.utils.structs import Actor, Articulation, ArticulationJoint, Link
 
 import embodied_envs  # noqa: F401
+from embodied_envs import internals
 from embodied_envs.envs import fast_control, fast_reads
 
 PHYSX = sapien.physx
-ITEM_TYPES = {  # the names fast_reads.PRIVATE_ATTRIBUTES gives, as classes
+ITEM_TYPES = {  # the names internals.PRIVATE_ATTRIBUTES gives, as classes
     "sapien.Entity": sapien.Entity,
     "PhysxRigidBodyComponent": PHYSX.PhysxRigidBodyComponent,
     "PhysxArticulationLinkComponent": PHYSX.PhysxArticulationLinkComponent,
@@ -32,9 +34,9 @@ STRUCTS = {
 
 def relied_on(what: str) -> str:
     return (
-        f"{what}: embodied_envs/envs/fast_reads.py (or fast_control.py) relies on it, and "
-        f"ManiSkill {mani_skill.__version__} lacks it or changed its type; update the CPU "
-        "reads there (and in envs/contacts.py, envs/tasks/scene.py) to this version"
+        f"{what}: embodied_envs/internals.py relies on it, and ManiSkill "
+        f"{mani_skill.__version__} lacks it or changed its type; update the reads there (and "
+        "what uses them) to this version"
     )
 
 
@@ -55,7 +57,7 @@ def structs(env):
     }  # fmt: skip
 
 
-@pytest.mark.parametrize("struct,name,item", fast_reads.PRIVATE_ATTRIBUTES)
+@pytest.mark.parametrize("struct,name,item", internals.PRIVATE_ATTRIBUTES)
 def test_each_private_attribute_exists_with_its_type(env, struct, name, item):
     obj = structs(env)[struct]
     assert isinstance(obj, STRUCTS[struct])
@@ -103,6 +105,29 @@ def test_what_the_reads_call_on_those_objects_exists(env):
     )
 
 
+def test_the_agent_and_env_fields_exist(env):
+    """``internals.controller_configs``, ``viewer`` and the ``ControllerState`` fields the
+    expert and the dataset converters read, on the default Panda in ``pd_joint_pos`` (and its
+    ``pd_ee_delta_pose`` arm for ``target_pose``)."""
+    u = env.unwrapped
+    configs = internals.controller_configs(u.agent)
+    assert isinstance(configs, dict) and "pd_joint_pos" in configs, relied_on(
+        "BaseAgent._controller_configs (a dict by control mode)")
+    assert internals.viewer(u) is None, relied_on("BaseEnv._viewer (None with no viewer)")
+    arm = u.agent.controller.controllers["arm"]
+    state = internals.ControllerState(arm)
+    assert state.control_freq == u.control_freq, relied_on("BaseController._control_freq")
+    assert isinstance(state.target_qpos, torch.Tensor), relied_on("_target_qpos (a tensor)")
+    e = gym.make("PickEmbodiedGen-v1", obs_mode="none", control_mode="pd_ee_delta_pose")
+    try:
+        e.reset(seed=0)
+        e.step(np.zeros(e.action_space.shape, np.float32))
+        ee = internals.ControllerState(e.unwrapped.agent.controller.controllers["arm"])
+        assert isinstance(ee.target_pose.p, torch.Tensor), relied_on("_target_pose (a Pose)")
+    finally:
+        e.close()
+
+
 def test_the_controller_attributes_fast_control_reads_exist():
     """Each controller class ``fast_control`` does the ``set_action`` of, met in the Fetch's
     joint control modes (all but the passive one), has the attributes it reads and sets."""
@@ -118,11 +143,12 @@ def test_the_controller_attributes_fast_control_reads_exist():
             met.add(type(c))
             for name in names:
                 assert hasattr(c, name), relied_on(f"{type(c).__name__}.{name}")
-            if c._normalize_action:
+            if internals.ControllerState(c).normalize_action:
                 for name in fast_control.NORMALIZED_ATTRIBUTES:
                     assert isinstance(getattr(c, name, None), torch.Tensor), relied_on(name)
             if "_target_qpos" in names:
-                assert isinstance(c._target_qpos, torch.Tensor), relied_on("_target_qpos")
+                target = internals.ControllerState(c).target_qpos
+                assert isinstance(target, torch.Tensor), relied_on("_target_qpos")
                 for flag in fast_control.CONFIG_FLAGS:
                     assert isinstance(getattr(c.config, flag), bool), relied_on(flag)
     e.close()

@@ -80,7 +80,7 @@ def test_sentences_it_cannot_grade_are_refused_in_one_line(sentence, why):
         parse_task(sentence, scene(["pen", "lamp", "laptop"], []), F)
     msg = str(e.value)
     assert len(e.value.problems) == 1 and F in msg and why in msg
-    assert f'"{sentence}"' in msg and "Pick up X" in msg and 'relation["task"]' in msg
+    assert f'"{sentence}"' in msg and "Pick up X" in msg and 'relation["task_spec"]' in msg
 
 
 def test_the_structured_field_wins_and_is_checked():

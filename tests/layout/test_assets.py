@@ -97,3 +97,22 @@ def test_heavy_collision_mesh_is_warned_about_once_with_its_cost(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         asset_geometry(spec)  # cached: no second warning
+
+
+def test_a_collision_mesh_off_the_visual_one_is_warned_about_once(tmp_path):
+    import warnings
+
+    from embodied_envs.layout.visual import check_visual_mesh
+
+    spec = parse_urdf(make_asset(tmp_path))  # the collision mesh's origin 0.1 m higher
+    with pytest.warns(UserWarning) as caught:
+        check_visual_mesh(spec)
+    text = str(caught[0].message)
+    assert text.startswith(f"{spec.urdf_path}: its collision mesh's top is +100.0 mm and its")
+    assert "bottom +100.0 mm" in text and "float" in text and "Fix:" in text
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_visual_mesh(spec)  # once per asset
+        # the shipped assets' collision meshes stand where their visual ones do
+        for urdf in sorted((DATA / "assets").glob("*/*.urdf")):
+            check_visual_mesh(parse_urdf(urdf))

@@ -1,5 +1,7 @@
-"""One-object concave collision meshes are decomposed into convex parts on load (CoACD, seeded,
-cached outside the user's folder), or kept with one warning when the user opts out."""
+"""Collision meshes written as one object are made of convex parts on load without changing
+their shape: one hull per convex piece (exact), CoACD only on a closed concave piece (no
+manifold pre-processing, parts checked against the piece), cached by content and settings
+outside the user's folder; degenerate meshes are refused before anything is decomposed."""
 
 import json
 import shutil
@@ -9,13 +11,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import ConvexHull
+from shapes import BOWL_FLOOR, bowl_wedges, round_table_pieces, table_pieces, write_asset
 
 from embodied_envs.cli.main import main
-from embodied_envs.layout import asset_geometry, parse_urdf
+from embodied_envs.layout import LayoutError, asset_geometry, parse_urdf
 from embodied_envs.layout import collision as col
 
 ROOT = Path(__file__).resolve().parents[2]
 ZOO = ROOT / "tests" / "data" / "zoo"
+EXACT = 1e-6  # m: the OBJ files' 6 decimals
 
 
 def revolved_cup() -> trimesh.Trimesh:
@@ -26,6 +31,9 @@ def revolved_cup() -> trimesh.Trimesh:
     cup = trimesh.creation.revolve(profile, sections=32)
     cup.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))
     return cup
+
+
+CUP_FLOOR = 0.006  # m: the revolved cup's inside floor over its bottom
 
 
 def cup_asset(folder: Path) -> Path:
@@ -39,6 +47,27 @@ def snapshot(folder: Path) -> dict:
     return {p: p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
+@pytest.fixture
+def fresh(monkeypatch, tmp_path):
+    """An empty cache, decompositions allowed, this process's memory of them cleared."""
+    monkeypatch.setenv(col.CACHE_ENV, str(tmp_path / "cache"))
+    monkeypatch.delenv(col.OPT_OUT_ENV, raising=False)
+    col._convex_collision.cache_clear()
+    col._WARNED.clear()
+    yield tmp_path / "cache" / "collision"
+    col._convex_collision.cache_clear()
+
+
+@pytest.fixture
+def no_coacd(monkeypatch):
+    import coacd
+
+    def refuse(*a, **k):
+        raise AssertionError("CoACD ran")
+
+    monkeypatch.setattr(coacd, "run_coacd", refuse)
+
+
 @pytest.fixture(scope="module")
 def cup(tmp_path_factory):
     """The handled cup as one concave object, decomposed once into a module cache."""
@@ -47,13 +76,51 @@ def cup(tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv(col.CACHE_ENV, str(cache))
         mp.delenv(col.OPT_OUT_ENV, raising=False)
+        col._convex_collision.cache_clear()
         urdf = cup_asset(root / "assets")
         before = snapshot(root / "assets")
         spec = parse_urdf(urdf)
     return dict(urdf=urdf, spec=spec, cache=cache, before=before, root=root)
 
 
-def test_a_concave_object_becomes_convex_parts_in_the_cache(cup):
+def hull_vertex_set(verts: np.ndarray) -> set:
+    return {tuple(v) for v in np.round(verts[ConvexHull(verts).vertices], 6)}
+
+
+@pytest.mark.parametrize(
+    "shape, count",
+    [(table_pieces, 5), (round_table_pieces, 3), (bowl_wedges, 17)],
+    ids=["table", "round_table", "bowl_of_touching_parts"],
+)
+def test_pieces_written_as_one_object_become_their_own_hulls_exactly(
+    shape, count, fresh, no_coacd, tmp_path
+):
+    urdf = write_asset(tmp_path / "assets", "thing", shape())
+    original = urdf.parent / "mesh" / "thing_collision.obj"
+    spec = parse_urdf(urdf)
+    assert spec.collision.path.parent == fresh
+    reason, out = col.DECOMPOSED[original]
+    assert reason == f"one object of {count} disconnected pieces"
+    written = col.obj_objects(original)[0]
+    parts = col.obj_objects(out)
+    assert len(parts) == count
+    # every part is the hull of one piece, vertex for vertex: the bounds are the user's
+    pieces = trimesh.load(original, force="mesh", process=False).split(only_watertight=False)
+    assert sorted(map(sorted, map(hull_vertex_set, parts))) == sorted(
+        map(sorted, (hull_vertex_set(np.asarray(p.vertices)) for p in pieces))
+    )
+    allv = np.concatenate(parts)
+    np.testing.assert_allclose(allv.min(0), written.min(0), atol=EXACT)
+    np.testing.assert_allclose(allv.max(0), written.max(0), atol=EXACT)
+
+
+def test_a_bowl_of_touching_parts_keeps_its_floor(fresh, no_coacd, tmp_path):
+    geom = asset_geometry(parse_urdf(write_asset(tmp_path / "assets", "bowl", bowl_wedges())))
+    floor = col.solid_top(list(geom.parts), (0.0, 0.0)) - geom.min_z
+    assert floor == pytest.approx(BOWL_FLOOR, abs=EXACT)
+
+
+def test_a_concave_object_is_decomposed_within_its_shape(cup):
     spec, urdf = cup["spec"], cup["urdf"]
     original = urdf.parent / "mesh" / "handled_cup_collision.obj"
     assert spec.collision.path.parent == cup["cache"] / "collision"
@@ -63,17 +130,20 @@ def test_a_concave_object_becomes_convex_parts_in_the_cache(cup):
     reason, out = col.DECOMPOSED[original]
     assert out == spec.collision.path
     assert reason == "one concave object (its convex hull is 3.1x its volume)"
-    # the parts follow the cup: their hulls hold far less than the one hull the simulator
-    # would make (3.1x the cup's volume), and span the same box
     mesh = trimesh.load(original, force="mesh")
-    hulls = [trimesh.Trimesh(p).convex_hull for p in parts]
-    assert sum(h.volume for h in hulls) < 2.0 * mesh.volume
-    lo = np.min([h.bounds[0] for h in hulls], 0)
-    hi = np.max([h.bounds[1] for h in hulls], 0)
-    assert np.allclose(lo, mesh.bounds[0], atol=4e-3) and np.allclose(hi, mesh.bounds[1], atol=4e-3)
-    # placement reads the same parts: as tall as the cup (the mesh is Y-up, the link Z-up)
+    # within the cup's bounding box, spanning all of it (to the file's 6 decimals)
+    allv = np.concatenate(parts)
+    np.testing.assert_allclose(allv.min(0), mesh.bounds[0], atol=col.BOUNDS_TOLERANCE)
+    np.testing.assert_allclose(allv.max(0), mesh.bounds[1], atol=col.BOUNDS_TOLERANCE)
+    assert (allv.min(0) >= mesh.bounds[0] - EXACT).all()
+    assert (allv.max(0) <= mesh.bounds[1] + EXACT).all()
+    # the parts hold the cup's volume within the stated ratio, far less than its one hull
+    ratio = sum(ConvexHull(p).volume for p in parts) / mesh.volume
+    assert col.VOLUME_RATIO[0] <= ratio <= col.VOLUME_RATIO[1]
+    # the cup's floor stays where it is: a block dropped in rests on it
     geom = asset_geometry(spec)
-    assert geom.max_z - geom.min_z == pytest.approx(np.ptp(mesh.bounds[:, 1]), abs=4e-3)  # Y-up
+    floor = col.solid_top(list(geom.parts), (0.0, 0.0)) - geom.min_z
+    assert floor == pytest.approx(CUP_FLOOR, abs=col.BOUNDS_TOLERANCE)
 
 
 def test_the_decomposition_is_cached_and_seeded(cup, monkeypatch, tmp_path):
@@ -94,6 +164,117 @@ def test_the_decomposition_is_cached_and_seeded(cup, monkeypatch, tmp_path):
     again = parse_urdf(cup["urdf"]).collision.path
     assert again.parent == tmp_path / "collision"
     assert again.read_bytes() == cup["spec"].collision.path.read_bytes()
+    col._convex_collision.cache_clear()
+
+
+def test_the_settings_are_in_the_cache_key(fresh, no_coacd, monkeypatch, tmp_path):
+    urdf = write_asset(tmp_path / "assets", "table", table_pieces())
+    first = parse_urdf(urdf).collision.path
+    col._convex_collision.cache_clear()
+    monkeypatch.setattr(col, "METHOD", col.METHOD + 1)
+    second = parse_urdf(urdf).collision.path
+    col._convex_collision.cache_clear()
+    monkeypatch.setitem(col.COACD_PARAMS, "threshold", 0.5)
+    third = parse_urdf(urdf).collision.path
+    assert len({first, second, third}) == 3 and all(p.parent == fresh for p in (second, third))
+
+
+def grown_part(vertices, faces, **_):
+    """A CoACD stand-in: the piece's hull grown 2 mm on every side (the manifold growth)."""
+    hull = trimesh.Trimesh(np.asarray(vertices), np.asarray(faces)).convex_hull
+    centre = hull.bounds.mean(0)
+    grow = 1 + 0.004 / np.ptp(hull.bounds, 0).min()
+    return [[(hull.vertices - centre) * grow + centre, hull.faces]]
+
+
+def one_hull(vertices, faces, **_):
+    """A CoACD stand-in: the piece's hull, the blob the simulator makes."""
+    hull = trimesh.Trimesh(np.asarray(vertices), np.asarray(faces)).convex_hull
+    return [[hull.vertices, hull.faces]]
+
+
+@pytest.mark.parametrize(
+    "coacd_result, words",
+    [(grown_part, "mm past the piece's bounds"), (one_hull, "x its volume (outside")],
+    ids=["grown", "filled"],
+)
+def test_a_decomposition_that_changes_the_shape_is_not_used(
+    coacd_result, words, fresh, monkeypatch, tmp_path
+):
+    import coacd
+
+    monkeypatch.setattr(coacd, "run_coacd", lambda m, **k: coacd_result(m.vertices, m.indices))
+    urdf = cup_asset(tmp_path / "assets")
+    original = urdf.parent / "mesh" / "handled_cup_collision.obj"
+    with pytest.warns(UserWarning) as caught:
+        assert parse_urdf(urdf).collision.path == original
+    text = str(caught[0].message)
+    assert text.startswith(f"{original}: one concave object") and words in text, text
+    assert "kept as written" in text and "Fix:" in text
+    # the refusal is cached too: not decomposed again
+    col._convex_collision.cache_clear()
+    monkeypatch.setattr(coacd, "run_coacd", lambda *a, **k: pytest.fail("decomposed again"))
+    assert parse_urdf(urdf).collision.path == original
+    assert original not in col.DECOMPOSED
+
+
+def flattened(text: str, axis: int) -> str:
+    """An OBJ's vertices all put at 0 along ``axis`` (a broken export flattened to a plane)."""
+    out = []
+    for line in text.splitlines():
+        if line.startswith("v "):
+            v = line.split()[1:4]
+            v[axis] = "0.0"
+            line = "v " + " ".join(v)
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def collapsed(text: str) -> str:
+    """An OBJ's vertices all at one point."""
+    return "\n".join("v 0.01 0.02 0.03" if x.startswith("v ") else x for x in text.splitlines())
+
+
+def tilted_flat(text: str) -> str:
+    """An OBJ flattened onto a tilted plane (y = 0.7 x): thin along no coordinate axis."""
+    out = []
+    for line in text.splitlines():
+        if line.startswith("v "):
+            x, _, z = map(float, line.split()[1:4])
+            line = f"v {x} {0.7 * x} {z}"
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [lambda t: flattened(t, 1), lambda t: flattened(t, 0), collapsed, tilted_flat],
+    ids=["flat", "flat_sideways", "collapsed", "tilted_flat"],
+)
+@pytest.mark.parametrize("shape", ["table", "cup"])
+def test_a_degenerate_mesh_is_refused_before_any_decomposition(
+    edit, shape, fresh, no_coacd, tmp_path
+):
+    if shape == "table":
+        urdf = write_asset(tmp_path / "assets", "thing", round_table_pieces())
+    else:
+        urdf = cup_asset(tmp_path / "assets")
+    original = urdf.parent / "mesh" / f"{urdf.stem}_collision.obj"
+    original.write_text(edit(original.read_text()))
+    spec = parse_urdf(urdf)
+    assert spec.collision.path == original and not fresh.exists()
+    with pytest.raises(LayoutError) as e:
+        asset_geometry(spec)
+    assert str(e.value).startswith(f"{original}: the collision mesh is flat")
+    assert "sink" in str(e.value) and "Fix:" in str(e.value)
+
+
+def test_a_mesh_with_a_flat_piece_is_kept_as_written_with_a_warning(fresh, no_coacd, tmp_path):
+    sheet = trimesh.Trimesh([[0, 0, 0.9], [0.2, 0, 0.9], [0, 0.2, 0.9]], [[0, 1, 2]])
+    urdf = write_asset(tmp_path / "assets", "thing", [*table_pieces(), sheet])
+    original = urdf.parent / "mesh" / "thing_collision.obj"
+    with pytest.warns(UserWarning, match=r"its piece \d is flat, so it is kept as written"):
+        assert parse_urdf(urdf).collision.path == original
 
 
 def test_opting_out_keeps_the_mesh_and_warns_once(cup, monkeypatch):
@@ -133,9 +314,9 @@ def test_layout_validate_names_what_it_decomposed(cup, monkeypatch, tmp_path, ca
     monkeypatch.setenv(col.CACHE_ENV, str(cup["cache"]))
     layout = json.loads((ZOO / "layouts" / "handled_cup.json").read_text())
     base = ZOO / "layouts"
-    layout["assets"] = {
-        n: str((base / p).resolve()) for n, p in layout["assets"].items()
-    } | {"handled_cup": str(cup["urdf"].parent)}
+    layout["assets"] = {n: str((base / p).resolve()) for n, p in layout["assets"].items()} | {
+        "handled_cup": str(cup["urdf"].parent)
+    }
     path = tmp_path / "cup.json"
     path.write_text(json.dumps(layout))
     col._convex_collision.cache_clear()
@@ -144,3 +325,53 @@ def test_layout_validate_names_what_it_decomposed(cup, monkeypatch, tmp_path, ca
     line = [x for x in out.splitlines() if "decomposed" in x]
     assert len(line) == 1 and "handled_cup_collision.obj" in line[0], out
     assert "convex parts" in line[0] and str(cup["cache"]) in line[0]
+    col._convex_collision.cache_clear()
+
+
+@pytest.mark.parametrize("soup", [False, True], ids=["shared_vertices", "triangle_soup"])
+def test_pieces_are_found_whatever_normals_and_vertex_sharing_the_file_has(soup, tmp_path):
+    """Per-corner normals or unshared triangles (an STL-like export) do not split a piece."""
+    table = trimesh.util.concatenate(table_pieces())
+    if soup:
+        table.unmerge_vertices()
+    path = tmp_path / "table.obj"
+    path.write_text(trimesh.exchange.obj.export_obj(table, include_normals=True))
+    assert col.concavity(path) == "one object of 5 disconnected pieces"
+    cup = revolved_cup()
+    if soup:
+        cup.unmerge_vertices()
+    path.write_text(trimesh.exchange.obj.export_obj(cup, include_normals=True))
+    assert col.concavity(path) == "one concave object (its convex hull is 3.1x its volume)"
+
+
+def open_bowl() -> trimesh.Trimesh:
+    """A bowl as one open surface, no thickness (a scan's or a careless export's)."""
+    profile = np.array([[0.0, 0.0], [0.045, 0.0], [0.08, 0.055]])
+    return trimesh.creation.revolve(profile, sections=32)
+
+
+@pytest.mark.parametrize("with_table", [False, True], ids=["alone", "among_pieces"])
+def test_an_open_concave_piece_is_named_in_a_warning(with_table, fresh, no_coacd, tmp_path):
+    parts = [*table_pieces(), open_bowl().apply_translation([0, 0, 0.9])] if with_table else []
+    urdf = write_asset(tmp_path / "assets", "thing", parts or [open_bowl()])
+    original = urdf.parent / "mesh" / "thing_collision.obj"
+    with pytest.warns(UserWarning) as caught:
+        spec = parse_urdf(urdf)
+    (text,) = [str(w.message) for w in caught]
+    assert text.startswith(f"{original}: one ") and "open and concave" in text, text
+    assert "Fix: close the mesh" in text
+    if with_table:  # the closed pieces still become their own hulls
+        assert "6 disconnected pieces, 1 open and concave" in text
+        assert len(col.obj_objects(spec.collision.path)) == 6
+    else:
+        assert spec.collision.path == original
+
+
+def test_open_convex_pieces_are_not_warned_about(fresh, tmp_path):
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.05)
+    sphere.update_faces(np.arange(len(sphere.faces)) != 0)  # one triangle missing: open
+    path = tmp_path / "sphere.obj"
+    path.write_text(trimesh.exchange.obj.export_obj(sphere))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert col.convex_collision(path) == path

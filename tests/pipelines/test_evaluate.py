@@ -6,6 +6,7 @@ import pytest
 from conftest import DEFAULT_LAYOUT, LAYOUTS
 
 from embodied_envs.cli.main import main
+from embodied_envs.layout import load_layout
 from embodied_envs.pipelines import evaluate as evaluate_module
 from embodied_envs.pipelines.evaluate import (
     Episode,
@@ -111,6 +112,8 @@ def test_zero_and_random_finish_without_success_and_random_is_seeded(tmp_path):
         (0, False, 15),
         (1, False, 15),
     ]
+    graded = load_layout(DEFAULT_LAYOUT).instruction  # the sentence the grade was read from
+    assert [e["instruction"] for e in episodes] == [graded, graded]
     assert (tmp_path / "zero" / "summary.png").stat().st_size > 1000
     a = evaluate(plan("random", seed=7), tmp_path / "a")
     evaluate(plan("random", seed=7), tmp_path / "b")
@@ -133,6 +136,7 @@ def test_expert_gives_the_successes_collect_gives_on_the_same_seeds(tmp_path, la
     episodes = json.loads((tmp_path / "e" / "episodes.json").read_text())
     assert [e["success"] for e in episodes] == [e["success"] for e in meta["episodes"]]
     assert [e["steps"] for e in episodes] == [e["elapsed_steps"] for e in meta["episodes"]]
+    assert [e["instruction"] for e in episodes] == [e["instruction"] for e in meta["episodes"]]
     assert s["successes"] == collected.successes == 2, "the expert solves these seeds"
     assert s["per_layout"][str(layout)]["success_rate"] == 1.0
 

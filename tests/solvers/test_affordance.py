@@ -35,6 +35,25 @@ def graspgen_entry(centre, closing, approach, confidence):
     }
 
 
+SHALLOW = 0.002  # m: a TCP this far outside the material (any sampled grasp's, on any machine)
+
+
+def pulled_out(grasps, k: int) -> np.ndarray:
+    """Grasp ``k``'s TCP moved back along its approach until it lies outside every convex part
+    of the asset (``grasps.planes``) by SHALLOW."""
+    point, back = grasps.centre[k].copy(), -grasps.approach[k]
+    while True:
+        exits = []
+        for p in grasps.planes:
+            n, d = p[:, :3], p[:, 3]
+            if (n @ point + d < 0).all():  # inside this part: where the line leaves it
+                out = n @ back > 0
+                exits.append(np.min(-(n[out] @ point + d[out]) / (n[out] @ back)))
+        if not exits:
+            return point + SHALLOW * back
+        point = point + (max(exits) + 1e-6) * back
+
+
 @pytest.fixture()
 def mug(tmp_path):
     folder = tmp_path / "mug"
@@ -58,10 +77,9 @@ def test_annotated_grasps_rank_first_by_confidence_and_invalid_ones_are_dropped(
     entry = [graspgen_entry(plain.centre[i], plain.closing[i], plain.approach[i], c)
              for i, c in ((worst, 0.7), (second, 0.95))]  # fmt: skip
     air = graspgen_entry(plain.centre[0] + [0.2, 0, 0], plain.closing[0], plain.approach[0], 0.99)
-    # the best grasp pulled back 2 cm along its approach: fingertips on the material, the TCP
-    # (where the fingers close) outside it
-    shallow = graspgen_entry(plain.centre[0] - 0.02 * plain.approach[0], plain.closing[0],
-                             plain.approach[0], 0.98)  # fmt: skip
+    # the best grasp pulled back along its approach until the TCP (where the fingers close) is
+    # SHALLOW outside the material: dropped, whichever grasp a machine's sample ranks best
+    shallow = graspgen_entry(pulled_out(plain, 0), plain.closing[0], plain.approach[0], 0.98)
     write_annotation(mug, [
         {"part_name": "handle", "graspable": True, "id": 0,
          "grasp_group": {"grasp_3": entry[0], "grasp_9": entry[1], "grasp_11": air,

@@ -5,6 +5,7 @@ approached is not grasped where it was but re-planned from where it lies."""
 import numpy as np
 import pytest
 import sapien
+from scipy.spatial import ConvexHull
 from test_grasps import solve, spec_of
 
 from embodied_envs.layout import asset_geometry
@@ -33,25 +34,45 @@ def test_the_footprint_grasp_closes_at_a_round_bodys_widest_section(name, height
     assert abs(closing[2]) < 1e-9
 
 
+# the ball's grasps are sampled: 500 contact pairs over its 320 facets (35 mm2 each; a closing
+# line runs along a facet's normal and passes the centre at the contact's distance from the
+# facet's circumcentre), so about 45 lines pass within 1 mm and the 8 best (the 1-3 most central
+# lines, 12 approaches each) lie far inside it, whatever sample a machine draws
+NEAR_CENTRE = 0.001  # m
+
+
+def facet_radii(vertices: np.ndarray) -> tuple[float, float]:
+    """The smallest inscribed and the largest circumscribed radius of the hull's facets."""
+    t = vertices[ConvexHull(vertices).simplices]
+    a, b, c = (np.linalg.norm(t[:, i] - t[:, j], axis=1) for i, j in ((1, 2), (0, 2), (0, 1)))
+    area = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1) / 2
+    return float((2 * area / (a + b + c)).min()), float((a * b * c / (4 * area)).max())
+
+
 def test_a_spheres_best_grasps_close_through_its_centre():
-    """Each of the 8 best grasps of the big ball closes on a line within 1 mm of its centre of
-    mass, the 8 posed on a table within 2 mm (the best within 1), the best level (its
-    equator)."""
-    grasps = asset_grasps(spec_of("big_ball"))
+    """Each of the 8 best grasps of the big ball closes on a line within NEAR_CENTRE of its
+    centre of mass; posed on a table, the first (which trades centring against the approach's
+    tilt) crosses the centre's facet within its inscribed circle, each of the 8 within a facet's
+    circumscribed one (the bound of every line along a facet's normal: posing keeps the lines),
+    the first level (its equator)."""
+    spec = spec_of("big_ball")
+    grasps = asset_grasps(spec)
     centre = np.array([0.0, 0.0, 0.03])
     assert np.linalg.norm(grasps.com - centre) < 5e-4
+    inscribed, circumscribed = facet_radii(asset_geometry(spec).parts[0])
+    assert 0.002 < inscribed < circumscribed < 0.006  # the 320 facets of a 3 cm icosphere
 
     def offset(c, closing):  # the closing line's distance from the centre
         d = c - centre
         return np.linalg.norm(d - (d @ closing) * closing)
 
     for k in range(8):
-        assert offset(grasps.centre[k], grasps.closing[k]) < 0.001, k
+        assert offset(grasps.centre[k], grasps.closing[k]) < NEAR_CENTRE, k
     posed = posed_grasps(grasps, np.eye(4), support_z=0.0, limit=8)
     assert len(posed) == 8
-    for c, closing, _, _ in posed:  # within 2 mm: contacts under 4 degrees off the line
-        assert offset(c, closing) < 0.002
-    assert offset(posed[0][0], posed[0][1]) < 0.001
+    for c, closing, _, _ in posed:
+        assert offset(c, closing) < circumscribed
+    assert offset(posed[0][0], posed[0][1]) < inscribed
     assert abs(posed[0][1][2]) < np.sin(np.radians(10))  # near level: through the equator
 
 

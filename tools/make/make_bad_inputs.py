@@ -528,6 +528,22 @@ def main(argv: list[str] | None = None) -> None:
             "v -0.04 0 -0.04\nv 0.04 0 -0.04\nv 0.04 0 0.04\nv -0.04 0 0.04\nf 1 2 3\nf 1 3 4\n"
         )
 
+    def one_object(edit_vertex):
+        """The mug's collision parts written as one object, each vertex edited: what a broken
+        export writes (a one-object mesh would otherwise be made of convex parts on load)."""
+
+        def edit(asset):
+            obj = asset / "mesh" / "mug_collision.obj"
+            lines = []
+            for line in obj.read_text().splitlines():
+                if line.startswith("v "):
+                    line = "v " + " ".join(edit_vertex(line.split()[1:4]))
+                if not line.startswith(("o ", "g ")):
+                    lines.append(line)
+            obj.write_text("\n".join(lines) + "\n")
+
+        return edit
+
     def with_joint(asset):
         urdf = asset / "mug.urdf"
         joint = '<joint name="handle_hinge" type="revolute"><parent link="x"/><child link="y"/>'
@@ -539,6 +555,12 @@ def main(argv: list[str] | None = None) -> None:
         ("visual_nan_vertex", "NaN in the visual mesh", nan_vertex("mug.obj"),
          ["mug.obj", "NaN or infinity"]),
         ("collision_flat", "a flat collision mesh (the mug would sink)", flat_collision,
+         ["mug_collision.obj", "collision mesh is flat", "sink"]),
+        ("collision_flat_one_object", "a one-object collision mesh flattened to a plane",
+         one_object(lambda v: [v[0], "0.0", v[2]]),
+         ["mug_collision.obj", "collision mesh is flat", "sink"]),
+        ("collision_collapsed", "a one-object collision mesh collapsed to a point",
+         one_object(lambda v: ["0.01", "0.02", "0.03"]),
          ["mug_collision.obj", "collision mesh is flat", "sink"]),
         ("urdf_with_joint", "a URDF joint that would be ignored", with_joint,
          ["mug.urdf", "handle_hinge", "ignored"]),

@@ -30,6 +30,9 @@ ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "embodied_envs" / "data"  # package data; ./layouts and ./assets link here
 ROBOT = "franka"
 MAX_SEEDS = 10_000  # placement seeds tried for a layout without pinned poses
+# relation["task"]: EmbodiedGen's free task category, written as its layout designer writes it
+# beside task_desc (never graded: the sentence is), by the kind the sentence states
+CATEGORY = {"pick": "single-arm pick", "place": "pick and place", "move": "push"}
 
 
 @dataclass(frozen=True)
@@ -234,7 +237,10 @@ def base_layout(spec: LayoutSpec) -> LayoutInfo:
         "position": {n: [0, 0, 0, 0, 0, 0, 1] for n in [*mapping, spec.robot]},
         "objs_desc": {n: DESCRIPTIONS[spec.asset_of.get(n, n)] for n in mapping},
     }
-    return LayoutInfo.from_dict(data, source=DATA / "layouts" / f"{spec.name}.json")
+    source = DATA / "layouts" / f"{spec.name}.json"
+    kind = LayoutInfo.from_dict(data, source=source).task.kind
+    data["relation"]["task"] = CATEGORY[kind]
+    return LayoutInfo.from_dict(data, source=source)
 
 
 def placed(spec: LayoutSpec) -> LayoutInfo:

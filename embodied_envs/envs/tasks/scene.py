@@ -17,6 +17,7 @@ from embodied_envs.envs.contacts import grasped_cpu
 from embodied_envs.envs.tasks import KIND_IDS, RULES, place
 from embodied_envs.envs.tasks.state import OPEN_FRACTION, TaskState
 from embodied_envs.envs.tasks.unmet import unmet_conditions
+from embodied_envs.internals import bodies, entities, px_articulations
 from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.layout.placement.rules import half_planes, pad_polygons
 from embodied_envs.layout.task import DIRECTION_XY, MOVE_SHIFT, Task
@@ -298,7 +299,10 @@ class TaskReader:
         """At the start of a control step (the env's ``_before_control_step``): keep the arm's
         joint positions, from which :meth:`state` measures its speeds."""
         robot = self.env.main_agent.robot
-        self.step_start = robot.get_qpos().clone() if self.gpu else robot._objs[0].qpos[None]
+        if self.gpu:
+            self.step_start = robot.get_qpos().clone()
+        else:
+            self.step_start = px_articulations(robot)[0].qpos[None]
         self.fresh[:] = False
 
     def begin_episode(self, env_idx: torch.Tensor, goal) -> torch.Tensor:
@@ -332,7 +336,7 @@ class TaskReader:
                 torch.stack([a.angular_velocity for a in movers], 1),
                 torch.stack([is_grasping(agent, a, entry) for a in movers], 1),
             )  # fmt: skip
-        robot = agent.robot._objs[0]
+        robot = px_articulations(agent.robot)[0]
         if entry.grasp_check is not None:  # one walk over the contacts for every mover
             grasped = grasped_cpu(agent, movers, entry.grasp_check)[None]
         else:
@@ -340,10 +344,10 @@ class TaskReader:
         # every pose and velocity in one array: numpy's cost is per call, not per value
         parts = []
         for actor in (*movers, rec):
-            pose = actor._objs[0].pose
+            pose = entities(actor)[0].pose
             parts += (pose.p, pose.q)
         for actor in movers:
-            body = actor._bodies[0]
+            body = bodies(actor)[0]
             parts += (body.linear_velocity, body.angular_velocity)
         flat, k = np.concatenate(parts), 7 * (len(movers) + 1)
         vel = flat[k:].reshape(1, len(movers), 2, 3)

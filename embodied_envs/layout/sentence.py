@@ -1,0 +1,431 @@
+"""The task sentence reader: ``relation["task_desc"]`` -> a ``Task``, or a one-line refusal.
+
+It reads the sentence's own words in order, with no model and no network, and grades nothing it
+cannot read exactly (docs/tasks.md states the grammar and what it refuses):
+
+    sentence := [please] clause {(and | then | ,) clause} [.]
+    clause   := VERB [up|down] OBJECTS {modifier}
+    modifier := from/off/out of PLACE           a source: read over
+              | in/into/inside/on/onto/on top of PLACE   a destination (after a pick verb only
+                                                  into/onto; in/on there say where it is)
+              | [to the] left/right/forward/backward    a move's direction (robot's frame)
+              | at the goal | up | down | an adverb ("slightly", "gently")
+
+At most one clause puts or moves; the others pick up or hold the same objects ("it",
+"them"). The receptacle is the first place a destination names, in the sentence's order;
+a place naming the context, or where the movers already stand, says where they are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from embodied_envs.layout.errors import LayoutError
+from embodied_envs.layout.nouns import (
+    ARTICLES,
+    PRONOUNS,
+    QUANTIFIERS,
+    Nodes,
+    Phrase,
+    Unread,
+    is_participle,
+)
+from embodied_envs.layout.task_model import EXPLICIT, Task
+from embodied_envs.layout.vocabulary import (
+    ADVERBS,
+    DIRECTION_WORDS,
+    DIRECTIONAL,
+    FORMS,
+    INTO,
+    MOVE,
+    PARTICLES,
+    PICK,
+    PLACE,
+    POSES,
+    REGIONS,
+    RELATIVE,
+    ROBOT_WORDS,
+    SOURCES,
+    VERBS,
+    check_words,
+    tokens,
+)
+
+MAX_SENTENCE = 1000  # characters: a task_desc is one sentence; a longer one is refused unread
+QUOTE = 200  # characters of the sentence a refusal quotes
+
+
+@dataclass
+class Clause:
+    """One verb's clause: what it does, to what, and where."""
+
+    verb: str
+    kind: str
+    objects: list[Phrase] = field(default_factory=list)
+    places: list[tuple[str, str, Phrase]] = field(default_factory=list)  # (prep, rel, place)
+    directions: list[str] = field(default_factory=list)
+    goal: bool = False
+
+
+def refuse(f: str, sentence: str, why: str) -> LayoutError:
+    """The one-line refusal: the sentence, what could not be read, the forms and the fix."""
+    said = " ".join(sentence.split())  # one line, however it was written
+    if len(said) > QUOTE:
+        said = said[:QUOTE] + "..."
+    return LayoutError(
+        f'{f}: relation["task_desc"] "{said}" is not a task this env grades ({why}). '
+        f"Understood: {FORMS}. Fix: rephrase it so, {EXPLICIT}."
+    )
+
+
+class Reader:
+    """One sentence's words, read left to right (each word once: linear in its length)."""
+
+    def __init__(self, toks: list[str], nodes: Nodes):
+        self.t, self.k, self.nodes = toks, 0, nodes
+
+    def peek(self, ahead: int = 0) -> str | None:
+        return self.t[self.k + ahead] if self.k + ahead < len(self.t) else None
+
+    def after_links(self) -> str | None:
+        """The first word after a run of "and", "then", "," and adverbs."""
+        j = self.k
+        while j < len(self.t) and (self.t[j] in ("and", "then", ",") or self.t[j] in ADVERBS):
+            j += 1
+        return self.t[j] if j < len(self.t) else None
+
+    def stop(self, w: str) -> bool:
+        """Whether ``w`` ends a noun phrase."""
+        return (w in INTO or w in SOURCES or w in PARTICLES or w in DIRECTION_WORDS
+                or w in ("and", "then", ",", "to", "at", "with", "away", "toward", "towards",
+                         "closer", "nearer", "farther", "further", "back")
+                or (w in ADVERBS and w not in self.nodes.name_words)
+                or (w.endswith("ly") and w not in self.nodes.name_words))  # fmt: skip
+
+    def phrase(self) -> Phrase:
+        """A noun phrase up to the next stop word (with its "with ..." description)."""
+        ws, with_words = [], []
+        noun = pronoun = False  # a word other than an article or quantifier read; a pronoun
+        while (w := self.peek()) is not None:
+            if w == "a" and self.peek(1) in ("bit", "little"):
+                break  # "move the lamp a bit to the left"
+            if w == "of" or not self.stop(w):
+                if ws and is_participle(self.t, self.k) and w not in self.nodes.name_words:
+                    self.k += 1  # "a can lying on its side": the description is read over
+                    if self.peek() in INTO or self.peek() in SOURCES:
+                        self.k += 1
+                        self.phrase()
+                    continue
+                if ws and ws[-1] != "of" and (w in ARTICLES and noun or pronoun):
+                    raise Unread(f'"{" ".join(ws)} {w}" runs two phrases together')
+                noun = noun or w not in ARTICLES and w not in QUANTIFIERS
+                pronoun = pronoun or w in PRONOUNS
+                ws.append(w)
+                self.k += 1
+            elif w == "with" and ws and not with_words:
+                self.k += 1
+                while (v := self.peek()) is not None and not self.stop(v):
+                    with_words.append(v)
+                    self.k += 1
+            else:
+                break
+        return Phrase(tuple(ws), tuple(with_words))
+
+    def objects(self) -> list[Phrase]:
+        """The clause's objects: one phrase, or several joined by "and" / ","."""
+        out = [self.phrase()]
+        while self.peek() in ("and", ",") and self.after_links() not in VERBS:
+            while self.peek() in ("and", ","):
+                self.k += 1
+            out.append(self.phrase())
+        return [p for p in out if p.words]
+
+    def place(self, prep: str) -> tuple[str, str, Phrase]:
+        """A destination (or a location): its preposition, relation and the place it names."""
+        rel = INTO[prep]
+        if prep == "on" and self.peek() == "top" and self.peek(1) == "of":
+            self.k += 2
+        elif prep == "inside" and self.peek() == "of":
+            self.k += 1
+        elif prep in ("on", "in") and self.peek() == "to":
+            self.k += 1
+            prep = prep + "to"
+        p = self.phrase()
+        if not [w for w in p.words if w not in ARTICLES]:
+            if self.peek() in (*DIRECTION_WORDS, "back", "front"):
+                raise Unread(f'"{prep} {p.text()} {self.peek()}" names a side, not an object: '
+                             "only in or on an object is graded")  # fmt: skip
+            raise Unread(f'"{prep}" is followed by no object')
+        return prep, rel, p
+
+    def direction_to(self) -> str | None:
+        """After "to": the direction it states, or None for "to the goal"."""
+        ws = [w for w in self.phrase().words if w not in ARTICLES]
+        if ws and ws[-1] == "goal":
+            return None
+        if self.peek() in ("back", "front"):
+            raise Unread(f'"to the {self.peek()}" is not a direction it grades (left, right, '
+                         "forward, backward)")  # fmt: skip
+        if self.peek() in DIRECTION_WORDS:
+            w = self.t[self.k]
+            self.k += 1
+            return self.direction(w, prefix=ws)
+        raise Unread(f'"to {" ".join(ws)}" says neither in nor on: say "in" or "on" the object')
+
+    def direction(self, w: str, prefix=()) -> str:
+        """A direction word, refused where it is relative to an object ("to the left of X"),
+        "to the left side of the table" (the context) kept."""
+        if any(p not in ("side", "edge", "end", "part", "your", "my") for p in prefix):
+            raise Unread(f'"to {" ".join(prefix)} {w}" is not a direction it grades')
+        part = self.peek() in ("side", "edge", "end", "part") and self.peek(1) == "of"
+        if self.peek() == "of" or part:
+            self.k += 2 if part else 1
+            of = self.phrase()
+            where, _ = self.nodes.resolve(of)
+            if not part or where != [self.nodes.context]:
+                raise Unread(
+                    f'"{w} of {of.text()}" is a direction relative to an object: only left, '
+                    "right, forward and backward in the robot's frame are graded"
+                )
+        return DIRECTION_WORDS[w]
+
+    def relative(self, w: str) -> str:
+        """"towards the robot" (backward), "away (from the robot)" (forward); relative to
+        anything else, refused."""
+        if w in ("closer", "nearer", "farther", "further") and self.peek() in ("to", "from"):
+            self.k += 1
+        elif w == "away" and self.peek() != "from":
+            return "forward"
+        elif w == "away":
+            self.k += 1
+        whom = self.phrase()
+        toward = w in ("toward", "towards", "closer", "nearer")
+        if toward and not set(whom.words) - ARTICLES and self.peek() in DIRECTION_WORDS:
+            self.k += 1  # "towards the left"
+            return self.direction(self.t[self.k - 1])
+        if set(whom.words) & ROBOT_WORDS:
+            return "backward" if toward else "forward"
+        raise Unread(f'"{w} {whom.text()}" is a direction relative to an object: only left, '
+                     "right, forward and backward in the robot's frame are graded")  # fmt: skip
+
+    def clause(self) -> Clause:
+        verb = self.t[self.k]
+        if verb not in VERBS:
+            raise Unread(f'"{verb}" is not a verb it knows')
+        self.k += 1
+        c = Clause(verb, VERBS[verb])
+        while self.peek() in PARTICLES:
+            self.k += 1
+        c.objects = self.objects()
+        while (w := self.peek()) is not None:
+            if w in ("and", "then", ","):
+                if self.after_links() in VERBS:
+                    break
+                nxt = self.after_links()
+                if nxt is None:
+                    self.k = len(self.t)
+                    break
+                if (nxt in ARTICLES or nxt in self.nodes.name_words or nxt in INTO
+                        or nxt in DIRECTION_WORDS or nxt in ("to", "at", "back")):  # fmt: skip
+                    raise Unread(
+                        f'after "{" ".join(self.t[:self.k])}" it goes on with "{nxt} ...": two '
+                        "destinations, directions or tasks in one sentence; state one"
+                    )
+                raise Unread(f'"{nxt}" is not a verb it knows')
+            self.k += 1
+            if w in POSES:
+                raise Unread(f'"{w}" asks for a pose: only where the object ends is graded')
+            ahead = {self.peek(), self.peek(1)}  # "to left", "to the left"
+            if c.kind != MOVE and (w in DIRECTION_WORDS or w in RELATIVE or (
+                    w == "to" and DIRECTION_WORDS.keys() & ahead)):  # fmt: skip
+                raise Unread(f'"{c.verb}" with a direction ("{w}"): a direction is graded after '
+                             "move, push, slide, shift, drag or nudge")  # fmt: skip
+            if w in ADVERBS or w.endswith("ly") or (w == "a" and self.peek() in ("bit", "little")):
+                continue  # "slightly", "gently", "a bit"
+            if w in PARTICLES:
+                if c.kind == MOVE and not c.places:
+                    raise Unread(f'"{w}" is not a direction it grades (left, right, forward, '
+                                 "backward)")  # fmt: skip
+                continue
+            if w in SOURCES:
+                if w == "out" and self.peek() == "of" or w == "off" and self.peek() == "of":
+                    self.k += 1
+                self.phrase()  # where it is taken from: read over
+            elif w in INTO:
+                c.places.append(self.place(w))
+            elif w == "to":
+                d = self.direction_to()
+                if d is None:
+                    c.goal = True
+                else:
+                    c.directions.append(d)
+            elif w in DIRECTION_WORDS:
+                c.directions.append(self.direction(w))
+            elif w == "back" and c.kind == MOVE and not c.places:
+                raise Unread('"back" may say towards the robot or away from it: say forward or '
+                             "backward")  # fmt: skip
+            elif w == "back":
+                continue  # "put it back in the mug"
+            elif w in RELATIVE:
+                c.directions.append(self.relative(w))
+            elif w == "at":
+                ws = [v for v in self.phrase().words if v not in ARTICLES]
+                if not ws or ws[-1] != "goal":
+                    raise Unread(f'"at {" ".join(ws)}" is a place it does not grade: only in '
+                                 "or on an object")  # fmt: skip
+                c.goal = True
+            elif w == "with":
+                raise Unread(f'"with {self.phrase().text()}" after the object is not a place')
+            else:
+                raise Unread(f'it could not read "{w}" after "{" ".join(self.t[: self.k - 1])}"')
+        return c
+
+    def clauses(self) -> list[Clause]:
+        if not self.t:
+            raise Unread("it is empty")
+        out = [self.clause()]
+        while self.k < len(self.t):
+            while self.peek() in ("and", "then", ",") or self.peek() in ADVERBS:
+                self.k += 1
+            out.append(self.clause())
+        return out
+
+
+def _movers(c: Clause, nodes: Nodes, manipulated: list[str]) -> list[str]:
+    """The nodes the clause's objects name, each among the layout's movers (never another
+    object in its place)."""
+    found: list[str] = []
+    for p in c.objects:
+        try:
+            got, _ = nodes.resolve(p, manipulated)
+        except Unread as e:
+            if not e.none:
+                raise
+            try:
+                others, _ = nodes.resolve(p)
+            except Unread as e2:
+                if not e2.none:
+                    raise
+                raise Unread(f'"{p.text()}" names no object of the layout '
+                             f"(movers: {', '.join(manipulated)})") from None  # fmt: skip
+            raise Unread(f'"{p.text()}" is {", ".join(others)}, not among the objects this '
+                         f"layout moves (manipulated_objs: {', '.join(manipulated)})") from None
+        found += [n for n in got if n not in found]
+    return found
+
+
+def _receptacle(places, nodes: Nodes, movers: list[str], parents: dict[str, str]):
+    """The first place that is not where the movers already stand (nor the context); the
+    others must say where it or they stand."""
+    named = []
+    for prep, rel, p in places:
+        where, _ = nodes.resolve(_region(prep, p))
+        if len(where) > 1:
+            raise Unread(f'"{prep} {p.text()}" names {len(where)} objects: name one receptacle')
+        named.append((where[0], rel, f"{prep} {p.text()}"))
+    around = set()
+    for n in movers:
+        while n in parents:
+            n = parents[n]
+            around.add(n)
+    around.add(nodes.context)
+    first = next((x for x in named if x[0] not in around), named[0])
+    if first[0] in movers:
+        raise Unread(f'"{first[2]}" names an object it also moves')
+    rec_around = set()
+    n = first[0]
+    while n in parents:
+        n = parents[n]
+        rec_around.add(n)
+    for node, _, said in named:
+        if node != first[0] and node not in around | rec_around:
+            raise Unread(f'"{first[2]}" and "{said}" name two destinations: name one')
+    return first[0], first[1]
+
+
+def _region(prep: str, p: Phrase) -> Phrase:
+    """The object a destination names: "on (the) top of the shelf" -> the shelf; a part of an
+    object or a side ("the middle of the table", "the left") refused."""
+    ws = [w for w in p.words if w not in ARTICLES]
+    if "of" in ws:
+        k = ws.index("of")
+        part, rest = ws[:k], ws[k + 1 :]
+        if part and part[-1] in ("top", "surface") and INTO.get(prep, "on") == "on":
+            return Phrase(tuple(rest), p.with_words)
+        if part and part[-1] in REGIONS | {"top", "surface"}:
+            raise Unread(f'"{prep} {p.text()}" is a part of an object: only in or on the '
+                         "object as a whole is graded")  # fmt: skip
+    elif any(w in REGIONS for w in ws):
+        raise Unread(f'"{prep} {p.text()}" names a side, not an object: only in or on an '
+                     "object is graded")  # fmt: skip
+    return p
+
+
+def read_sentence(sentence: str, layout) -> Task:
+    """The task ``sentence`` states against ``layout``'s nodes.
+
+    Raises:
+        Unread: what it could not read, and why.
+    """
+    if len(sentence) > MAX_SENTENCE:
+        raise Unread(f"it is {len(sentence)} characters long, over the {MAX_SENTENCE} read")
+    nodes = Nodes(layout)
+    manipulated = list(layout.relation["manipulated_objs"])
+    toks = tokens(sentence, str(layout.relation.get("robot", "")))
+    check_words(toks, nodes.name_words)
+    clauses = Reader(toks, nodes).clauses()
+    first = clauses[0]
+    if not first.objects or any(p.pronoun() for p in first.objects):
+        raise Unread(f'"{first.verb}" names no object')
+    movers = _movers(first, nodes, manipulated)
+    acts = []
+    for c in clauses:
+        if c.objects and c is not first and not all(p.pronoun() for p in c.objects):
+            if set(_movers(c, nodes, manipulated)) != set(movers):
+                raise Unread(f'"{c.verb}" names other objects than "{first.verb}": two tasks '
+                             "in one sentence; state one")  # fmt: skip
+        # after a pick verb only into/onto is a destination ("pick up the pen on the desk")
+        places = c.places if c.kind != PICK else [x for x in c.places if x[0] in DIRECTIONAL]
+        if c.kind == MOVE and c.directions and places:
+            if any(x[0] in DIRECTIONAL for x in places):
+                raise Unread("it states a direction and a destination: state one")
+            places = []  # "move the pen in the tray to the left": where it is
+        if len(c.directions) > 1:
+            raise Unread("it states two directions: state one")
+        if places or c.directions:
+            acts.append((c, places))
+        elif c.kind == PLACE:
+            raise Unread(f'"{c.verb}" names no destination (in or on an object)')
+        elif c.kind == MOVE:
+            raise Unread(f'"{c.verb}" names no direction and no destination')
+    if len(acts) > 1:
+        raise Unread("it states two destinations or moves: state one task")
+    goal = any(c.goal for c in clauses)
+    if not acts:
+        if len(movers) != 1:
+            raise Unread(f"a pick grades one object; it names {len(movers)} "
+                         f"({', '.join(movers)})")  # fmt: skip
+        return Task("pick", tuple(movers))
+    c, places = acts[0]
+    if goal:
+        raise Unread("it names the goal and another destination: state one")
+    if c.directions:
+        return Task("move", tuple(movers), direction=c.directions[0])
+    parents = {kid: parent for parent, kids in layout.tree.items() for kid, *_ in kids}
+    receptacle, relation = _receptacle(places, nodes, movers, parents)
+    objects = tuple(n for n in movers if n != receptacle)
+    if not objects:
+        raise Unread("it names nothing to move but the receptacle")
+    return Task("place", objects, receptacle, relation)
+
+
+def parse_task(sentence: str, layout, f: str) -> Task:
+    """The task ``sentence`` states, against ``layout``'s nodes; ``f`` names the file.
+
+    Raises:
+        LayoutError: one line quoting the sentence, saying which part it could not read.
+    """
+    try:
+        return read_sentence(sentence, layout)
+    except Unread as e:
+        raise refuse(f, sentence, str(e)) from None
