@@ -103,6 +103,8 @@ def upright_layout(spec: Upright, out: Path) -> dict:
             "manipulated_objs": list(spec.movers),
             "distractor_objs": [n for n in objects if n not in spec.movers],
             "task_desc": spec.sentence,
+            # EmbodiedGen's task category (a hint, never the grade), as its prompt writes it
+            **({"task": "pick and place"} if "task" in relation else {}),
         },
         "objs_mapping": mapping,
         "assets": assets,
