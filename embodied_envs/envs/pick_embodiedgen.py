@@ -244,9 +244,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
 
     def task_rules(self):
         """The task state now and each present kind's rule results (``envs/tasks``)."""
-        reader = self.task_reader
-        goal = self.goal_site.pose.p if reader.gpu else fast_reads.positions(self.goal_site)
-        return reader.rules(goal)
+        return self.task_reader.rules(self.task_reader.goal())
 
     def evaluate(self):
         state, results = self.task_rules()

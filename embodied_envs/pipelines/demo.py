@@ -151,7 +151,8 @@ def run_demo(plan: DemoPlan, out: Path, progress: Callable[[int], None] | None =
         n_frames = write_video(video, tiled([ep.frames for ep in eps]), fps, quality=7)
         envs = [
             dict(episode=e, env=k, seed=ep.seed, layout=layouts[k], robot=robots[k],
-                 success=ep.success, steps=ep.steps, plan_failures=ep.plan_failures,
+                 success=ep.success, failure=ep.failure, steps=ep.steps,
+                 plan_failures=ep.plan_failures,
                  wall_time_s=round(ep.wall_time_s, 3))
             for k, ep in enumerate(eps)
         ]  # fmt: skip

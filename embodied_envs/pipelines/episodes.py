@@ -40,6 +40,8 @@ class Episode:
         episode_return: the sum of the env's rewards (rounded to 6 decimals).
         instruction: its task in words.
         plan_failures: the expert's failed plans (``"stage: why"``); empty for a policy.
+        unmet: on failure, the conditions of success its end missed, per mover
+            (``"can: not released, not at rest"``, ``env.task_reader.unmet()``).
         wall_time_s: seconds from the reset to its end.
         kept: ``collect``: whether it went into the dataset.
         video: ``eval``: its video's file name, if one was kept.
@@ -54,6 +56,7 @@ class Episode:
     episode_return: float
     instruction: str = ""
     plan_failures: list[str] = field(default_factory=list)
+    unmet: list[str] = field(default_factory=list)
     wall_time_s: float = 0.0
     kept: bool = True
     video: str | None = None
@@ -61,10 +64,13 @@ class Episode:
 
     @property
     def failure(self) -> str | None:
-        """The stage that failed first; ``"execution"`` when every plan ran; None on success."""
+        """The stage that failed first (``"execution"`` when every plan ran) and the conditions
+        of success its end missed: ``"execution (can: not resting on its floor)"``; None on
+        success."""
         if self.success:
             return None
-        return self.plan_failures[0].split(":")[0] if self.plan_failures else "execution"
+        stage = self.plan_failures[0].split(":")[0] if self.plan_failures else "execution"
+        return f"{stage} ({'; '.join(self.unmet)})" if self.unmet else stage
 
 
 def frame(env) -> np.ndarray:
@@ -152,15 +158,17 @@ def run_episode(
     failures = drive(tally, obs, seed)
     if closing_frame:
         tally.film()
+    success = bool(u.evaluate()["success"][0])
     return Episode(
         layout=layout,
         seed=seed,
-        success=bool(u.evaluate()["success"][0]),
+        success=success,
         fail=tally.fail,
         steps=tally.steps,
         episode_return=round(tally.ret, 6),
         instruction=u.instructions[0],
         plan_failures=list(failures),
+        unmet=[] if success else u.task_reader.unmet()[0],
         wall_time_s=time.perf_counter() - t0,
         frames=tally.frames,
     )

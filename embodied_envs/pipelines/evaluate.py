@@ -4,9 +4,11 @@
 ``seed .. seed + episodes - 1``, the same for each layout), in this process or in worker
 processes (one env per layout per worker, reused across its episodes), and writes under ``out``:
 
-- ``episodes.json``: per episode its layout, seed, success, fail, steps, return and video;
+- ``episodes.json``: per episode its layout, seed, success, fail, failure (``Episode.failure``:
+  the stage and the conditions of success missed), steps, return and video;
 - ``summary.json``: the success rate with its 95% Wilson interval overall and per layout, the
-  fail rate, mean and median episode length and return;
+  fail rate, the failures counted by ``Episode.failure``, mean and median episode length and
+  return;
 - ``summary.png``: success per layout with its interval, and a histogram of episode lengths
   (drawn after ``summary.json`` is written: a plot that cannot be drawn is a warning);
 - ``videos/<layout>_seed<seed>.mp4``, opt-in (``video="none"`` by default): with ``"all"`` or
@@ -34,6 +36,7 @@ import math
 import statistics
 import tempfile
 import warnings
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -136,8 +139,9 @@ def wilson_interval(successes: int, n: int, z: float = WILSON_Z) -> tuple[float,
 def episode_json(episode: Episode) -> dict:
     """An episode as ``episodes.json`` holds it."""
     return dict(layout=episode.layout, seed=episode.seed, instruction=episode.instruction,
-                success=episode.success, fail=episode.fail, steps=episode.steps,
-                video=episode.video, **{"return": episode.episode_return})  # fmt: skip
+                success=episode.success, fail=episode.fail, failure=episode.failure,
+                steps=episode.steps, video=episode.video,
+                **{"return": episode.episode_return})  # fmt: skip
 
 
 # --- episodes -----------------------------------------------------------------------------
@@ -271,6 +275,7 @@ def summarize(plan: EvalPlan, results: list[Episode]) -> dict:
             "success_rate": k / n if n else 0.0,
             "success_ci95": list(wilson_interval(k, n)),
             "fail_rate": sum(r.fail for r in rs) / n if n else 0.0,
+            "failures": dict(Counter(r.failure for r in rs if r.failure)),  # Episode.failure
             "steps_mean": statistics.fmean(steps),
             "steps_median": statistics.median(steps),
             "return_mean": statistics.fmean([r.episode_return for r in rs] or [0.0]),

@@ -106,7 +106,9 @@ def test_a_mover_the_tree_puts_in_the_receptacle_is_refused():
 
 # --- success and reward from set states (numpy, the CPU path's arrays) -----------------------
 def task_state(**over):
-    """One env, one mover: a 0.2 m square receptacle at the origin, top 0.1 m, rim 0.05 m."""
+    """One env, one mover: a 0.2 m square receptacle at the origin (its frame 0.04 m up), its
+    rim 0.05 m above that frame's origin (0.09 m), its floor at it (0.04 m); the mover
+    resting on the floor."""
     square = np.array([[-0.1, -0.1], [0.1, -0.1], [0.1, 0.1], [-0.1, 0.1]])
     from embodied_envs.layout.placement.rules import half_planes
 
@@ -118,9 +120,9 @@ def task_state(**over):
         ang_vel=np.zeros((1, 1, 3)), bottom=np.array([[0.04]]), grasped=np.array([[False]]),
         start=np.array([[[0.3, 0.0, 0.03]]]), dest=np.array([[[0.0, 0.0, 0.07]]]),
         in_receptacle=np.array([[[0.0, 0.0, 0.03]]]), footprint=(normals[None], offsets[None]),
-        rim=np.array([0.05]), rec_top=np.array([0.09]), rec_pos=np.array([[0.0, 0.0, 0.04]]),
-        is_in=np.array([True]), rec_is_table=np.array([False]), table_z=np.array([0.0]),
-        direction=np.array([[0.0, 1.0]]),
+        rim=np.array([0.05]), floor=np.array([0.0]), rec_top=np.array([0.09]),
+        rec_pos=np.array([[0.0, 0.0, 0.04]]), is_in=np.array([True]),
+        rec_is_table=np.array([False]), table_z=np.array([0.0]), direction=np.array([[0.0, 1.0]]),
     )  # fmt: skip
     base.update(over)
     return state.TaskState(**base)
@@ -152,7 +154,15 @@ def as_torch(s: state.TaskState) -> state.TaskState:
                                          in_receptacle=np.array([[[0.25, 0, 0.0]]])), False),
         ("leaning on its outer wall", dict(bottom=np.array([[0.0]]),
                                            in_receptacle=np.array([[[0.09, 0, 0.02]]])), False),
-        ("on it but above the rim (in)", dict(in_receptacle=np.array([[[0, 0, 0.06]]])), False),
+        ("standing on its rim (in)", dict(bottom=np.array([[0.09]]),
+                                          in_receptacle=np.array([[[0, 0, 0.08]]])), False),
+        ("on the rim, sunk 5 mm into it (in)", dict(bottom=np.array([[0.085]]),
+                                                    in_receptacle=np.array([[[0, 0, 0.075]]])),
+         False),
+        ("lying on its inner walls, 2 cm under the rim (in)",
+         dict(bottom=np.array([[0.07]]), in_receptacle=np.array([[[0, 0, 0.05]]])), True),
+        ("tall, centre above the rim, on its floor (in)",
+         dict(movers=np.array([[[0, 0, 0.14]]]), in_receptacle=np.array([[[0, 0, 0.10]]])), True),
     ],
 )  # fmt: skip
 def test_place_success_truth_table(case, over, success):
@@ -253,19 +263,21 @@ def test_two_movers_the_first_keeps_its_credit_while_the_hand_works_on_the_secon
 
 
 def test_a_mover_let_go_just_above_its_pose_keeps_its_carry_credit():
-    """Let go 2 cm over the receptacle's top, not yet resting on it: carried credit, not the
-    reach credit of a mover on the table (a 0.42 fall on place_bowl before)."""
-    gap = 0.02
-    up = np.array([0.0, 0.0, gap])
+    """Let go 2 cm over the receptacle's top (7 cm over its floor, where it goes), not yet
+    resting in it: carried credit, not the reach credit of a mover on the table (a 0.42 fall
+    on place_bowl before)."""
+    gap, top = 0.02, 0.09  # the receptacle's top (task_state)
+    up = np.array([0.0, 0.0, top - 0.04 + gap])  # from resting on the floor (at 0.04)
     held = task_state(grasped=np.array([[True]]), opening=np.array([0.3]),
                       tcp=np.array([[0.0, 0.0, 0.07]]) + up, movers=np.array([[[0, 0, 0.07]]]) + up,
-                      bottom=np.array([[0.04 + gap]]),
+                      bottom=np.array([[top + gap]]),
                       in_receptacle=np.array([[[0.0, 0.0, 0.03]]]) + up)  # fmt: skip
     falling = state.TaskState(**{**vars(held), "grasped": np.array([[False]]),
                                  "opening": np.array([0.5])})  # fmt: skip
     assert not place.in_pose(falling)[0][0, 0] and place.in_pose(falling)[1][0, 0]
     assert reward_of(falling) == pytest.approx(reward_of(held))
-    assert reward_of(falling) > 3.8 / 6
+    # 2 + carried over its destination (1) + brought to it (1 - tanh(5 x 7 cm)), not reaching
+    assert reward_of(falling) == pytest.approx((4 - np.tanh(5 * (top + gap - 0.04))) / 6)
 
 
 def test_pick_reward_is_its_maximum_at_success_and_eases_off_past_the_static_speed():

@@ -24,6 +24,7 @@ class FakeEnv:
             layouts=[SimpleNamespace(source="/x/drawn.json")],
             instructions=["pick up the can"],
             evaluate=lambda: {"success": torch.tensor([self.t >= 4])},
+            task_reader=SimpleNamespace(unmet=lambda: [["can: not at the goal"]]),
         )
         self.spec = SimpleNamespace(max_episode_steps=9)
 
@@ -73,7 +74,11 @@ def test_an_episode_records_the_drive_graded_at_its_end(varies):
     assert ep.plan_failures == ["grasp: no reachable grasp"] and ep.failure is None
     # the frame after the reset, after steps 2 and 4, and the closing one
     assert [int(f[0, 0, 0]) for f in ep.frames] == [0, 2, 4, 5]
-    assert run_episode(FakeEnv(), 1, lambda t, o, s: [], film_every=0).frames == []
+    assert ep.unmet == []  # a success misses nothing
+    failed = run_episode(FakeEnv(), 1, lambda t, o, s: [], film_every=0)
+    assert failed.frames == [] and not failed.success
+    assert failed.unmet == ["can: not at the goal"]
+    assert failed.failure == "execution (can: not at the goal)"
 
 
 def test_an_episodes_failure_is_the_first_failed_stage():

@@ -4,7 +4,8 @@
 Each episode resets with its seed (per-episode object placement and goal on the layout's
 configuration), runs the solver within the env's registered episode limit, and counts success
 by the env's own ``evaluate()`` at the end. Prints success rate, mean and max episode length
-(control steps), failures by stage, and wall time.
+(control steps), failures by stage with the conditions of success each one missed
+(``env.task_reader.unmet()``), and wall time.
 
 Usage: python tools/bench/bench_solver.py [--episodes 50] [--layout FILE ...]
 """
@@ -48,7 +49,8 @@ def main() -> None:
             else:
                 failures = result.reports[0].plan_failures
                 stage = failures[0].split(":")[0] if failures else "execution"
-                stages[f"{stage} (seed {seed})"] += 1
+                unmet = "; ".join(env.unwrapped.task_reader.unmet()[0])  # as Episode.failure
+                stages[f"{stage} (seed {seed}: {unmet})"] += 1
         env.close()
         wall = (time.perf_counter() - t0) / args.episodes
         print(

@@ -20,6 +20,7 @@ from embodied_envs.envs.tasks.state import (
     TaskState,
     norm,
     number_set,
+    released_and_still,
     staged_dense,
     staged_evaluate,
     total,
@@ -32,15 +33,32 @@ numbers = number_set(MIN_SHIFT=MIN_SHIFT, COS_ANGLE=math.cos(math.radians(MAX_AN
                      TOUCH=TOUCH, DROP_GAP=DROP_GAP)  # fmt: skip
 
 
-def in_pose(s: TaskState):
-    """``(n, m)`` each: each mover shifted far enough along the direction, on the table; near
-    it (shifted, lowest point within ``DROP_GAP`` of the table)."""
+def _parts(s: TaskState):
+    """``(n, m)`` each: shifted far enough along the direction; on the table; near it."""
     c = numbers(s.movers)
     d = s.movers[..., :2] - s.start[..., :2]
     along = total(d * s.direction[:, None, :])
     shifted = (along >= c.MIN_SHIFT) & (along >= c.COS_ANGLE * norm(d))
     height = s.bottom - s.table_z[:, None]
-    return shifted & (height <= c.TOUCH), shifted & (height <= c.DROP_GAP)
+    return shifted, height <= c.TOUCH, height <= c.DROP_GAP
+
+
+def in_pose(s: TaskState):
+    """``(n, m)`` each: each mover shifted far enough along the direction, on the table; near
+    it (shifted, lowest point within ``DROP_GAP`` of the table)."""
+    shifted, on_table, near = _parts(s)
+    return shifted & on_table, shifted & near
+
+
+def conditions(s: TaskState, info: dict) -> dict:
+    """Each condition of success, ``(n, m)`` bool per mover (true: met), keyed by the words that
+    say it is not met (``info``: :func:`evaluate`'s)."""
+    shifted, on_table, _ = _parts(s)
+    return {
+        **released_and_still(info),
+        "not moved far enough along the direction": shifted,
+        "not on the table": on_table,
+    }
 
 
 def evaluate(s: TaskState) -> dict:

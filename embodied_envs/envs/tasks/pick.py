@@ -47,6 +47,15 @@ def evaluate(s: TaskState) -> dict:
     }
 
 
+def conditions(s: TaskState, info: dict) -> dict:
+    """Each condition of success, ``(n, 1)`` bool (true: met), keyed by the words that say it
+    is not met (``info``: :func:`evaluate`'s)."""
+    return {
+        "not at the goal": info["is_obj_placed"][:, None],
+        "the arm not static": info["is_robot_static"][:, None],
+    }
+
+
 def reward(s: TaskState, info: dict):
     xp, c = s.xp, numbers(s.origins)
     reach = c.ONE - xp.tanh(c.FIVE * norm(s.origins[:, 0] - s.tcp))

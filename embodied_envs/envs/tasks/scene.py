@@ -11,11 +11,13 @@ import torch
 from mani_skill.utils.structs import Actor
 from scipy.spatial import ConvexHull
 
+from embodied_envs.envs import fast_reads
 from embodied_envs.envs.agents import is_grasping, tcp_pose, tcp_position_cpu
 from embodied_envs.envs.contacts import grasped_cpu
 from embodied_envs.envs.fast_reads import raw_poses
 from embodied_envs.envs.tasks import KIND_IDS, RULES, place
 from embodied_envs.envs.tasks.state import OPEN_FRACTION, TaskState
+from embodied_envs.envs.tasks.unmet import unmet_conditions
 from embodied_envs.internals import bodies, entities, px_articulations
 from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.layout.placement.rules import half_planes, pad_polygons
@@ -70,21 +72,47 @@ def as_tensor(value, device: torch.device) -> torch.Tensor:
 def support_height(parts: tuple[np.ndarray, ...], xy: np.ndarray, default: float) -> float:
     """The highest point of any convex part straight above or below ``xy`` (its top surface
     there: a bowl's floor, a box's lid), in the actor's frame; ``default`` where none is."""
-    best = None
+    height = support_heights(parts, np.asarray(xy, float)[None], np.nan)[0]
+    return default if np.isnan(height) else float(height)
+
+
+def support_heights(parts: tuple[np.ndarray, ...], xy: np.ndarray, default: float) -> np.ndarray:
+    """:func:`support_height` at each of the points ``xy (P, 2)``, ``(P,)``."""
+    best = np.full(len(xy), -np.inf)
     for verts in parts:
         try:
             eq = ConvexHull(verts).equations  # n . p + d <= 0 inside
         except Exception:  # a flat part: no volume, nothing to stand on
             continue
-        n, d = eq[:, :3], eq[:, 3] + eq[:, :2] @ xy
+        n, d = eq[:, :3], eq[:, 3] + xy @ eq[:, :2].T  # d: (P, F)
         up, down, side = n[:, 2] > 1e-9, n[:, 2] < -1e-9, np.abs(n[:, 2]) <= 1e-9
-        if (d[side] > 1e-9).any():
-            continue
-        top = (-d[up] / n[up, 2]).min() if up.any() else None
-        low = (-d[down] / n[down, 2]).max() if down.any() else -np.inf
-        if top is not None and top >= low and (best is None or top > best):
-            best = float(top)
-    return default if best is None else best
+        within = ~(d[:, side] > 1e-9).any(1)  # the vertical line through xy meets the part
+        top = (-d[:, up] / n[up, 2]).min(1) if up.any() else np.full(len(xy), np.nan)
+        low = (-d[:, down] / n[down, 2]).max(1) if down.any() else np.full(len(xy), -np.inf)
+        ok = within & (top >= low)  # nan (no top face) compares false
+        best = np.where(ok & (top > best), top, best)
+    return np.where(np.isfinite(best), best, default)
+
+
+FLOOR_GRID = 15  # points a side of the grid where a receptacle's floor is sought
+FLOOR_SPAN = 0.5  # over its footprint shrunk to this part about its centre: under the opening
+# (a mug's handle, lower than its rim, is not its floor)
+
+
+def cavity_floor(rec, poly: np.ndarray) -> float:
+    """The receptacle's floor in its frame: the lowest support height (:func:`support_heights`)
+    over a grid of points inside its footprint ``poly (K, 2)`` shrunk to ``FLOOR_SPAN`` about
+    its centre, where any part is; its top (``rec.max_z``: no inside) where none is lower. A
+    bowl's or a tray's floor; a box's lid."""
+    centre = poly.mean(0)
+    poly = centre + FLOOR_SPAN * (poly - centre)
+    lo, hi = poly.min(0), poly.max(0)
+    ticks = [np.linspace(a, b, FLOOR_GRID + 2)[1:-1] for a, b in zip(lo, hi, strict=True)]
+    xy = np.stack(np.meshgrid(*ticks), -1).reshape(-1, 2)
+    normals, offsets = half_planes(poly)
+    xy = xy[(xy @ normals.T >= offsets).all(1)]
+    heights = support_heights(rec.parts, xy, np.inf)
+    return float(min(heights.min(initial=np.inf), rec.max_z))
 
 
 @dataclass
@@ -106,8 +134,10 @@ class TaskScene:
     receptacle: Actor
     hulls: np.ndarray  # (n, m, V, 3) each mover's collision points in its frame
     centres: np.ndarray  # (n, m, 3) each mover's centre (its collision box's) in its frame
+    reach: np.ndarray  # (n, m) the farthest of each mover's collision points from its centre
     footprint: tuple  # (normals (n, E, 2), offsets (n, E)) receptacle footprint, its frame
     rim: np.ndarray  # (n,) receptacle top in its frame
+    floor: np.ndarray  # (n,) its floor in its frame (``cavity_floor``; the top: no inside)
     dest_local: np.ndarray  # (n, m, 3) each mover's destination in the receptacle's frame
     is_in: np.ndarray  # (n,) bool
     rec_is_table: np.ndarray  # (n,) bool
@@ -129,7 +159,7 @@ class TaskScene:
         receptacle = Actor.merge(
             [env_actors[f"env{i}"][rec_nodes[i]] for i in range(n)], name="receptacle"
         )
-        hulls, centres, polys, rims, dests = [], [], [], [], []
+        hulls, centres, polys, rims, floors, dests = [], [], [], [], [], []
         for i, layout in enumerate(layouts):
             geoms = [asset_geometry(layout.asset_spec(node)) for node in nodes[i]]
             hulls.append([_hull_points(g.vertices) for g in geoms])
@@ -138,12 +168,14 @@ class TaskScene:
             poly = rec.top_hull(0.02) if rec_nodes[i] == layout.context else rec.footprint()
             polys.append(poly)
             rims.append(rec.max_z)
+            floors.append(rec.max_z if rec_nodes[i] == layout.context else cavity_floor(rec, poly))
             widths = [2 * np.linalg.norm(h[:, :2] - c[:2], axis=1).max()
                       for h, c in zip(hulls[-1], centres[-1], strict=True)]  # fmt: skip
             dests.append(_destinations(rec, poly, [g.min_z for g in geoms], centres[-1], widths))
         size = max(len(h) for hs in hulls for h in hs)
         hulls = np.array([[np.concatenate([h, np.repeat(h[:1], size - len(h), 0)]) for h in hs]
                           for hs in hulls], np.float32)  # fmt: skip
+        centres = np.array(centres, np.float32)
         normals, offsets = half_planes(pad_polygons(polys))
         yaw = _yaws(robot_poses)
         way = np.array([DIRECTION_XY.get(t.direction, (1.0, 0.0)) for t in tasks])
@@ -156,9 +188,11 @@ class TaskScene:
             mover_nodes=nodes,
             receptacle=receptacle,
             hulls=hulls,
-            centres=np.array(centres, np.float32),
+            centres=centres,
+            reach=np.linalg.norm(hulls - centres[:, :, None], axis=-1).max(-1),
             footprint=(normals.astype(np.float32), offsets.astype(np.float32)),
             rim=np.array(rims, np.float32),
+            floor=np.array(floors, np.float32),
             dest_local=np.array(dests, np.float32),
             is_in=np.array([t.relation == "in" for t in tasks]),
             rec_is_table=np.array([r == x.context for r, x in zip(rec_nodes, layouts, strict=1)]),
@@ -253,7 +287,8 @@ class TaskReader:
         self.hulls, self.centres = arr(scene.hulls), arr(scene.centres)
         self.hulls_t = self.hulls.swapaxes(-1, -2)  # (n, m, 3, V)
         self.footprint = tuple(arr(x) for x in scene.footprint)
-        self.rim, self.is_in = arr(scene.rim), arr(scene.is_in)
+        self.rim, self.floor, self.is_in = arr(scene.rim), arr(scene.floor), arr(scene.is_in)
+        self.reach = arr(scene.reach) if scene.hulls.shape[1] > 1 else None  # place.stacked
         self.rec_is_table, self.direction = arr(scene.rec_is_table), arr(scene.direction)
         self.table_z = arr(table_z.cpu().numpy()) if not self.gpu else table_z
         n, m = scene.hulls.shape[:2]
@@ -269,7 +304,7 @@ class TaskReader:
         self.can_fall = arr(can_fall)
         # place's bounds, once: the receptacle fields they come from stay the same
         self.bounds = place.Bounds.of(
-            self.footprint, self.rim, self.is_in, self.rec_is_table, self.table_z
+            self.footprint, self.rim, self.floor, self.is_in, self.rec_is_table, self.table_z
         )
         # the arm's joint positions when the control step began (``before_step``), and the envs
         # reset since (their arm counts as still: nothing has moved it yet)
@@ -368,10 +403,12 @@ class TaskReader:
         rot, rec_rot = rots[:, :m], rots[:, m]
         p = origin + (rot @ self.centres[..., None])[..., 0]  # the movers' centres
         j = self.env.robot_entry.gripper.joints  # the trailing gripper joints
-        bottom = local = rec_top = opening = None
+        bottom = local = rec_top = opening = top = None
         if full:
             low = (rot[..., 2:3, :] @ self.hulls_t)[..., 0, :]  # (n, m, V)
             bottom = origin[..., 2] + (low.min(-1) if not self.gpu else low.amin(-1))
+            if self.reach is not None:  # several movers: one may rest on another
+                top = origin[..., 2] + (low.max(-1) if not self.gpu else low.amax(-1))
             local = ((p - rec[:, None, :3])[..., None, :] @ rec_rot[:, None])[..., 0, :]
             rec_top = rec[:, 2] + self.rim
             lo, hi = self.ts.finger_span
@@ -380,9 +417,9 @@ class TaskReader:
             tcp=tcp, goal=goal, arm_speed=self._arm_speed(qpos[:, :-j]), opening=opening,
             movers=p, origins=origin, lin_vel=lin, ang_vel=ang, bottom=bottom, grasped=grasped,
             start=self.start, dest=self.dest, in_receptacle=local, footprint=self.footprint,
-            rim=self.rim, rec_top=rec_top, rec_pos=rec[:, :3], is_in=self.is_in,
+            rim=self.rim, floor=self.floor, rec_top=rec_top, rec_pos=rec[:, :3], is_in=self.is_in,
             rec_is_table=self.rec_is_table, table_z=self.table_z, direction=self.direction,
-            bounds=self.bounds,
+            bounds=self.bounds, top=top, reach=self.reach,
         )  # fmt: skip
 
     def rules(self, goal) -> tuple[TaskState, dict]:
@@ -391,6 +428,18 @@ class TaskReader:
         present kind's rule results (``RULES[kind].evaluate``), kind -> dict."""
         state = self.state(goal, full=self.kinds != ["pick"])
         return state, {k: RULES[k].evaluate(state) for k in self.kinds}
+
+    def goal(self):
+        """The goal marker's position now, as this reader's arrays hold it."""
+        site = self.env.goal_site
+        return site.pose.p if self.gpu else fast_reads.positions(site)
+
+    def unmet(self) -> list[list[str]]:
+        """Per env, the conditions of success its movers miss now, in words: ``"can: not at
+        rest"`` per mover that misses any; ``[]`` where it succeeds
+        (:func:`~embodied_envs.envs.tasks.unmet.unmet_conditions`)."""
+        state, results = self.rules(self.goal())
+        return unmet_conditions(state, results, self.ts.tasks)
 
     def by_kind(self, results: dict, key: str) -> torch.Tensor:
         """``key`` of each env's own kind (``results``: kind -> dict of per-env values), as a

@@ -45,15 +45,18 @@ class TaskState:
         in_receptacle: ``(n, m, 3)`` each mover's centre in the receptacle's frame.
         footprint: ``(normals (n, E, 2), offsets (n, E))``: the receptacle's footprint in its
             frame (inside: ``normals @ xy >= offsets`` on every edge, ``rules.half_planes``).
-        rim: ``(n,)`` height of the receptacle's top in its frame; ``rec_top``: ``(n,)`` the
-            height of its top in the world; ``rec_pos``: ``(n, 3)`` its origin;
-            ``is_in``: ``(n,)`` bool,
-            the relation is "in" (else "on").
+        rim: ``(n,)`` height of the receptacle's top in its frame; ``floor``: ``(n,)`` of its
+            floor (the lowest surface under its opening; the top where it has no inside);
+            ``rec_top``: ``(n,)`` the height of its top in the world; ``rec_pos``: ``(n, 3)``
+            its origin; ``is_in``: ``(n,)`` bool, the relation is "in" (else "on").
         rec_is_table: ``(n,)`` bool: the receptacle is the context (the table).
         table_z: ``(n,)`` height of the table's top.
         direction: ``(n, 2)`` unit vector of a move's direction in the world's XY.
         bounds: ``place.Bounds`` of the receptacle fields, made once per configuration
             (``TaskReader``); ``None``: ``place`` makes them on every call.
+        top: ``(n, m)`` height of each mover's highest collision point; ``reach``: ``(n, m)``
+            the farthest of its collision points from its centre. ``None`` (both) with one
+            mover: ``place.stacked``, which reads them, has no other mover to rest on.
 
     ``bottom``, ``in_receptacle``, ``rec_top`` and ``opening`` are None in the state of the
     env's rules where ``pick``, which reads none of them, is the only kind present
@@ -75,6 +78,7 @@ class TaskState:
     in_receptacle: Any
     footprint: tuple
     rim: Any
+    floor: Any
     rec_top: Any
     rec_pos: Any
     is_in: Any
@@ -82,6 +86,8 @@ class TaskState:
     table_z: Any
     direction: Any
     bounds: Any = None
+    top: Any = None
+    reach: Any = None
 
     @property
     def xp(self):
@@ -232,7 +238,8 @@ def staged_evaluate(s: TaskState, pose, near) -> dict:
     norms = norm(concat([v[..., None, :] for v in vectors], -2))
     away = norms[..., HAND] >= c.HAND_AWAY
     free = ~s.grasped & ((s.opening >= c.OPEN_FRACTION)[:, None] | away)
-    done = pose & free & every(norms[..., LIN : ANG + 1] <= c.REST)
+    rest = every(norms[..., LIN : ANG + 1] <= c.REST)
+    done = pose & free & rest
     success, placed = every(done, 1), every(pose, 1)
     k = current(done)
     return {
@@ -242,9 +249,15 @@ def staged_evaluate(s: TaskState, pose, near) -> dict:
         "is_robot_static": robot_static(s, c),
         "obj_to_goal_pos": to_dest[k],
         # for the reward, not in info: (n, m) each; the first mover not in its pose
-        "pose": pose, "near": near, "released": free, "norms": norms,
+        "pose": pose, "near": near, "released": free, "rest": rest, "norms": norms,
         "first_off_pose": current(pose),
     }  # fmt: skip
+
+
+def released_and_still(info: dict) -> dict:
+    """The conditions every staged kind shares (``info``: :func:`staged_evaluate`'s), ``(n, m)``
+    each (true: met), keyed by the words that say a mover fails it (``place.conditions``)."""
+    return {"not released": info["released"], "not at rest": info["rest"]}
 
 
 def settled(speeds, c: SimpleNamespace):
