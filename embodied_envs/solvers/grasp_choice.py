@@ -31,6 +31,7 @@ from embodied_envs.solvers.grasps import (
     posed_grasps,
     widest_height,
 )
+from embodied_envs.solvers.planar import lowest_centre, off_reach, planar_grasps, table_gap
 
 # rad: ``SolverConfig.fixed_hand`` takes a synthesised grasp this close to straight down and to
 # the hand's closing direction
@@ -145,7 +146,7 @@ class GraspChoice:
                              + synthesised)  # fmt: skip
                 continue
             if self.robot_hand.planar:
-                poses.append(self._planar(checked, closing, support, synthesised, gripper))
+                poses.append(self._planar(checked, closing, support, gripper))
                 continue
             down = np.array([0, 0, -1.0])
             footprint = [
@@ -161,37 +162,53 @@ class GraspChoice:
             poses.append(footprint + synthesised if first else synthesised + footprint)
         return poses
 
-    def _planar(self, checked, closing, support, synthesised, gripper) -> list:
-        """A planar hand's grasps (``robots.Hand.planar``) of the footprint's centre: the
+    def _planar(self, checked, closing, support, gripper) -> list:
+        """A planar hand's grasps (``robots.Hand.planar``): of the footprint's centre, the
         approach in the arm's vertical plane, tilted ``planar_tilts`` from straight down
         toward the far side, closing along the footprint's narrow side as far as that is
-        across the approach (either way: the wrist roll takes one or the other), each kept
-        when it passes the footprint grasp's checks; then the synthesised grasps whose approach
-        lies in that plane."""
-        i, centre = checked[0], checked[3]
+        across the approach (either way: the wrist roll takes one or the other), the centre
+        raised where the tilted fingers would reach into the table (a short object), each kept
+        when it passes the footprint grasp's checks; then the synthesised grasps posed with
+        the approach the arm can make for each contact pair (``solvers/planar.py``)."""
+        i, grasps, pose, centre = checked
         base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
         out = centre[:2] - base
         out = np.array([*(out / max(np.linalg.norm(out), 1e-9)), 0.0])
         across = np.array([-out[1], out[0], 0.0])  # the plane's normal
+        top = float(pose.transform_points(asset_geometry(asset_spec(
+            self.base.layouts[i], self._node(i))).vertices)[:, 2].max())  # fmt: skip
+        # the table's own surface points are obstacles too: its top is the height check's
+        cloud = self.clouds[i]
+        cloud = cloud[cloud[:, 2] > support + table_gap(self.grasp_config)]
+        reach = self.robot_hand.tilts_at(float(np.linalg.norm(centre[:2] - base)))
+        tilts = sorted(self.cfg.planar_tilts,
+                       key=lambda t: float(off_reach(np.deg2rad(t), reach)))  # fmt: skip
         poses = []
-        for tilt in np.deg2rad(self.cfg.planar_tilts):
+        for tilt in np.deg2rad(tilts):
             approach = np.cos(tilt) * np.array([0, 0, -1.0]) + np.sin(tilt) * out
             c = closing - (closing @ approach) * approach
             c = c / np.linalg.norm(c) if np.linalg.norm(c) > 1e-6 else across
             for way in (c, -c):
-                if self._footprint_fits(*checked, way, support, approach):
-                    poses.append((grasp_pose(approach, way, centre), gripper.opening))
-        slack = np.sin(self.robot_hand.tilt_tolerance)
-        in_plane = [g for g in synthesised
-                    if abs(g[0].to_transformation_matrix()[:3, 2] @ across) <= slack]  # fmt: skip
-        return poses + in_plane
+                low = lowest_centre(gripper, way[None], approach[None], gripper.opening)[0]
+                at = centre.copy()
+                at[2] = max(at[2], support + table_gap(self.grasp_config) + low)
+                if at[2] < top and self._footprint_fits(i, grasps, pose, at, way, support,
+                                                        approach, cloud):  # fmt: skip
+                    poses.append((grasp_pose(approach, way, at), gripper.opening))
+        planar = planar_grasps(
+            grasps, pose.matrix(), base, support, cloud, tuple(tilts), reach,
+            self.grasp_config, gripper, self.cfg.grasp_candidates,
+        )  # fmt: skip
+        return poses + [(grasp_pose(a, c, p), o) for p, c, a, o in planar]
 
     def _footprint_fits(
-        self, i, grasps, pose, centre, closing, support, down: np.ndarray | None = None
-    ) -> bool:
+        self, i, grasps, pose, centre, closing, support, down: np.ndarray | None = None,
+        cloud: np.ndarray | None = None,
+    ) -> bool:  # fmt: skip
         """Whether env i's grasp at ``centre`` closing along ``closing``, approaching along
         ``down`` (straight down unless given), passes the synthesised grasps' checks on the
-        object (``pose``) and clears the other objects by the wide margin."""
+        object (``pose``) and clears the other objects (``cloud``: env i's obstacle points
+        unless given) by the wide margin."""
         down = np.array([0, 0, -1.0]) if down is None else down
         world_to_object = np.linalg.inv(pose.matrix())
         rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
@@ -203,7 +220,7 @@ class GraspChoice:
         _, roomy = posed_clearance(
             centre[None], closing[None], down[None],
             self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
-            self.clouds[i], self.grasp_config,
+            self.clouds[i] if cloud is None else cloud, self.grasp_config,
         )  # fmt: skip
         return valid and bool(roomy[0])
 
