@@ -25,6 +25,7 @@ from embodied_envs.layout.assets import (
 )
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.solvers.grasps import (
+    GraspError,
     asset_grasps,
     grasp_is_valid,
     posed_clearance,
@@ -121,7 +122,13 @@ class GraspChoice:
             geom = asset_geometry(spec)
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             support = float(self.base.layout_scene.top_z[i])
-            grasps = asset_grasps(spec, self.grasp_config, gripper)
+            try:
+                grasps = asset_grasps(spec, self.grasp_config, gripper)
+            except GraspError as e:  # this hand takes the object nowhere: said per episode
+                if not self.reports[i].plan_failures:
+                    self.reports[i].plan_failures.append(f"grasp: {e}")
+                poses.append([])
+                continue
             hand_y = np.array([*tcp[i, :2, 1], 0.0]) / max(np.linalg.norm(tcp[i, :2, 1]), 1e-9)
             keep = _held_so(grasps, pose.matrix(), hand_y) if self.cfg.fixed_hand else None
             taken = posed_grasps(

@@ -3,8 +3,9 @@
 turns it freely about the approach (the wrist roll).
 
 So a grasp's approach is fixed by its closing line: perpendicular to the closing direction and
-within the plane, ``closing x across`` (``across`` the plane's normal); a closing line across
-the plane leaves the approach free in it (tried at the hand's ``planar_tilts``). Of the asset's
+within the plane, ``closing x across`` (``across`` the plane's normal); or, at the hand's
+``planar_tilts``, the closing turned square to the approach as long as it stays within the
+friction cone of the pair's line (a line across the plane: any tilt). Of the asset's
 antipodal contact pairs (``grasps.py``: the same pairs, not the approaches it turned about each
 line for a six- or seven-joint arm), those whose approach is tilted from straight down toward
 the far side by no more than the arm reaches are posed with that approach and checked as the
@@ -93,17 +94,18 @@ def planar_grasps(
     out = np.concatenate([out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-9),
                           np.zeros((len(out), 1))], 1)  # fmt: skip
     across = np.stack([-out[:, 1], out[:, 0], np.zeros(len(out))], 1)
-    along = np.abs(np.einsum("ij,ij->i", closing, across))
-    free = along >= np.cos(np.deg2rad(cfg.cone_deg))  # across the plane: any tilt in it
     rows, approach, tilt = [], [], []
-    for a in np.deg2rad(tilts):  # a closing line across the plane, at each of the hand's tilts
-        k = np.flatnonzero(free)
+    cone = np.sin(np.deg2rad(cfg.cone_deg))
+    for a in np.deg2rad(tilts):  # each of the hand's tilts, closing within the friction cone
+        at = np.cos(a) * DOWN[None] + np.sin(a) * out  # of the pair's line (a faceted body's
+        k = np.flatnonzero(np.abs(np.einsum("ij,ij->i", closing, at)) <= cone)  # lines lean)
         rows.append(k)
-        approach.append(np.cos(a) * DOWN + np.sin(a) * out[k])
+        approach.append(at[k])
         tilt.append(np.full(len(k), a))
-    k = np.flatnonzero(~free)  # else the one approach in the plane across the closing line
+    # and the one approach in the plane square to the closing line (where it is not across)
+    k = np.flatnonzero(np.linalg.norm(np.cross(closing, across), axis=1) > cone)
     a = np.cross(closing[k], across[k])
-    a /= np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-9)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
     a[a[:, 2] > 0] *= -1.0
     rows.append(k)
     approach.append(a)
