@@ -19,7 +19,7 @@ from embodied_envs.robots import Robot
 
 def narrowest_width(vertices: np.ndarray) -> float:
     """The least width (m) of the convex hull of ``vertices (n, 3)`` over its face normals."""
-    from scipy.spatial import ConvexHull, QhullError
+    from scipy.spatial import ConvexHull, QhullError  # only where a layout is checked
 
     try:
         hull = ConvexHull(vertices)
