@@ -305,11 +305,12 @@ ROBOTS: dict[str, Robot] = {
         ),
         # ManiSkill's table scene: base at the table's edge turned +90 deg, these joints;
         # its so100 motion planner opens the jaw at 0 rad (0.084 m between the tips) and
-        # closes it at -0.8; the default controller steps the jaw by up to 0.2 rad
+        # closes it at -0.8; the default controller steps the jaw by up to 0.2 rad; reach from
+        # 0.14 m: nearer, its IK reaches no grasp 1.5 cm above the table (tilt_reach)
         Robot(
             uid="so100", names=("so_100", "so-100"),
             rest_qpos=(0.0, 0.0, 0.0, math.pi / 2, math.pi / 2, 0.0),
-            noise_joints=tuple(range(5)), reach=(0.12, 0.30), goal_inset=0.05,
+            noise_joints=tuple(range(5)), reach=(0.14, 0.30), goal_inset=0.05,
             goal_height=(0.04, 0.10),  # the expert reaches these holding a block
             gripper=Gripper(joints=1, open_qpos=0.0, closed_qpos=-1.1, max_opening=0.084,
                             action_index=5, action_kind="delta"),
