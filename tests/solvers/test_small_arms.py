@@ -13,6 +13,7 @@ from conftest import ROOT
 import embodied_envs  # noqa: F401
 from embodied_envs.layout import LayoutError, LayoutPose, parse_urdf
 from embodied_envs.robots import ROBOTS
+from embodied_envs.solvers import PickPlaceSolver
 from embodied_envs.solvers.grasps import GraspConfig, asset_grasps
 from embodied_envs.solvers.gripper import GripperModel, box_corners, tcp_axes
 from embodied_envs.solvers.planar import planar_grasps, table_gap
@@ -66,3 +67,15 @@ def test_an_object_wider_than_the_jaws_is_refused_at_make(tmp_path):
         "jaws open 8.4 cm (embodied_envs/robots.py), so it cannot grasp it. Fix: a smaller "
         "object, or a robot with a wider gripper (relation.robot or robot_uids=)"
     )
+
+
+@pytest.mark.parametrize(("layout", "seed"), [("so100_marker", 1), ("koch_marker", 1)])
+def test_the_expert_picks_a_lying_marker_on_each_small_arm(layout, seed):
+    # before issue 50 neither arm had any grasp of a lying 2 cm marker ("approach": 0/6)
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(SMALL_ZOO / "layouts" / f"{layout}.json"),
+                   control_mode="pd_joint_pos")  # fmt: skip
+    env.reset(seed=seed)
+    result = PickPlaceSolver(env, seed=seed).solve()
+    assert result.reports[0].plan_failures == []
+    assert bool(env.unwrapped.evaluate()["success"][0])
+    env.close()
