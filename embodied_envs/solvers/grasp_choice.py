@@ -131,7 +131,9 @@ class GraspChoice:
                 continue
             hand_y = np.array([*tcp[i, :2, 1], 0.0]) / max(np.linalg.norm(tcp[i, :2, 1]), 1e-9)
             keep = _held_so(grasps, pose.matrix(), hand_y) if self.cfg.fixed_hand else None
-            taken = posed_grasps(
+            # a planar hand poses the asset's contact pairs its own way (``_planar``)
+            planar = self.robot_hand.planar and not self.cfg.fixed_hand
+            taken = [] if planar else posed_grasps(
                 grasps, pose.matrix(), support, self.clouds[i], self.grasp_config, gripper,
                 limit=self.cfg.grasp_candidates, with_index=True, keep=keep,
             )  # fmt: skip
@@ -152,7 +154,7 @@ class GraspChoice:
                 poses.append([(grasp_pose(down, hand_y, centre), gripper.opening)] * fits
                              + synthesised)  # fmt: skip
                 continue
-            if self.robot_hand.planar:
+            if planar:
                 poses.append(self._planar(checked, closing, support, gripper))
                 continue
             down = np.array([0, 0, -1.0])
