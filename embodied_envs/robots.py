@@ -118,9 +118,6 @@ class Hand:
     # (an arm of fewer than six joints, solvers/motion.py)
     planar: bool = False  # the hand approaches only within the arm's vertical plane (five
     # joints: base turn, three pitches, wrist roll): its grasps are aimed so
-    fixed_jaw: float = 0.0  # m: a hand whose one jaw stands still (the SO-100's): its inner
-    # face this far along the grasp frame's +y from the origin; the object is taken against
-    # it (else the moving jaw pushes it across the open gap first); 0: jaws closing together
     tilt_reach: tuple[tuple[float, float, float], ...] = ()  # a planar hand's reachable
     # orientations: (m from the base, lowest, highest deg) the approach tilts from straight
     # down toward the far side at which its IK reaches a grasp 1.5 cm above the table, straight
@@ -257,7 +254,6 @@ SO100_HAND = Hand(
                      (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
     close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300, convertible=False,
-    fixed_jaw=0.040,
     tilt_reach=((0.14, 0.0, 0.0), (0.18, 0.0, 15.0), (0.22, 0.0, 15.0), (0.26, 0.0, 30.0),
                 (0.30, 0.0, 30.0), (0.34, 15.0, 45.0)),
 )  # fmt: skip

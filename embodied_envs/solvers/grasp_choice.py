@@ -34,7 +34,6 @@ from embodied_envs.solvers.grasps import (
 )
 from embodied_envs.solvers.planar import lowest_centre, off_reach, planar_grasps, table_gap
 
-FIXED_JAW_GAP = 0.002  # m: a fixed jaw's face this far from the object as the hand descends
 # rad: ``SolverConfig.fixed_hand`` takes a synthesised grasp this close to straight down and to
 # the hand's closing direction
 FIXED_SLACK = np.deg2rad(15.0)
@@ -156,8 +155,7 @@ class GraspChoice:
                              + synthesised)  # fmt: skip
                 continue
             if planar:
-                poses.append(self._against_fixed_jaw(
-                    self._planar(checked, closing, support, gripper), verts))  # fmt: skip
+                poses.append(self._planar(checked, closing, support, gripper))
                 continue
             down = np.array([0, 0, -1.0])
             footprint = [
@@ -222,23 +220,6 @@ class GraspChoice:
             self.grasp_config, gripper, self.cfg.grasp_candidates,
         )  # fmt: skip
         return poses + [(grasp_pose(a, c, p), o) for p, c, a, o in planar]
-
-    def _against_fixed_jaw(self, poses: list, verts: np.ndarray) -> list:
-        """``poses`` moved along their closing direction so that the object (its vertices
-        ``verts``, world) lies ``FIXED_JAW_GAP`` from a fixed jaw's face
-        (``robots.Hand.fixed_jaw``): the moving jaw then presses it there, not across the open
-        gap first (the SO-100's fixed jaw stands 4 cm from its grasp origin: a 2 cm marker was
-        pushed 3 cm and slipped from under its short moving jaw). Unchanged without one."""
-        face = self.robot_hand.fixed_jaw
-        if not face:
-            return poses
-        out = []
-        for pose, opening in poses:
-            m = pose.to_transformation_matrix()
-            c = m[:3, 1]
-            shift = (verts @ c).max() + FIXED_JAW_GAP - face - m[:3, 3] @ c
-            out.append((sapien.Pose(m[:3, 3] + shift * c, pose.q), opening))
-        return out
 
     def _footprint_fits(
         self, i, grasps, pose, centre, closing, support, down: np.ndarray | None = None,
