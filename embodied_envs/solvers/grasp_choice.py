@@ -192,9 +192,20 @@ class GraspChoice:
         reach = self.robot_hand.tilts_at(float(np.linalg.norm(centre[:2] - base)))
         tilts = sorted(self.cfg.planar_tilts,
                        key=lambda t: float(off_reach(np.deg2rad(t), reach)))  # fmt: skip
+
+        def approach_at(tilt):  # tilted from straight down toward the far side, in the plane
+            return np.cos(tilt) * np.array([0, 0, -1.0]) + np.sin(tilt) * out
+
+        # the footprint's closing turned square to the approach leans off the narrow side by
+        # asin(|closing . approach|): the jaws then meet a box's faces at their edges and push
+        # it; the least lean first among the reachable tilts, none past the friction cone
+        lean = lambda t: abs(closing @ approach_at(np.deg2rad(t)))  # noqa: E731
+        cone = np.sin(np.deg2rad(self.grasp_config.cone_deg))
+        footprint_tilts = sorted((t for t in tilts if lean(t) <= cone), key=lambda t: (
+            float(off_reach(np.deg2rad(t), reach)), round(lean(t), 2)))  # fmt: skip
         poses = []
-        for tilt in np.deg2rad(tilts):
-            approach = np.cos(tilt) * np.array([0, 0, -1.0]) + np.sin(tilt) * out
+        for tilt in np.deg2rad(footprint_tilts):
+            approach = approach_at(tilt)
             c = closing - (closing @ approach) * approach
             c = c / np.linalg.norm(c) if np.linalg.norm(c) > 1e-6 else across
             for way in (c, -c):

@@ -115,6 +115,7 @@ def planar_grasps(
     rows, approach, tilt = rows[keep], approach[keep], tilt[keep]
     if not len(rows):
         return []
+    lean = np.abs(np.einsum("ij,ij->i", closing[rows], approach))  # sine of the turn
     close = closing[rows] - np.einsum("ij,ij->i", closing[rows], approach)[:, None] * approach
     close /= np.linalg.norm(close, axis=1, keepdims=True)
     opening = np.minimum(gripper.opening, width[rows] + 2 * cfg.preshape)
@@ -124,8 +125,8 @@ def planar_grasps(
     rise = support_z + table_gap(cfg) + low - centre[rows, 2]
     back = np.maximum(rise, 0.0) / np.maximum(-approach[:, 2], 1e-9)
     within = back <= gripper.finger_tip + TIP_HOLD
-    rows, approach, tilt, close, opening, back = (
-        x[within] for x in (rows, approach, tilt, close, opening, back))  # fmt: skip
+    rows, approach, tilt, close, opening, back, lean = (
+        x[within] for x in (rows, approach, tilt, close, opening, back, lean))  # fmt: skip
     at = centre[rows] - back[:, None] * approach
     at_o = (at - t) @ rot
     boxes = gripper.boxes(cfg.sweep, opening)
@@ -142,6 +143,7 @@ def planar_grasps(
         np.linalg.norm(centre_o[rows[keep]] - grasps.com, axis=1) / 0.05
         + np.abs(width[rows[keep]] - gripper.opening / 2) / 0.08
         + off_reach(tilt[keep], reach) + 2.0 * ~roomy
+        + lean[keep] / cone  # the closing turned off the pair's line: up to one step
     )
     best = keep[np.argsort(score, kind="stable")][:limit]
     return [(at[j], close[j], approach[j], float(opening[j])) for j in best]
