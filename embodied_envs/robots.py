@@ -118,6 +118,10 @@ class Hand:
     # (an arm of fewer than six joints, solvers/motion.py)
     planar: bool = False  # the hand approaches only within the arm's vertical plane (five
     # joints: base turn, three pitches, wrist roll): its grasps are aimed so
+    tilt_reach: tuple[tuple[float, float, float], ...] = ()  # a planar hand's reachable
+    # orientations: (m from the base, lowest, highest deg) the approach tilts from straight
+    # down toward the far side at which its IK reaches a grasp 1.5 cm above the table, straight
+    # ahead, by distance (tools/make/measure_tilts.py); empty: every tilt is tried
     # a jaw that the arm's PD gains drive closes gently (solvers/, PickPlaceSolver._close_gently):
     close_gap: float = 0.0  # m: first at once to the object's width plus this (0: shut at once)
     close_step: float = 0.0  # then its target leads the jaw by this (action) until it grasps
@@ -129,6 +133,14 @@ class Hand:
     # follow (solvers/follow.py; SolverConfig.convertible). False: an arm whose one controller
     # drives every joint, which ManiSkill 3.0.1's converter cannot convert anyway (the SO-100:
     # at 0.4 rad/s 8 of 20 episodes ran out of steps; docs/robots.md)
+
+    def tilts_at(self, distance: float) -> tuple[float, float]:
+        """The approach tilts (deg, lowest and highest) this hand reaches an object at
+        ``distance`` m from its base with (``tilt_reach``'s nearest row; (0, 90) without)."""
+        if not self.tilt_reach:
+            return 0.0, 90.0
+        row = min(self.tilt_reach, key=lambda r: abs(r[0] - distance))
+        return row[1], row[2]
 
     def action(self, opening: float) -> float:
         """The ``pd_joint_pos`` gripper action that opens the jaws ``opening`` m apart
@@ -242,6 +254,8 @@ SO100_HAND = Hand(
                      (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
     close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300, convertible=False,
+    tilt_reach=((0.14, 0.0, 0.0), (0.18, 0.0, 15.0), (0.22, 0.0, 15.0), (0.26, 0.0, 30.0),
+                (0.30, 0.0, 30.0), (0.34, 15.0, 45.0)),
 )  # fmt: skip
 # the Koch's hand (its jaws' collision hulls in ManiSkill 3.0.1's model): the fixed jaw is
 # link_6 (inner face at x -0.009 over z -0.069..0), the moving jaw (link "gripper") turns about
@@ -266,6 +280,8 @@ KOCH_HAND = Hand(
                      (0.0563, 1.2)),
     close_gap=0.004, close_step=0.02, squeeze=0.01, max_path_steps=300, convertible=False,
     drifts=True,
+    tilt_reach=((0.12, 0.0, 0.0), (0.15, 0.0, 15.0), (0.19, 0.0, 30.0), (0.23, 0.0, 45.0),
+                (0.26, 0.0, 60.0), (0.29, 15.0, 75.0), (0.32, 30.0, 75.0)),
 )  # fmt: skip
 # reach from 0.30 m: the expert's top-down grasps nearer the base need the shoulder bent back
 # (place_two, 50 seeds: 4 failures, movers 0.23-0.25 m away, when the band began at 0.20; 1 at 0.30)
@@ -289,11 +305,12 @@ ROBOTS: dict[str, Robot] = {
         ),
         # ManiSkill's table scene: base at the table's edge turned +90 deg, these joints;
         # its so100 motion planner opens the jaw at 0 rad (0.084 m between the tips) and
-        # closes it at -0.8; the default controller steps the jaw by up to 0.2 rad
+        # closes it at -0.8; the default controller steps the jaw by up to 0.2 rad; reach from
+        # 0.14 m: nearer, its IK reaches no grasp 1.5 cm above the table (tilt_reach)
         Robot(
             uid="so100", names=("so_100", "so-100"),
             rest_qpos=(0.0, 0.0, 0.0, math.pi / 2, math.pi / 2, 0.0),
-            noise_joints=tuple(range(5)), reach=(0.12, 0.30), goal_inset=0.05,
+            noise_joints=tuple(range(5)), reach=(0.14, 0.30), goal_inset=0.05,
             goal_height=(0.04, 0.10),  # the expert reaches these holding a block
             gripper=Gripper(joints=1, open_qpos=0.0, closed_qpos=-1.1, max_opening=0.084,
                             action_index=5, action_kind="delta"),

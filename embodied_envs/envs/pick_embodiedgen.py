@@ -20,6 +20,7 @@ from embodied_envs.config import SPLAT_Y_UP_TO_Z_UP, SUPPORTED_ROBOTS, CameraSpe
 from embodied_envs.envs import agents, fast_control, fast_reads, keywords, physx_scene
 from embodied_envs.envs.arguments import check_quaternion
 from embodied_envs.envs.base import CheckedEnv
+from embodied_envs.envs.graspable import check_graspable
 from embodied_envs.envs.rendering import HybridRendering, render_camera, robot_camera
 from embodied_envs.envs.tasks import INFO_KEYS, KIND_IDS, RULES, pick
 from embodied_envs.envs.tasks.scene import TaskReader, TaskScene, as_tensor
@@ -120,6 +121,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         self.base_layout: LayoutInfo = self.layout_set.layouts[0]
         robot, self.robot_entries = keywords.robot_arms(self.layout_set, robot_uids)
         self.robot_entry = self.robot_entries[0]  # the arm the task's TCP and grasp follow
+        check_graspable(self.layout_set, self.robot_entry)  # an object its jaws cannot take
         if len(self.robot_entries) > 1:  # ManiSkill's multi-agent env (warns if not listed)
             self.SUPPORTED_ROBOTS = [*SUPPORTED_ROBOTS, robot]
         # each arm's rest joints (robot_init_qpos: its length now, its limits once loaded)

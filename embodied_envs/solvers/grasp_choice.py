@@ -25,12 +25,14 @@ from embodied_envs.layout.assets import (
 )
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.solvers.grasps import (
+    GraspError,
     asset_grasps,
     grasp_is_valid,
     posed_clearance,
     posed_grasps,
     widest_height,
 )
+from embodied_envs.solvers.planar import lowest_centre, off_reach, planar_grasps, table_gap
 
 # rad: ``SolverConfig.fixed_hand`` takes a synthesised grasp this close to straight down and to
 # the hand's closing direction
@@ -120,10 +122,18 @@ class GraspChoice:
             geom = asset_geometry(spec)
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             support = float(self.base.layout_scene.top_z[i])
-            grasps = asset_grasps(spec, self.grasp_config, gripper)
+            try:
+                grasps = asset_grasps(spec, self.grasp_config, gripper)
+            except GraspError as e:  # this hand takes the object nowhere: said per episode
+                if not self.reports[i].plan_failures:
+                    self.reports[i].plan_failures.append(f"grasp: {e}")
+                poses.append([])
+                continue
             hand_y = np.array([*tcp[i, :2, 1], 0.0]) / max(np.linalg.norm(tcp[i, :2, 1]), 1e-9)
             keep = _held_so(grasps, pose.matrix(), hand_y) if self.cfg.fixed_hand else None
-            taken = posed_grasps(
+            # a planar hand poses the asset's contact pairs its own way (``_planar``)
+            planar = self.robot_hand.planar and not self.cfg.fixed_hand
+            taken = [] if planar else posed_grasps(
                 grasps, pose.matrix(), support, self.clouds[i], self.grasp_config, gripper,
                 limit=self.cfg.grasp_candidates, with_index=True, keep=keep,
             )  # fmt: skip
@@ -144,8 +154,8 @@ class GraspChoice:
                 poses.append([(grasp_pose(down, hand_y, centre), gripper.opening)] * fits
                              + synthesised)  # fmt: skip
                 continue
-            if self.robot_hand.planar:
-                poses.append(self._planar(checked, closing, support, synthesised, gripper))
+            if planar:
+                poses.append(self._planar(checked, closing, support, gripper))
                 continue
             down = np.array([0, 0, -1.0])
             footprint = [
@@ -161,37 +171,64 @@ class GraspChoice:
             poses.append(footprint + synthesised if first else synthesised + footprint)
         return poses
 
-    def _planar(self, checked, closing, support, synthesised, gripper) -> list:
-        """A planar hand's grasps (``robots.Hand.planar``) of the footprint's centre: the
+    def _planar(self, checked, closing, support, gripper) -> list:
+        """A planar hand's grasps (``robots.Hand.planar``): of the footprint's centre, the
         approach in the arm's vertical plane, tilted ``planar_tilts`` from straight down
         toward the far side, closing along the footprint's narrow side as far as that is
-        across the approach (either way: the wrist roll takes one or the other), each kept
-        when it passes the footprint grasp's checks; then the synthesised grasps whose approach
-        lies in that plane."""
-        i, centre = checked[0], checked[3]
+        across the approach (either way: the wrist roll takes one or the other), the centre
+        raised where the tilted fingers would reach into the table (a short object), each kept
+        when it passes the footprint grasp's checks; then the synthesised grasps posed with
+        the approach the arm can make for each contact pair (``solvers/planar.py``)."""
+        i, grasps, pose, centre = checked
         base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
         out = centre[:2] - base
         out = np.array([*(out / max(np.linalg.norm(out), 1e-9)), 0.0])
         across = np.array([-out[1], out[0], 0.0])  # the plane's normal
+        top = float(pose.transform_points(asset_geometry(asset_spec(
+            self.base.layouts[i], self._node(i))).vertices)[:, 2].max())  # fmt: skip
+        # the table's own surface points are obstacles too: its top is the height check's
+        cloud = self.clouds[i]
+        cloud = cloud[cloud[:, 2] > support + table_gap(self.grasp_config)]
+        reach = self.robot_hand.tilts_at(float(np.linalg.norm(centre[:2] - base)))
+        tilts = sorted(self.cfg.planar_tilts,
+                       key=lambda t: float(off_reach(np.deg2rad(t), reach)))  # fmt: skip
+
+        def approach_at(tilt):  # tilted from straight down toward the far side, in the plane
+            return np.cos(tilt) * np.array([0, 0, -1.0]) + np.sin(tilt) * out
+
+        # the footprint's closing turned square to the approach leans off the narrow side by
+        # asin(|closing . approach|): the jaws then meet a box's faces at their edges and push
+        # it; the least lean first among the reachable tilts, none past the friction cone
+        lean = lambda t: abs(closing @ approach_at(np.deg2rad(t)))  # noqa: E731
+        cone = np.sin(np.deg2rad(self.grasp_config.cone_deg))
+        footprint_tilts = sorted((t for t in tilts if lean(t) <= cone), key=lambda t: (
+            float(off_reach(np.deg2rad(t), reach)), round(lean(t), 2)))  # fmt: skip
         poses = []
-        for tilt in np.deg2rad(self.cfg.planar_tilts):
-            approach = np.cos(tilt) * np.array([0, 0, -1.0]) + np.sin(tilt) * out
+        for tilt in np.deg2rad(footprint_tilts):
+            approach = approach_at(tilt)
             c = closing - (closing @ approach) * approach
             c = c / np.linalg.norm(c) if np.linalg.norm(c) > 1e-6 else across
             for way in (c, -c):
-                if self._footprint_fits(*checked, way, support, approach):
-                    poses.append((grasp_pose(approach, way, centre), gripper.opening))
-        slack = np.sin(self.robot_hand.tilt_tolerance)
-        in_plane = [g for g in synthesised
-                    if abs(g[0].to_transformation_matrix()[:3, 2] @ across) <= slack]  # fmt: skip
-        return poses + in_plane
+                low = lowest_centre(gripper, way[None], approach[None], gripper.opening)[0]
+                at = centre.copy()
+                at[2] = max(at[2], support + table_gap(self.grasp_config) + low)
+                if at[2] < top and self._footprint_fits(i, grasps, pose, at, way, support,
+                                                        approach, cloud):  # fmt: skip
+                    poses.append((grasp_pose(approach, way, at), gripper.opening))
+        planar = planar_grasps(
+            grasps, pose.matrix(), base, support, cloud, tuple(tilts), reach,
+            self.grasp_config, gripper, self.cfg.grasp_candidates,
+        )  # fmt: skip
+        return poses + [(grasp_pose(a, c, p), o) for p, c, a, o in planar]
 
     def _footprint_fits(
-        self, i, grasps, pose, centre, closing, support, down: np.ndarray | None = None
-    ) -> bool:
+        self, i, grasps, pose, centre, closing, support, down: np.ndarray | None = None,
+        cloud: np.ndarray | None = None,
+    ) -> bool:  # fmt: skip
         """Whether env i's grasp at ``centre`` closing along ``closing``, approaching along
         ``down`` (straight down unless given), passes the synthesised grasps' checks on the
-        object (``pose``) and clears the other objects by the wide margin."""
+        object (``pose``) and clears the other objects (``cloud``: env i's obstacle points
+        unless given) by the wide margin."""
         down = np.array([0, 0, -1.0]) if down is None else down
         world_to_object = np.linalg.inv(pose.matrix())
         rot, t = world_to_object[:3, :3], world_to_object[:3, 3]
@@ -203,7 +240,7 @@ class GraspChoice:
         _, roomy = posed_clearance(
             centre[None], closing[None], down[None],
             self.gripper_model.boxes(self.grasp_config.sweep)[None], support,
-            self.clouds[i], self.grasp_config,
+            self.clouds[i] if cloud is None else cloud, self.grasp_config,
         )  # fmt: skip
         return valid and bool(roomy[0])
 

@@ -225,7 +225,8 @@ def test_user_limits_win_field_by_field():
                    goal_region=dict(inset=0.04))  # fmt: skip
     try:
         u = env.unwrapped
-        assert (u.placement_limits.reach_min, u.placement_limits.reach_max) == (0.12, 0.28)
+        lo = robots.robot("so100").reach[0]  # the robot's, under the user's reach_max
+        assert (u.placement_limits.reach_min, u.placement_limits.reach_max) == (lo, 0.28)
         assert (u.goal_region.inset, tuple(u.goal_region.height)) == (0.04, (0.04, 0.10))
     finally:
         env.close()

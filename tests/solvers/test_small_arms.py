@@ -1,0 +1,81 @@
+"""The small arms (issue 50): grasps a five-joint arm can make (its approach in its vertical
+plane, tilted within what it reaches, the fingers off the table), an object wider than the
+jaws refused at gym.make in one line, and the expert on the small-arm zoo."""
+
+import json
+import shutil
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from conftest import ROOT
+
+import embodied_envs  # noqa: F401
+from embodied_envs.layout import LayoutError, LayoutPose, parse_urdf
+from embodied_envs.robots import ROBOTS
+from embodied_envs.solvers import PickPlaceSolver
+from embodied_envs.solvers.grasps import GraspConfig, asset_grasps
+from embodied_envs.solvers.gripper import GripperModel, box_corners, tcp_axes
+from embodied_envs.solvers.planar import planar_grasps, table_gap
+
+SMALL_ZOO = ROOT / "tests" / "data" / "small_zoo"
+TOL = 1e-6  # unit vectors' products, in float64
+
+
+@pytest.mark.parametrize("uid", ["so100", "koch-v1.1"])
+def test_planar_grasps_lie_in_the_arms_plane_and_clear_the_table(uid):
+    hand = ROBOTS[uid].hand
+    gripper, cfg = GripperModel(**dict(hand.boxes)), GraspConfig(sweep=hand.approach_offset)
+    spec = parse_urdf(SMALL_ZOO / "assets" / "marker" / "marker.urdf")
+    grasps = asset_grasps(spec, cfg, gripper)
+    base = np.array([0.0, 0.0])
+    support = 0.74
+    for yaw in (0.0, 0.7, 1.57):  # the marker along the arm's plane, askew, across it
+        pose = LayoutPose.from_layout([0.2, 0.05, support, 0.0, 0.0, np.sin(yaw / 2),
+                                        np.cos(yaw / 2)]).matrix()
+        reach = hand.tilts_at(0.2)
+        found = planar_grasps(grasps, pose, base, support, None, (30.0, 15.0, 0.0), reach,
+                              cfg, gripper, 6)  # fmt: skip
+        assert found, yaw
+        for centre, closing, approach, opening in found:
+            out = np.array([*centre[:2], 0.0]) / np.linalg.norm(centre[:2])
+            across = np.cross([0.0, 0.0, 1.0], out)
+            assert abs(approach @ across) < TOL  # within the arm's vertical plane
+            assert abs(closing @ approach) < TOL
+            tilt = np.degrees(np.arctan2(approach @ out, -approach[2]))
+            assert -5.0 - TOL <= tilt <= 30.0 + TOL
+            boxes = gripper.boxes(0.0, opening)[None, :2]
+            low = box_corners(centre[None], tcp_axes(closing[None], approach[None]), boxes)
+            assert low[..., 2].min() >= support + table_gap(cfg) - TOL
+
+
+def test_an_object_wider_than_the_jaws_is_refused_at_make(tmp_path):
+    assets = tmp_path / "assets"
+    shutil.copytree(SMALL_ZOO / "assets" / "cube_30", assets / "cube_30")
+    urdf = assets / "cube_30" / "cube_30.urdf"
+    urdf.write_text(urdf.read_text().replace('scale="1.0 1.0 1.0"', 'scale="3.0 3.0 3.0"'))
+    layout = json.loads((SMALL_ZOO / "layouts" / "so100_cube_30.json").read_text())
+    layout["assets"]["cube_30"] = str(assets / "cube_30")
+    for node in ("background", "round_table"):
+        layout["assets"][node] = str(ROOT / "embodied_envs" / "data" / "assets" / node)
+    path = tmp_path / "big_cube.json"
+    path.write_text(json.dumps(layout))
+    with pytest.raises(LayoutError) as e:
+        gym.make("PickEmbodiedGen-v1", layout_file=str(path))
+    assert str(e.value) == (
+        f"{path}: the manipulated object 'cube_30' is 9.0 cm across at its narrowest; so100's "
+        "jaws open 8.4 cm (embodied_envs/robots.py), so it cannot grasp it. Fix: a smaller "
+        "object, or a robot with a wider gripper (relation.robot or robot_uids=)"
+    )
+
+
+@pytest.mark.parametrize(("layout", "seed"), [("so100_marker", 1), ("koch_marker", 1)])
+def test_the_expert_picks_a_lying_marker_on_each_small_arm(layout, seed):
+    # before issue 50 neither arm had any grasp of a lying 2 cm marker ("approach": 0/6)
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(SMALL_ZOO / "layouts" / f"{layout}.json"),
+                   control_mode="pd_joint_pos")  # fmt: skip
+    env.reset(seed=seed)
+    result = PickPlaceSolver(env, seed=seed).solve()
+    assert result.reports[0].plan_failures == []
+    assert bool(env.unwrapped.evaluate()["success"][0])
+    env.close()
