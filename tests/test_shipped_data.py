@@ -1,7 +1,8 @@
 """Every generator of shipped data in tools/make/ writes, into a temporary folder, what is
 shipped: the assets and the room's splat (make_assets.py, mesh_to_splat.py), the layouts
 (make_layouts.py), the grasp zoo (make_grasp_zoo.py), the upright-mover layouts
-(make_upright.py) and the bad-input corpus (make_bad_inputs.py). Files are compared as data
+(make_upright.py), the small-arm zoo (make_small_zoo.py) and the bad-input corpus
+(make_bad_inputs.py). Files are compared as data
 (``tests/data_compare.py``: meshes by geometry, PLY and JSON by value within tolerances that
 follow from the written precision), so the check holds on any processor and library release,
 and still fails on a real change (tested below). A failure names the files that differ, why,
@@ -22,6 +23,7 @@ SHIPPED = {
     "layouts": DATA / "layouts",
     "zoo": ROOT / "tests" / "data" / "zoo",
     "upright": ROOT / "tests" / "data" / "upright",
+    "small_zoo": ROOT / "tests" / "data" / "small_zoo",
     "bad_inputs": ROOT / "tests" / "data" / "bad_inputs",
 }
 
@@ -96,6 +98,11 @@ def test_make_grasp_zoo_reproduces_the_shipped_zoo(tmp_path, tool):
 def test_make_upright_reproduces_the_shipped_upright_layouts(tmp_path, tool):
     tool("make_upright").main(["--out", str(tmp_path)])
     assert_same_files(tmp_path, SHIPPED["upright"], "tools/make/make_upright.py")
+
+
+def test_make_small_zoo_reproduces_the_shipped_small_arm_zoo(tmp_path, tool):
+    tool("make_small_zoo").main(["--out", str(tmp_path)])
+    assert_same_files(tmp_path, SHIPPED["small_zoo"], "tools/make/make_small_zoo.py")
 
 
 def test_make_bad_inputs_reproduces_the_shipped_corpus(tmp_path, tool):

@@ -102,7 +102,9 @@ def layout(robot: str, movers: dict[str, str], receptacle: str | None, task: str
            assets: Path, out: Path) -> dict:
     """A layout in EmbodiedGen's form on the round table (``movers``: node -> description)."""
     rel_assets = Path(os.path.relpath(assets, out))
-    shipped = Path(os.path.relpath(DATA / "assets", out))
+    # the shipped assets relative to where the layouts ship, wherever --out is (as
+    # make_layouts.py does): the files do not depend on the folder they were written to
+    shipped = Path(os.path.relpath(DATA / "assets", SMALL_ZOO / "layouts"))
     nodes = list(movers) + ([receptacle] if receptacle else [])
     position = {
         "background": ROUND["position"]["background"],
