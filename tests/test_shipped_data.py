@@ -85,24 +85,15 @@ def test_make_assets_and_mesh_to_splat_reproduce_the_shipped_assets(tmp_path, to
     assert_same_files(out, SHIPPED["assets"], script)
 
 
-def test_make_layouts_reproduces_the_shipped_layouts(tmp_path, tool):
-    tool("make_layouts").main(["--out", str(tmp_path)])
-    assert_same_files(tmp_path, SHIPPED["layouts"], "tools/make/make_layouts.py")
-
-
-def test_make_grasp_zoo_reproduces_the_shipped_zoo(tmp_path, tool):
-    tool("make_grasp_zoo").main(["--out", str(tmp_path)])
-    assert_same_files(tmp_path, SHIPPED["zoo"], "tools/make/make_grasp_zoo.py")
-
-
-def test_make_upright_reproduces_the_shipped_upright_layouts(tmp_path, tool):
-    tool("make_upright").main(["--out", str(tmp_path)])
-    assert_same_files(tmp_path, SHIPPED["upright"], "tools/make/make_upright.py")
-
-
-def test_make_small_zoo_reproduces_the_shipped_small_arm_zoo(tmp_path, tool):
-    tool("make_small_zoo").main(["--out", str(tmp_path)])
-    assert_same_files(tmp_path, SHIPPED["small_zoo"], "tools/make/make_small_zoo.py")
+@pytest.mark.parametrize(
+    "script, shipped",
+    [("make_layouts", "layouts"), ("make_grasp_zoo", "zoo"), ("make_upright", "upright"),
+     ("make_small_zoo", "small_zoo")],
+)  # fmt: skip
+def test_a_generator_reproduces_what_it_ships(tmp_path, tool, script, shipped):
+    """The shipped layouts, the grasp zoo, the upright-mover layouts and the small-arm zoo."""
+    tool(script).main(["--out", str(tmp_path)])
+    assert_same_files(tmp_path, SHIPPED[shipped], f"tools/make/{script}.py")
 
 
 def test_make_bad_inputs_reproduces_the_shipped_corpus(tmp_path, tool):
