@@ -21,7 +21,15 @@ import json
 from dataclasses import asdict
 from pathlib import Path
 
-from embodied_envs.cluster import RAY_LOCAL, Bundle, ResumeStore, cluster_cpus, ray_session
+from embodied_envs.cluster import (
+    RAY_LOCAL,
+    Bundle,
+    ResumeStore,
+    cluster_cpus,
+    ray_session,
+    start_early,
+    starting,
+)
 from embodied_envs.datasets.records import scene_folders
 from embodied_envs.pipelines.episodes import Episode
 from embodied_envs.workers import started
@@ -40,12 +48,24 @@ def session(address: str | None, workers: int):
         return
     import ray  # only where a run asks for Ray
 
-    if ray.is_initialized():
+    args = _session_args(address, workers)
+    if ray.is_initialized() and not starting(*args):
         yield
         return
-    with ray_session(None if address == RAY_LOCAL else address, workers or None):
+    with ray_session(*args):
         started()
         yield
+
+
+def start(address: str | None, workers: int) -> None:
+    """Begins the start of :func:`session`'s Ray (none for ``address`` None) while the command
+    checks its inputs (``cluster.start_early``)."""
+    if address is not None:
+        start_early(*_session_args(address, workers))
+
+
+def _session_args(address: str, workers: int) -> tuple[str | None, int | None]:
+    return None if address == RAY_LOCAL else address, workers or None
 
 
 def scene_paths(layout) -> list[Path]:
