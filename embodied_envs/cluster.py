@@ -175,15 +175,22 @@ def cluster_cpus() -> int:
 
 
 # --- the job's files -----------------------------------------------------------------------
-def _walk(paths: Iterable[str | Path]) -> list[Path]:
-    files: set[Path] = set()
-    for p in paths:
-        p = Path(p).resolve()
-        if p.is_dir():
-            files.update(q.resolve() for q in p.rglob("*") if q.is_file())
-        elif p.is_file():
-            files.add(p)
-    return sorted(files)
+def _walk(paths: Iterable) -> list[tuple[Path, Path]]:
+    """Every file under ``paths`` as (the name it travels by, where it is read). An entry is a
+    path, or a pair (the name a layout gives a folder, the folder it resolves to): a folder
+    reached through a symbolic link (a checkout's ``./assets``) travels by the layout's name
+    for it, so the layout's relative paths hold in the node's copy, which has no link."""
+    files: dict[Path, Path] = {}
+    for entry in paths:
+        name, source = entry if isinstance(entry, tuple) else (entry, entry)
+        name, source = Path(os.path.abspath(name)), Path(source).resolve()
+        if source.is_dir():
+            for q in source.rglob("*"):
+                if q.is_file():
+                    files[name / q.relative_to(source)] = q
+        elif source.is_file():
+            files[name] = source
+    return sorted(files.items())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -197,9 +204,10 @@ class Bundle:
     ref: Any
 
     @classmethod
-    def put(cls, *groups: Iterable[str | Path]) -> Bundle:
+    def put(cls, *groups: Iterable) -> Bundle:
         """Zips each group of files and folders (relative to the group's common folder: a
-        layout and its asset folders keep their relative places) into the object store.
+        layout and its asset folders keep their relative places) into the object store; an
+        entry is a path or a pair (its name, the path it resolves to: :func:`_walk`).
 
         Raises:
             ClusterError: a group's files share no folder but ``/``, or the zip is over
@@ -213,17 +221,17 @@ class Bundle:
                 files = _walk(group)
                 if not files:
                     continue
-                root = os.path.commonpath([str(f.parent) for f in files])
+                root = os.path.commonpath([str(f.parent) for f, _ in files])
                 if root == os.sep:
                     raise ClusterError(
-                        f"{files[0]} and {files[-1]} share no folder but {os.sep}: a Ray job "
-                        "sends a layout and its asset folders as one folder. Fix: keep them "
-                        "under one folder"
+                        f"{files[0][0]} and {files[-1][0]} share no folder but {os.sep}: a Ray "
+                        "job sends a layout and its asset folders as one folder. Fix: keep "
+                        "them under one folder"
                     )
                 roots.append(root)
-                for f in files:
+                for f, source in files:
                     name = f"{len(roots) - 1}/{f.relative_to(root).as_posix()}"
-                    data = f.read_bytes()
+                    data = source.read_bytes()
                     digest.update(f"{name}\0{len(data)}\0".encode() + data)
                     z.writestr(zipfile.ZipInfo(name, ZIP_TIME), data, zipfile.ZIP_DEFLATED)
         if buffer.tell() > MAX_BUNDLE_BYTES:

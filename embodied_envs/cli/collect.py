@@ -87,6 +87,7 @@ def add_parser(sub) -> None:
 
 
 def cmd_collect(args) -> int:
+    # the pipelines import the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.on_ray import session, start
 
     workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs

@@ -93,6 +93,7 @@ def add_parser(sub) -> None:
 
 
 def cmd_eval(args) -> int:
+    # the pipelines import the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.on_ray import start
 
     workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 from dataclasses import asdict
 from pathlib import Path
 
@@ -30,7 +31,8 @@ from embodied_envs.cluster import (
     start_early,
     starting,
 )
-from embodied_envs.datasets.records import scene_folders
+from embodied_envs.layout import load_layout
+from embodied_envs.layout.sets import layout_files
 from embodied_envs.pipelines.episodes import Episode
 from embodied_envs.workers import started
 
@@ -68,9 +70,18 @@ def _session_args(address: str, workers: int) -> tuple[str | None, int | None]:
     return None if address == RAY_LOCAL else address, workers or None
 
 
-def scene_paths(layout) -> list[Path]:
-    """The layout files of ``layout`` (a file or a set) and their asset folders."""
-    return [p for file, folders in scene_folders(layout) for p in (file, *folders.values())]
+def scene_paths(layout) -> list:
+    """The layout files of ``layout`` (a file or a set) and their asset folders, each folder
+    as (the name the layout gives it, ``..`` taken by name as on a node's copy; the folder it
+    resolves to): ``cluster.Bundle.put``'s entries."""
+    out: list = []
+    for file in layout_files(layout):
+        lay = load_layout(file, check_files=False)
+        out.append(Path(file))
+        for node in sorted(lay.assets):
+            named = Path(os.path.normpath(os.path.abspath(lay.asset_base / lay.assets[node])))
+            out.append((named, lay.asset_dir(node)))
+    return out
 
 
 def fingerprint(plan, bundle: Bundle) -> dict:
