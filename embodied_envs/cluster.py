@@ -24,9 +24,11 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib
 import io
 import json
 import os
+import pickle
 import re
 import shutil
 import tempfile
@@ -320,8 +322,36 @@ def _task(fn: Callable, bundle: Bundle, args: tuple):
         result = fn(*paths.to_node(args))
     except Exception as e:  # the message names the driver's files, as the local run's does
         e.args = paths.to_driver(e.args)
+        e.__dict__.update({k: paths.to_driver(v) for k, v in vars(e).items() if isinstance(v, str)})
+        try:  # an exception whose __init__ takes other arguments than its args is carried
+            pickle.loads(pickle.dumps(e))
+        except Exception:
+            raise CarriedError.of(e) from None
         raise
     return paths.to_driver(result), ray.get_runtime_context().get_node_id(), os.getpid()
+
+
+class CarriedError(Exception):
+    """A task's exception that pickle cannot rebuild (its ``__init__`` takes other arguments
+    than its ``args``, as ``PlacementError``'s does), carried as its class's name, its args
+    and its attributes; the driver raises the same class again (:meth:`rebuilt`)."""
+
+    @classmethod
+    def of(cls, e: Exception) -> CarriedError:
+        return cls(type(e).__module__, type(e).__qualname__, e.args, dict(e.__dict__))
+
+    def rebuilt(self) -> Exception:
+        """The exception as it was raised (its class, message and attributes); itself when
+        its class cannot be found here."""
+        module, name, args, attributes = self.args
+        try:
+            kind = getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError):
+            return self
+        e = kind.__new__(kind)
+        e.args = args
+        e.__dict__.update(attributes)
+        return e
 
 
 @dataclasses.dataclass
@@ -378,6 +408,8 @@ def run_tasks(
                 result, node, pid = ray.get(done[0])
             except RayTaskError as e:  # the task's own exception, without Ray's traceback
                 cause = e.cause if isinstance(e.cause, Exception) else RuntimeError(str(e))
+                if isinstance(cause, CarriedError):
+                    cause = cause.rebuilt()
                 raise cause from None
             except RayError as e:
                 text = " ".join(str(e).split())[:300]
