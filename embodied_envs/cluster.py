@@ -3,9 +3,10 @@ sends with it, tasks with retries, and the driver's resumable store.
 
 - :func:`ray_session`: Ray for one command. No address: a local Ray is started for the command
   (or the cluster ``RAY_ADDRESS`` names); ``auto`` or ``host:port`` connects to a running
-  cluster, as ``ray.init(address=...)`` does. The package's code travels with the job (Ray's
-  ``py_modules``), so every node runs the driver's code; its dependencies (the set-up's venv)
-  must be installed on every node.
+  cluster, as ``ray.init(address=...)`` does. On a cluster the package's code travels with the
+  job (Ray's ``py_modules``), so every node runs the driver's code; its dependencies (the
+  set-up's venv) must be installed on every node. A local Ray's workers import the driver's
+  package from where it is (``PYTHONPATH``): no runtime environment to build per worker.
 - :class:`Bundle`: the files the episodes read (layouts, their asset folders with the splat, a
   policy file) as one zip in Ray's object store, unpacked once per node under the temporary
   folder; no shared filesystem is assumed. Paths in a task's arguments are mapped onto the
@@ -23,12 +24,15 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib
 import io
 import json
 import os
+import pickle
 import re
 import shutil
 import tempfile
+import threading
 import zipfile
 from collections.abc import Callable, Iterable
 from contextlib import contextmanager
@@ -44,11 +48,45 @@ TASK_RETRIES = 3  # runs again of a task whose worker process died (Ray's max_re
 LOCAL_OBJECT_STORE_BYTES = 256 * 2**20  # a local Ray's object store (job files, results)
 MAX_BUNDLE_BYTES = 128 * 2**20  # the job's files, zipped: held once per node in the store
 BUNDLE_FOLDER = "embodied_envs-ray"  # per node, under the temporary folder: unpacked bundles
+EARLY_POLL_SECONDS = 0.05  # how often a session looks whether start_early's Ray is up
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # every zip member's date: a bundle's bytes follow its files
 
 
 class ClusterError(RuntimeError):
     """Ray cannot run the job (no cluster at the address, too large a job, a worker lost)."""
+
+
+_EARLY: dict[tuple, tuple[threading.Thread, dict]] = {}  # start_early's Ray starts, by args
+
+
+def start_early(address: str | None, cpus: int | None = None) -> None:
+    """Begins :func:`ray_session`'s start of Ray in a thread, so that Ray's processes come up
+    while the command imports the simulator and checks its inputs (a Ray start took 4-22 s
+    on the busy 2-core machine); the session with the same arguments waits for it.
+
+    The thread lives until the session ends: the processes a local Ray starts die with the
+    thread that started them (their parent-death signal follows the thread). A command that
+    stops before its session leaves it to Ray's exit handler (the thread is a daemon)."""
+    outcome: dict[str, Any] = {"release": threading.Event()}
+
+    def init() -> None:
+        try:
+            _init(address, cpus)
+        except BaseException as e:  # raised again by the session, in the command's thread
+            outcome["error"] = e
+            return
+        finally:
+            outcome["ready"] = True
+        outcome["release"].wait()
+
+    thread = threading.Thread(target=init, name="ray-start", daemon=True)
+    thread.start()
+    _EARLY[(address, cpus)] = (thread, outcome)
+
+
+def starting(address: str | None, cpus: int | None = None) -> bool:
+    """Whether :func:`start_early` began a start of Ray for these arguments."""
+    return (address, cpus) in _EARLY
 
 
 @contextmanager
@@ -65,12 +103,33 @@ def ray_session(address: str | None, cpus: int | None = None):
     """
     import ray  # only where a command runs on Ray
 
+    early = _EARLY.pop((address, cpus), None)
+    if early is None:
+        _init(address, cpus)
+    else:
+        thread, outcome = early
+        while thread.is_alive() and "ready" not in outcome:
+            thread.join(EARLY_POLL_SECONDS)
+        if "error" in outcome:
+            raise outcome["error"]
+    try:
+        yield
+    finally:
+        ray.shutdown()
+        if early is not None:
+            early[1]["release"].set()
+
+
+def _init(address: str | None, cpus: int | None) -> None:
+    """``ray.init`` for :func:`ray_session`."""
+    import ray  # only where a command runs on Ray
+
     package = str(Path(embodied_envs.__file__).parent)
     kwargs: dict[str, Any] = dict(
         log_to_driver=False,  # workers' warnings would break the progress bar's line
-        runtime_env={"py_modules": [package]},
     )
-    if address is None and not os.environ.get("RAY_ADDRESS"):
+    local = address is None and not os.environ.get("RAY_ADDRESS")
+    if local:
         # a new Ray even where a cluster runs ("local"); its workers at the command's priority,
         # as --workers processes (Ray's default nice 15 starves them on a busy machine: their
         # imports took 5-7x a plain process's)
@@ -78,8 +137,13 @@ def ray_session(address: str | None, cpus: int | None = None):
         kwargs.update(num_cpus=cpus, include_dashboard=False,
                       object_store_memory=LOCAL_OBJECT_STORE_BYTES,
                       _system_config={"worker_niceness": WORKER_NICENESS})  # fmt: skip
+    else:  # other machines get the driver's code with the job
+        kwargs["runtime_env"] = {"py_modules": [package]}
     try:
-        ray.init(address=address, **kwargs)
+        # this machine's workers import the driver's package from where it is (no runtime
+        # environment: one held each worker's start ~10 s, and Ray's idle workers go unused)
+        with _python_path(str(Path(package).parent) if local else None):
+            ray.init(address=address, **kwargs)
     except ConnectionError as e:
         where = os.environ.get("RAY_ADDRESS") if address is None else address
         raise ClusterError(
@@ -87,10 +151,22 @@ def ray_session(address: str | None, cpus: int | None = None):
             "start one (ray start --head), give its address, or give --ray without a value for "
             "a Ray of this machine alone"
         ) from None
+
+
+@contextmanager
+def _python_path(folder: str | None):
+    """``PYTHONPATH`` with ``folder`` first while Ray starts (its processes inherit it)."""
+    before = os.environ.get("PYTHONPATH")
+    if folder is not None:
+        os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (folder, before) if p)
     try:
         yield
     finally:
-        ray.shutdown()
+        if folder is not None:
+            if before is None:
+                os.environ.pop("PYTHONPATH", None)
+            else:
+                os.environ["PYTHONPATH"] = before
 
 
 def cluster_cpus() -> int:
@@ -101,15 +177,22 @@ def cluster_cpus() -> int:
 
 
 # --- the job's files -----------------------------------------------------------------------
-def _walk(paths: Iterable[str | Path]) -> list[Path]:
-    files: set[Path] = set()
-    for p in paths:
-        p = Path(p).resolve()
-        if p.is_dir():
-            files.update(q.resolve() for q in p.rglob("*") if q.is_file())
-        elif p.is_file():
-            files.add(p)
-    return sorted(files)
+def _walk(paths: Iterable) -> list[tuple[Path, Path]]:
+    """Every file under ``paths`` as (the name it travels by, where it is read). An entry is a
+    path, or a pair (the name a layout gives a folder, the folder it resolves to): a folder
+    reached through a symbolic link (a checkout's ``./assets``) travels by the layout's name
+    for it, so the layout's relative paths hold in the node's copy, which has no link."""
+    files: dict[Path, Path] = {}
+    for entry in paths:
+        name, source = entry if isinstance(entry, tuple) else (entry, entry)
+        name, source = Path(os.path.abspath(name)), Path(source).resolve()
+        if source.is_dir():
+            for q in source.rglob("*"):
+                if q.is_file():
+                    files[name / q.relative_to(source)] = q
+        elif source.is_file():
+            files[name] = source
+    return sorted(files.items())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,9 +206,10 @@ class Bundle:
     ref: Any
 
     @classmethod
-    def put(cls, *groups: Iterable[str | Path]) -> Bundle:
+    def put(cls, *groups: Iterable) -> Bundle:
         """Zips each group of files and folders (relative to the group's common folder: a
-        layout and its asset folders keep their relative places) into the object store.
+        layout and its asset folders keep their relative places) into the object store; an
+        entry is a path or a pair (its name, the path it resolves to: :func:`_walk`).
 
         Raises:
             ClusterError: a group's files share no folder but ``/``, or the zip is over
@@ -139,17 +223,17 @@ class Bundle:
                 files = _walk(group)
                 if not files:
                     continue
-                root = os.path.commonpath([str(f.parent) for f in files])
+                root = os.path.commonpath([str(f.parent) for f, _ in files])
                 if root == os.sep:
                     raise ClusterError(
-                        f"{files[0]} and {files[-1]} share no folder but {os.sep}: a Ray job "
-                        "sends a layout and its asset folders as one folder. Fix: keep them "
-                        "under one folder"
+                        f"{files[0][0]} and {files[-1][0]} share no folder but {os.sep}: a Ray "
+                        "job sends a layout and its asset folders as one folder. Fix: keep "
+                        "them under one folder"
                     )
                 roots.append(root)
-                for f in files:
+                for f, source in files:
                     name = f"{len(roots) - 1}/{f.relative_to(root).as_posix()}"
-                    data = f.read_bytes()
+                    data = source.read_bytes()
                     digest.update(f"{name}\0{len(data)}\0".encode() + data)
                     z.writestr(zipfile.ZipInfo(name, ZIP_TIME), data, zipfile.ZIP_DEFLATED)
         if buffer.tell() > MAX_BUNDLE_BYTES:
@@ -238,8 +322,36 @@ def _task(fn: Callable, bundle: Bundle, args: tuple):
         result = fn(*paths.to_node(args))
     except Exception as e:  # the message names the driver's files, as the local run's does
         e.args = paths.to_driver(e.args)
+        e.__dict__.update({k: paths.to_driver(v) for k, v in vars(e).items() if isinstance(v, str)})
+        try:  # an exception whose __init__ takes other arguments than its args is carried
+            pickle.loads(pickle.dumps(e))
+        except Exception:
+            raise CarriedError.of(e) from None
         raise
     return paths.to_driver(result), ray.get_runtime_context().get_node_id(), os.getpid()
+
+
+class CarriedError(Exception):
+    """A task's exception that pickle cannot rebuild (its ``__init__`` takes other arguments
+    than its ``args``, as ``PlacementError``'s does), carried as its class's name, its args
+    and its attributes; the driver raises the same class again (:meth:`rebuilt`)."""
+
+    @classmethod
+    def of(cls, e: Exception) -> CarriedError:
+        return cls(type(e).__module__, type(e).__qualname__, e.args, dict(e.__dict__))
+
+    def rebuilt(self) -> Exception:
+        """The exception as it was raised (its class, message and attributes); itself when
+        its class cannot be found here."""
+        module, name, args, attributes = self.args
+        try:
+            kind = getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError):
+            return self
+        e = kind.__new__(kind)
+        e.args = args
+        e.__dict__.update(attributes)
+        return e
 
 
 @dataclasses.dataclass
@@ -296,6 +408,8 @@ def run_tasks(
                 result, node, pid = ray.get(done[0])
             except RayTaskError as e:  # the task's own exception, without Ray's traceback
                 cause = e.cause if isinstance(e.cause, Exception) else RuntimeError(str(e))
+                if isinstance(cause, CarriedError):
+                    cause = cause.rebuilt()
                 raise cause from None
             except RayError as e:
                 text = " ".join(str(e).split())[:300]

@@ -87,13 +87,16 @@ def add_parser(sub) -> None:
 
 
 def cmd_collect(args) -> int:
+    # the pipelines import the simulator: only when the command runs, not for --help
+    from embodied_envs.pipelines.on_ray import session, start
+
+    workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs
+    start(args.ray, workers)  # Ray comes up while the simulator is imported and inputs checked
     # the pipeline imports the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.collect import CollectError, CollectPlan, owned_output
-    from embodied_envs.pipelines.on_ray import session
 
     config = env_config(args.config, OWNED_KEYS)
     layouts = checked_layouts(args.layout)
-    workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs
     # the seeds every worker will use (the same for every layout) are valid seeds
     blocks = CollectPlan(
         layout="", num=args.num, seed=args.seed, only_success=args.only_success,

@@ -93,6 +93,11 @@ def add_parser(sub) -> None:
 
 
 def cmd_eval(args) -> int:
+    # the pipelines import the simulator: only when the command runs, not for --help
+    from embodied_envs.pipelines.on_ray import start
+
+    workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs
+    start(args.ray, workers)  # Ray comes up while the simulator is imported and inputs checked
     config = env_config(args.config, OWNED_KEYS)
     layouts = checked_layouts(args.layout)
     if args.policy == "expert" and args.control_mode not in (None, "pd_joint_pos"):
@@ -101,7 +106,6 @@ def cmd_eval(args) -> int:
         )
     check_seed_span(args.seed, args.episodes, "episodes")
     writable_dir(args.out)
-    workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs
     if not args.ray:
         note_workers(workers)
     plan = EvalPlan(

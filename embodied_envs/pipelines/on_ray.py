@@ -18,11 +18,21 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 from dataclasses import asdict
 from pathlib import Path
 
-from embodied_envs.cluster import RAY_LOCAL, Bundle, ResumeStore, cluster_cpus, ray_session
-from embodied_envs.datasets.records import scene_folders
+from embodied_envs.cluster import (
+    RAY_LOCAL,
+    Bundle,
+    ResumeStore,
+    cluster_cpus,
+    ray_session,
+    start_early,
+    starting,
+)
+from embodied_envs.layout import load_layout
+from embodied_envs.layout.sets import layout_files
 from embodied_envs.pipelines.episodes import Episode
 from embodied_envs.workers import started
 
@@ -40,17 +50,38 @@ def session(address: str | None, workers: int):
         return
     import ray  # only where a run asks for Ray
 
-    if ray.is_initialized():
+    args = _session_args(address, workers)
+    if ray.is_initialized() and not starting(*args):
         yield
         return
-    with ray_session(None if address == RAY_LOCAL else address, workers or None):
+    with ray_session(*args):
         started()
         yield
 
 
-def scene_paths(layout) -> list[Path]:
-    """The layout files of ``layout`` (a file or a set) and their asset folders."""
-    return [p for file, folders in scene_folders(layout) for p in (file, *folders.values())]
+def start(address: str | None, workers: int) -> None:
+    """Begins the start of :func:`session`'s Ray (none for ``address`` None) while the command
+    checks its inputs (``cluster.start_early``)."""
+    if address is not None:
+        start_early(*_session_args(address, workers))
+
+
+def _session_args(address: str, workers: int) -> tuple[str | None, int | None]:
+    return None if address == RAY_LOCAL else address, workers or None
+
+
+def scene_paths(layout) -> list:
+    """The layout files of ``layout`` (a file or a set) and their asset folders, each folder
+    as (the name the layout gives it, ``..`` taken by name as on a node's copy; the folder it
+    resolves to): ``cluster.Bundle.put``'s entries."""
+    out: list = []
+    for file in layout_files(layout):
+        lay = load_layout(file, check_files=False)
+        out.append(Path(file))
+        for node in sorted(lay.assets):
+            named = Path(os.path.normpath(os.path.abspath(lay.asset_base / lay.assets[node])))
+            out.append((named, lay.asset_dir(node)))
+    return out
 
 
 def fingerprint(plan, bundle: Bundle) -> dict:

@@ -1,6 +1,7 @@
 """`collect --ray` and `eval --ray` on a real Ray cluster of two nodes on this machine
 (``ray.cluster_utils.Cluster``, one CPU each), started by the tests: the same data as one local
-worker, a killed worker, an interrupted driver resumed, a worker's error as the local line."""
+worker, a killed worker, an interrupted driver resumed, a worker's error (a policy's, a
+layout's) as the local line."""
 
 import json
 import os
@@ -13,7 +14,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from conftest import DEFAULT_LAYOUT
+from conftest import DEFAULT_LAYOUT, ROOT
 
 ray = pytest.importorskip("ray")
 from ray.cluster_utils import Cluster  # noqa: E402
@@ -186,6 +187,29 @@ def test_a_policy_raising_on_a_worker_is_the_local_one_line_error(cluster, tmp_p
         "0 of episode seed 0 (default.json)"
     ]
     assert [ln for ln in res.stdout.splitlines() if ln.startswith("error:")] == line
+
+
+# the driver checks this layout and passes it; its objects cannot be placed this far from the
+# robot, which only the env's construction on a worker finds (the bad-input corpus's case)
+FAR_REACH = {"placement_limits": {"reach_min": 1.7, "reach_max": 1.95}}
+
+
+def test_a_layout_error_on_a_worker_is_the_local_one_line_error(cluster, tmp_path):
+    layout = ROOT / "tests" / "data" / "bad_inputs" / "objects_cannot_be_placed" / "layout.json"
+    (tmp_path / "far.json").write_text(json.dumps(FAR_REACH))
+    args = ["collect", "--layout", str(layout), "--config", "far.json", "--num", "1"]
+    local = cli([*args, "--workers", "1", "--out", "local"], tmp_path)
+    res = cli([*args, "--ray", "auto", "--out", "ray"], tmp_path, cluster)
+    assert local.returncode == res.returncode == 1, res.stdout + res.stderr
+    line = [ln for ln in local.stdout.splitlines() if ln.startswith("error:")]
+    assert len(line) == 1 and line[0].startswith(
+        f"error: collecting layout.json failed: PlacementError: {layout}: cannot place \"can\""
+    ), line
+    assert [ln for ln in res.stdout.splitlines() if ln.startswith("error:")] == line
+    assert list((tmp_path / "local").iterdir()) == [], "no dataset"
+    # no dataset either; the resume store (what arrived: no episode) stays for a run again
+    assert [p.name for p in (tmp_path / "ray").iterdir()] == [".resume-layout"]
+    assert not list((tmp_path / "ray" / ".resume-layout").glob("seed_*"))
 
 
 def test_paths_map_whole_folder_names_both_ways():

@@ -17,11 +17,14 @@ import numpy as np
 import torch
 
 from embodied_envs.layout.placement.rules import (
+    amax,
+    amin,
     array_module,
     half_planes,
     inside,
     inward_normals,
     pad_polygons,
+    stack_last,
 )
 
 # --- counter-based random numbers ----------------------------------------------------------
@@ -141,7 +144,7 @@ def yaw_raw_poses(xy, z, yaw):
     """ManiSkill raw poses ``(b, 7)``, ``[x, y, z, qw, qx, qy, qz]``, of yaw-only rotations."""
     xp = array_module(yaw)
     zeros = xp.zeros_like(yaw)
-    return xp.stack([xy[:, 0], xy[:, 1], z, xp.cos(yaw / 2), zeros, zeros, xp.sin(yaw / 2)], -1)
+    return stack_last([xy[:, 0], xy[:, 1], z, xp.cos(yaw / 2), zeros, zeros, xp.sin(yaw / 2)])
 
 
 @dataclass(frozen=True)
@@ -157,9 +160,8 @@ class Region:
 
     @classmethod
     def of(cls, poly, z) -> Region:
-        xp = array_module(poly)
         n, c = half_planes(poly)
-        return cls(n, c, xp.amin(poly, -2), xp.amax(poly, -2), z)
+        return cls(n, c, amin(poly, -2), amax(poly, -2), z)
 
     def map(self, fn) -> Region:
         """The region with ``fn`` applied to every array (e.g. to make tensors of them)."""

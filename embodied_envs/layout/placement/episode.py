@@ -74,6 +74,22 @@ NOISE_DIMS = 7  # at most this many arm joints get start noise (robots.py noise_
 MANY_OBJECTS = 16  # placing more objects every episode is warned about (resets slow down)
 STARTS_PER_DRAW = 32  # episode starts prepared per sampler call at least (then per env)
 FIRST_CHUNK = 8  # candidates per object tested before the rest (most draws need only these)
+ROWS_KEPT = 64  # env row sets whose arrays a numpy sampler keeps indexed (a CPU env: one)
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """The configuration's per-env arrays at some envs' rows: what every draw of them reads."""
+
+    table: Region  # the top, shrunk by the placement margin
+    goal_table: Region
+    robot_xy: object
+    robot_yaw: object
+    robot_foot: object
+    robot_foot_normals: object
+    goal_lo: object
+    goal_hi: object
+    top_z: object
 
 
 class EpisodeSampler:
@@ -150,6 +166,7 @@ class EpisodeSampler:
         # the robot base's footprint per env (fixed for the configuration) and its normals
         self.robot_foot = rotate(self.shapes.vertices[0], self.robot_yaw) + self.robot_xy[:, None]
         self.robot_foot_normals = rotate(self.shapes.normals[0], self.robot_yaw)
+        self._kept_rows: dict[bytes, _Rows] = {}  # numpy: row sets' arrays, by their bytes
         self._init_goals(base, ctx, ctx_poses, layouts)
         # prepared starts: per env a block of its next episodes, and which one comes next
         self.block = max(1, STARTS_PER_DRAW // len(layouts))
@@ -197,17 +214,36 @@ class EpisodeSampler:
                 "deg of its heading. Fix: put the robot at the table's edge, facing the table."
             )
 
+    def _rows(self, env_idx) -> _Rows:
+        """The per-env arrays at the rows ``env_idx``; a numpy sampler keeps them (indexing
+        them anew costs a few-env draw more than its arithmetic)."""
+        key = env_idx.tobytes() if self.arrays.xp is np else None
+        rows = self._kept_rows.get(key) if key is not None else None
+        if rows is None:
+            rows = _Rows(
+                self.table.rows(env_idx), self.goal_table.rows(env_idx), self.robot_xy[env_idx],
+                self.robot_yaw[env_idx], self.robot_foot[env_idx],
+                self.robot_foot_normals[env_idx], self.goal_lo[env_idx], self.goal_hi[env_idx],
+                self.top_z[env_idx],
+            )  # fmt: skip
+            if key is not None:
+                if len(self._kept_rows) >= ROWS_KEPT:
+                    self._kept_rows.clear()
+                self._kept_rows[key] = rows
+        return rows
+
     def _in_goal_region(self, xy, env_idx):
         """``xy (b, k, 2)`` -> ``(b, k)``: inside the goal region of each env (the top shrunk
         by the goal margin; the reach rule with the band shrunk by the goal inset)."""
+        r = self._rows(env_idx)
         in_band, facing = within_reach(
             xy,
-            self.robot_xy[env_idx][:, None],
-            self.robot_yaw[env_idx][:, None],
+            r.robot_xy[:, None],
+            r.robot_yaw[:, None],
             self.goal_region.distance_band(self.limits),
             self.limits.max_heading_deg,
         )
-        return self.goal_table.rows(env_idx).contains(xy) & in_band & facing
+        return r.goal_table.contains(xy) & in_band & facing
 
     # --- draws ---------------------------------------------------------------------------
     def invalidate(self, env_idx=None) -> None:
@@ -306,14 +342,15 @@ class EpisodeSampler:
         a, xp = self.arrays, self.arrays.xp
         b = len(env_idx)
         rows = a.index(np.arange(b))
-        regions = {self.context: self.table.rows(env_idx)}
-        robot_xy, robot_yaw = self.robot_xy[env_idx], self.robot_yaw[env_idx]
+        r = self._rows(env_idx)
+        regions = {self.context: r.table}
+        robot_xy, robot_yaw = r.robot_xy, r.robot_yaw
         # placed footprints (shape i: robot base, then the items): world polygons, their
         # normals, origins
         shapes = self.shapes
         polys = a.zeros((b, n + 1, *shapes.vertices.shape[1:]))
         poly_normals, origins = a.zeros(polys.shape), a.zeros((b, n + 1, 2))
-        polys[:, 0], poly_normals[:, 0] = self.robot_foot[env_idx], self.robot_foot_normals[env_idx]
+        polys[:, 0], poly_normals[:, 0] = r.robot_foot, r.robot_foot_normals
         origins[:, 0] = robot_xy
         placed = (polys, poly_normals, origins)
         drawn = {}
@@ -348,7 +385,9 @@ class EpisodeSampler:
         out = {}
         for node, (xy, z, yaw) in drawn.items():
             raw = yaw_raw_poses(xy, z + self.objs_z_offset, yaw)
-            out[node] = xp.where(ok_env[:, None], raw, self.fallback[node][env_idx])
+            if failed:  # those envs keep their configuration's arrangement
+                raw = xp.where(ok_env[:, None], raw, self.fallback[node][env_idx])
+            out[node] = raw
         return out
 
     def _first_fit(self, j: int, it, region: Region, u, placed, robot_xy, robot_yaw):
@@ -361,7 +400,7 @@ class EpisodeSampler:
         not ``episode_candidates``. The first fit does not depend on the chunks.
         """
         lim, shapes, shape, xp = self.limits, self.shapes, j + 1, self.arrays.xp
-        b, k = u.shape[0], u.shape[-1]
+        k = u.shape[-1]
         polys, poly_normals, origins = placed
         avoid = self.avoid[j]
         keep_clear = (polys[:, avoid], poly_normals[:, avoid], origins[:, avoid],
@@ -370,8 +409,7 @@ class EpisodeSampler:
         if it.manipulated:
             band = (lim.reach_min, lim.reach_max)
             reach = (robot_xy, robot_yaw, band, lim.max_heading_deg)
-        first = self.arrays.zeros(b, "int64")
-        found = self.arrays.zeros(b, "bool")
+        first = found = None
         for lo, hi in ((0, min(FIRST_CHUNK, k)), (min(FIRST_CHUNK, k), k)):
             if lo == hi:
                 continue
@@ -385,9 +423,12 @@ class EpisodeSampler:
             for mask in masks.values():
                 ok = ok & mask
             index, any_ok = first_true(ok)
-            new = any_ok & ~found
-            first = xp.where(new, lo + index, first)
-            found = found | new
+            if found is None:  # the first chunk (first_true gives 0 where none fits)
+                first, found = index, any_ok
+            else:
+                new = any_ok & ~found
+                first = xp.where(new, lo + index, first)
+                found = found | new
             if bool(found.all()):
                 break
         return first, found
@@ -397,7 +438,8 @@ class EpisodeSampler:
         xp = self.arrays.xp
         b = len(env_idx)
         u = uniforms(keys, GOAL_STREAM, 2 * k + 1).reshape(b, -1)
-        lo, hi = self.goal_lo[env_idx], self.goal_hi[env_idx]
+        r = self._rows(env_idx)
+        lo, hi = r.goal_lo, r.goal_hi
         xy = lo[:, None] + u[:, : 2 * k].reshape(b, k, 2) * (hi - lo)[:, None]
         first, found = first_true(self._in_goal_region(xy, env_idx))
         xy = xy[self.arrays.index(np.arange(b)), first]
@@ -409,7 +451,7 @@ class EpisodeSampler:
             )
             xy = xp.where(found[:, None], xy, self.goal_fallback[env_idx])
         h = g.height[0] + u[:, -1] * (g.height[1] - g.height[0])
-        return xp.concatenate([xy, (self.top_z[env_idx] + h)[:, None]], 1)
+        return xp.concatenate([xy, (r.top_z + h)[:, None]], 1)
 
 
 def _fields(start: EpisodeStart) -> list:

@@ -34,13 +34,38 @@ def array_module(x):
     return torch if torch is not None and isinstance(x, torch.Tensor) else np
 
 
+def stack_last(parts):
+    """``xp.stack(parts, -1)`` of same-shaped arrays; numpy's by ``concatenate`` (the same
+    array, a fraction of ``np.stack``'s fixed cost, which dominates the few-env draws)."""
+    if array_module(parts[0]) is np:
+        return np.concatenate([p[..., None] for p in parts], -1)
+    return sys.modules["torch"].stack(parts, -1)
+
+
+def amax(x, dim: int = -1):
+    """The maximum over ``dim`` (numpy's method: ``np.amax``'s wrapper costs more)."""
+    return x.max(dim) if array_module(x) is np else x.amax(dim)
+
+
+def amin(x, dim: int = -1):
+    """The minimum over ``dim``."""
+    return x.min(dim) if array_module(x) is np else x.amin(dim)
+
+
+def all_true(mask):
+    """A bool array of ``mask``'s shape and library, all True."""
+    if array_module(mask) is np:
+        return np.ones(mask.shape, dtype=bool)
+    return sys.modules["torch"].ones_like(mask, dtype=sys.modules["torch"].bool)
+
+
 def rotate(points, yaw):
     """``points (m, 2)`` rotated by each ``yaw (...)``: ``(..., m, 2)``; or points
     ``(..., m, 2)`` each by its own yaw ``(...)``."""
     xp = array_module(yaw)
     c, s = xp.cos(yaw)[..., None], xp.sin(yaw)[..., None]
     x, y = points[..., 0], points[..., 1]
-    return xp.stack([c * x - s * y, s * x + c * y], -1)
+    return stack_last([c * x - s * y, s * x + c * y])
 
 
 def inward_normals(poly):
@@ -48,7 +73,7 @@ def inward_normals(poly):
     from vertex i to i + 1); a zero-length edge gets a zero normal."""
     xp = array_module(poly)
     e = xp.roll(poly, -1, -2) - poly
-    n = xp.stack([-e[..., 1], e[..., 0]], -1)
+    n = stack_last([-e[..., 1], e[..., 0]])
     return n / xp.clip(xp.hypot(n[..., 0], n[..., 1]), 1e-12, None)[..., None]
 
 
@@ -80,7 +105,8 @@ def inside(vertices, normals, offsets):
         ``(...)`` bool.
     """
     depth = vertices @ normals.swapaxes(-1, -2)  # (..., m, e)
-    return (depth >= offsets[..., None, :] - INSIDE_TOLERANCE).all(-1).all(-1)
+    ok = depth >= offsets[..., None, :] - INSIDE_TOLERANCE
+    return ok.reshape(*ok.shape[:-2], -1).all(-1)  # one reduction over (m, e)
 
 
 def overlap(p, q, clearance: float, p_normals, q_normals):
@@ -103,8 +129,8 @@ def overlap(p, q, clearance: float, p_normals, q_normals):
     on_p = axes @ p.swapaxes(-1, -2)  # (..., a, m)
     on_q = axes @ q.swapaxes(-1, -2)
     real = (axes != 0).any(-1)
-    apart = (xp.amax(on_p, -1) + clearance <= xp.amin(on_q, -1)) | (
-        xp.amax(on_q, -1) + clearance <= xp.amin(on_p, -1)
+    apart = (amax(on_p) + clearance <= amin(on_q)) | (
+        amax(on_q) + clearance <= amin(on_p)
     )
     return ~(apart & real).any(-1)
 
@@ -139,7 +165,7 @@ def first_true(mask):
     """``(first, any)`` along the last dim of a bool mask: the index of its first True (0 where
     none) and whether there is one."""
     xp = array_module(mask)
-    as_int = mask.astype(np.uint8) if xp is np else mask.to(xp.uint8)
+    as_int = mask if xp is np else mask.to(xp.uint8)  # numpy's argmax takes bools
     return as_int.argmax(-1), mask.any(-1)
 
 
@@ -176,7 +202,7 @@ def candidates_fit(
     xp = array_module(xy)
     poly = rotate(foot, yaw) + xy[..., None, :]  # (b, c, m, 2)
     masks = {}
-    ok = xp.ones_like(yaw, dtype=bool) if xp is np else xp.ones_like(yaw, dtype=xp.bool)
+    ok = None  # every rule so far (None: no rule yet)
     if region is not None:
         masks["inside"] = ok = inside(poly, region[0][:, None], region[1][:, None])
     if reach is not None:
@@ -184,7 +210,8 @@ def candidates_fit(
         masks["in_band"], masks["facing"] = within_reach(
             xy, robot_xy[:, None], robot_yaw[:, None], band, heading
         )
-        ok = ok & masks["in_band"] & masks["facing"]
+        reached = masks["in_band"] & masks["facing"]
+        ok = reached if ok is None else ok & reached
         if shift is not None:
             vec = (np.asarray([shift], dtype=xy.dtype) if xp is np else
                    xp.as_tensor([shift], dtype=xy.dtype, device=xy.device))  # fmt: skip
@@ -202,8 +229,8 @@ def candidates_fit(
     polys, normals, origins, radii = placed
     rel = xy[:, :, None] - origins[:, None]  # (b, c, o, 2)
     near = xp.hypot(rel[..., 0], rel[..., 1]) < radius + radii + clearance
-    e, c, o = nonzero(near & ok[..., None])
-    masks["clear"] = clear = xp.ones_like(ok)
+    e, c, o = nonzero(near if ok is None else near & ok[..., None])
+    masks["clear"] = clear = all_true(yaw)
     if len(e):
         pair_normals = rotate(foot_normals, yaw[e, c])
         hit = overlap(poly[e, c], polys[e, o], clearance, pair_normals, normals[e, o])
