@@ -118,6 +118,10 @@ class Hand:
     # (an arm of fewer than six joints, solvers/motion.py)
     planar: bool = False  # the hand approaches only within the arm's vertical plane (five
     # joints: base turn, three pitches, wrist roll): its grasps are aimed so
+    fixed_jaw: float = 0.0  # m: a hand with one jaw that stands still (the SO-100's): its inner
+    # face's y in the grasp frame (signed), from the robot's collision hulls
+    # (tools/make/measure_jaws.py); the expert takes an object against it, the other jaw open
+    # (solvers/grasp_choice.py); 0: the jaws close together about the origin
     tilt_reach: tuple[tuple[float, float, float], ...] = ()  # a planar hand's reachable
     # orientations: (m from the base, lowest, highest deg) the approach tilts from straight
     # down toward the far side at which its IK reaches a grasp 1.5 cm above the table, straight
@@ -246,7 +250,7 @@ PANDA_HAND = Hand(
 SO100_HAND = Hand(
     link="Fixed_Jaw", grasp_in_link=(-0.0306, -0.0873, 0.0, 0.5, 0.5, 0.5, -0.5),
     boxes=(("opening", 0.06), ("finger_width", 0.02), ("finger_thickness", 0.015),
-           ("finger_tip", 0.012), ("finger_length", 0.037), ("palm_size", (0.02, 0.132)),
+           ("finger_tip", 0.019), ("finger_length", 0.044), ("palm_size", (0.02, 0.132)),
            ("palm_z", (-0.12, -0.025))),
     grasp_depth=0.02, approach_offset=0.04, joint_vel=(1.5,) * 5, joint_acc=(8.0,) * 5,
     action_open=0.0, action_closed=-1.1, tilt_tolerance=0.1, planar=True,
@@ -254,6 +258,7 @@ SO100_HAND = Hand(
                      (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
     close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300, convertible=False,
+    fixed_jaw=0.0385,
     tilt_reach=((0.14, 0.0, 0.0), (0.18, 0.0, 15.0), (0.22, 0.0, 15.0), (0.26, 0.0, 30.0),
                 (0.30, 0.0, 30.0), (0.34, 15.0, 45.0)),
 )  # fmt: skip
