@@ -33,6 +33,9 @@ import math
 from dataclasses import dataclass
 
 DOWNLOAD_COMMAND = "python -m mani_skill.utils.download_asset {uid}"
+GRAVITY = 9.81  # m/s^2
+MANISKILL_FORCE_LIMIT = 100.0  # N m: ManiSkill 3.0.1's arm drives (panda.py arm_force_limit,
+# so_100.py and koch.py force_limit)
 
 
 @dataclass(frozen=True)
@@ -186,6 +189,18 @@ class Robot:
     in_wheel: bool = True  # False: its model is a separate ManiSkill download
     hand: Hand | None = None  # what the scripted expert (solvers/) needs; None: it does not
     # drive this robot
+    arm_force_limit: float | None = None  # N m, the most its arm joints' drives exert
+    # (ManiSkill 3.0.1's controller configs: force_limit=100 for the Panda, SO-100 and Koch; their
+    # URDFs give none: so100.urdf's effort="0", the Koch's no effort); None: not read, unchecked
+
+    @property
+    def payload(self) -> float | None:
+        """The heaviest object (kg) its arm holds up at the far end of its reach: the drives'
+        force limit over the weight's lever there (its own links' weight is balanced by the
+        simulator's passive forces); None where ``arm_force_limit`` is not known."""
+        if self.arm_force_limit is None:
+            return None
+        return self.arm_force_limit / (GRAVITY * self.reach[1])
 
     @property
     def expert(self) -> bool:
@@ -284,7 +299,7 @@ KOCH_HAND = Hand(
                      (0.0357, 0.8), (0.0401, 0.9), (0.0445, 1.0), (0.0497, 1.1),
                      (0.0563, 1.2)),
     close_gap=0.004, close_step=0.02, squeeze=0.01, max_path_steps=300, convertible=False,
-    drifts=True,
+    drifts=True, fixed_jaw=-0.0225,
     tilt_reach=((0.12, 0.0, 0.0), (0.15, 0.0, 15.0), (0.19, 0.0, 30.0), (0.23, 0.0, 45.0),
                 (0.26, 0.0, 60.0), (0.29, 15.0, 75.0), (0.32, 30.0, 75.0)),
 )  # fmt: skip
@@ -295,7 +310,7 @@ PANDA = Robot(
     noise_joints=tuple(range(7)), reach=(0.30, 0.78), goal_inset=0.10, goal_height=(0.05, 0.25),
     gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
     camera_mount="panda_link0", camera_eye=(0.95, 0.0, 0.55), camera_target=(0.30, 0.0, 0.0),
-    hand=PANDA_HAND,
+    hand=PANDA_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT,
 )  # fmt: skip
 ROBOTS: dict[str, Robot] = {
     r.uid: r
@@ -307,6 +322,7 @@ ROBOTS: dict[str, Robot] = {
             gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
             camera_mount="panda_link0", camera_eye=PANDA.camera_eye,
             camera_target=PANDA.camera_target, hand=PANDA_HAND,
+            arm_force_limit=MANISKILL_FORCE_LIMIT,
         ),
         # ManiSkill's table scene: base at the table's edge turned +90 deg, these joints;
         # its so100 motion planner opens the jaw at 0 rad (0.084 m between the tips) and
@@ -322,7 +338,7 @@ ROBOTS: dict[str, Robot] = {
             tcp_link=None, grasp_check=JAW_GRASP, camera_mount="Base",
             camera_eye=(0.55, 0.0, 0.40), camera_target=(0.18, 0.0, 0.0), base_yaw=math.pi / 2,
             tcp_tips=("Fixed_Jaw_tip", "Moving_Jaw_tip"),
-            hand=SO100_HAND,
+            hand=SO100_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT,
         ),
         # Koch v1.1: turned +90 deg as ManiSkill's keyframes; its hand pointing down, the jaws'
         # tips 0.10 m above the table 0.12 m out (ManiSkill's rest keyframe, folded, holds
@@ -338,7 +354,7 @@ ROBOTS: dict[str, Robot] = {
                             action_index=5, action_kind="delta"),
             tcp_link="gripper_tcp", grasp_check=JAW_GRASP, camera_mount="base_link",
             camera_eye=(0.50, 0.0, 0.38), camera_target=(0.16, 0.0, 0.0), base_yaw=math.pi / 2,
-            hand=KOCH_HAND,
+            hand=KOCH_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT,
         ),
         # Fetch: ManiSkill's table-scene joints (torso up), fingers open (0.05 m each); on the
         # floor 0.345 m behind the spot (ManiSkill: 0.325 m behind the table's edge; the spot

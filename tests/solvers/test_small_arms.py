@@ -1,6 +1,7 @@
 """The small arms (issue 50): grasps a five-joint arm can make (its approach in its vertical
 plane, tilted within what it reaches, the fingers off the table), an object wider than the
-jaws refused at gym.make in one line, and the expert on the small-arm zoo."""
+jaws or heavier than the arm holds refused at gym.make in one line, and the expert on the
+small-arm zoo."""
 
 import json
 import shutil
@@ -49,17 +50,24 @@ def test_planar_grasps_lie_in_the_arms_plane_and_clear_the_table(uid):
             assert low[..., 2].min() >= support + table_gap(cfg) - TOL
 
 
-def test_an_object_wider_than_the_jaws_is_refused_at_make(tmp_path):
+def edited_cube_layout(tmp_path, old: str, new: str):
+    """The SO-100's 3 cm cube layout with its cube's URDF text ``old`` replaced by ``new``."""
     assets = tmp_path / "assets"
     shutil.copytree(SMALL_ZOO / "assets" / "cube_30", assets / "cube_30")
     urdf = assets / "cube_30" / "cube_30.urdf"
-    urdf.write_text(urdf.read_text().replace('scale="1.0 1.0 1.0"', 'scale="3.0 3.0 3.0"'))
+    assert old in urdf.read_text()
+    urdf.write_text(urdf.read_text().replace(old, new))
     layout = json.loads((SMALL_ZOO / "layouts" / "so100_cube_30.json").read_text())
     layout["assets"]["cube_30"] = str(assets / "cube_30")
     for node in ("background", "round_table"):
         layout["assets"][node] = str(ROOT / "embodied_envs" / "data" / "assets" / node)
-    path = tmp_path / "big_cube.json"
+    path = tmp_path / "edited_cube.json"
     path.write_text(json.dumps(layout))
+    return path
+
+
+def test_an_object_wider_than_the_jaws_is_refused_at_make(tmp_path):
+    path = edited_cube_layout(tmp_path, 'scale="1.0 1.0 1.0"', 'scale="3.0 3.0 3.0"')
     with pytest.raises(LayoutError) as e:
         gym.make("PickEmbodiedGen-v1", layout_file=str(path))
     assert str(e.value) == (
@@ -67,6 +75,23 @@ def test_an_object_wider_than_the_jaws_is_refused_at_make(tmp_path):
         "jaws open 8.4 cm (embodied_envs/robots.py), so it cannot grasp it. Fix: a smaller "
         "object, or a robot with a wider gripper (relation.robot or robot_uids=)"
     )
+
+
+def test_an_object_heavier_than_the_arm_holds_is_refused_at_make(tmp_path):
+    # the SO-100's payload: its drives' 100 N m over g times its 0.30 m reach, 34.0 kg
+    assert ROBOTS["so100"].payload == pytest.approx(100.0 / (9.81 * 0.30), rel=TOL)
+    path = edited_cube_layout(tmp_path, '<mass value="0.035"/>', '<mass value="40"/>')
+    with pytest.raises(LayoutError) as e:
+        gym.make("PickEmbodiedGen-v1", layout_file=str(path))
+    assert str(e.value) == (
+        f"{path}: the manipulated object 'cube_30' weighs 40 kg; so100's arm holds up at most "
+        "34 kg at its reach (its drives' force limit, embodied_envs/robots.py), so it cannot "
+        "lift it. Fix: a lighter object (its URDF's inertial/mass), or a stronger robot "
+        "(relation.robot or robot_uids=)"
+    )
+    # 30 kg is within it: the env is made
+    gym.make("PickEmbodiedGen-v1", layout_file=str(edited_cube_layout(
+        tmp_path / "light", '<mass value="0.035"/>', '<mass value="30"/>'))).close()  # fmt: skip
 
 
 @pytest.mark.parametrize(("layout", "seed"), [("so100_marker", 1), ("koch_marker", 1)])
