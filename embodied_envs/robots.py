@@ -254,14 +254,14 @@ PANDA_HAND = Hand(
 )  # fmt: skip
 # the SO-100's hand (its jaw's sections measured in ManiSkill 3.0.1's collision meshes, jaw at
 # 0 rad): the grasp frame's origin midway between the jaws' tip links, z along -y of Fixed_Jaw,
-# y along its x. The fixed jaw's inner face stands 0.040 m from the origin over z -0.045..0.015;
-# the moving jaw is slanted (its inner face 0.037 m from the origin at z -0.01, 0.029 at -0.02,
-# 0.018 at -0.03) and its tip ends at z -0.003, so the jaws are modelled 0.06 m apart down to
-# z -0.025, the palm behind that (0.02 m across: the jaws' roots; the jaw's motor, 0.048 m
-# across, is 0.045 m back): objects are taken 0.02 m below their top (the moving jaw's tip
-# then overlaps their side by 0.017 m; at 0.012 it rode on a block's edge), from 0.04 m back.
-# Its pd_joint_pos drives the jaw's angle: 0 open, -1.1 shut, with the arm's gains (stiffness
-# 1e3, 100 N m), so it closes gently
+# y along its x. The still jaw's inner face stands 0.0385 m from the origin (fixed_jaw), its tip
+# 0.019 m past it; the moving jaw's face swings in from -0.025 m, its tip from 0.003 m behind the
+# origin to 0.019 m past it at -0.7 rad (tools/make/measure_jaws.py). Modelled: the jaws 0.06 m
+# apart, their tips 0.019 m past the origin (at 0.012 the real tips met the table under a short
+# object), the palm behind them (0.02 m across: the jaws' roots; the jaw's motor, 0.048 m
+# across, is 0.045 m back): objects are taken 0.02 m below their top, from 0.04 m back, against
+# the still jaw (grasp_choice.py). Its pd_joint_pos drives the jaw's angle: 0 open, -1.1 shut,
+# with the arm's gains (stiffness 1e3, 100 N m), so it closes gently
 SO100_HAND = Hand(
     link="Fixed_Jaw", grasp_in_link=(-0.0306, -0.0873, 0.0, 0.5, 0.5, 0.5, -0.5),
     boxes=(("opening", 0.06), ("finger_width", 0.02), ("finger_thickness", 0.015),

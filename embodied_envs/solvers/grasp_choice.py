@@ -227,8 +227,9 @@ class GraspChoice:
         along their closing line so that the object (``verts``, world) lies the arm's precision
         (``GraspConfig.margin``) from that jaw's inner face, the other jaw fully open: it then
         presses the object that far onto the still jaw, not across the gap between the open
-        jaws (the SO-100's: 3.85 cm from the grasp origin each; a 2 cm marker centred there was
-        pushed 2.9 cm and rolled or slid from under the jaw). Unchanged without one."""
+        jaws (the SO-100's still jaw stands 3.85 cm from the grasp origin: a 2 cm marker
+        centred there lay 2.9 cm from it, and was pushed 1.4-2 cm and missed). The checks the
+        grasp passed were the hand model's, about the unmoved centre. Unchanged without one."""
         face = self.robot_hand.fixed_jaw
         if not face:
             return poses
