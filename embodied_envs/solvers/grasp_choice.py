@@ -225,16 +225,17 @@ class GraspChoice:
     def _against_fixed_jaw(self, poses: list, verts: np.ndarray) -> list:
         """``poses`` of a hand with a jaw that stands still (``robots.Hand.fixed_jaw``) moved
         along their closing line so that the object (``verts``, world) lies the arm's precision
-        (``GraspConfig.margin``) from that jaw's inner face, the other jaw fully open: it then
-        presses the object that far onto the still jaw, not across the gap between the open
-        jaws (the SO-100's still jaw stands 3.85 cm from the grasp origin: a 2 cm marker
-        centred there lay 2.9 cm from it, and was pushed 1.4-2 cm and missed). The checks the
-        grasp passed were the hand model's, about the unmoved centre. Unchanged without one."""
+        (``GraspConfig.margin``) from that jaw's inner face, the other jaw at its widest
+        (``Hand.action_openings``' last): it then presses the object that far onto the still
+        jaw, not across the gap between the open jaws (the SO-100's still jaw stands 3.85 cm
+        from the grasp origin: a 2 cm marker centred there lay 2.9 cm from it, and was pushed
+        1.4-2 cm and missed). The checks the grasp passed were the hand model's, about the
+        unmoved centre. Unchanged without one."""
         face = self.robot_hand.fixed_jaw
         if not face:
             return poses
         way = np.sign(face)
-        wide_open = self.robot_hand.action_openings[-1][0]  # the jaw's own fully open gap
+        wide_open = self.robot_hand.action_openings[-1][0]  # the widest gap the jaw holds
         out = []
         for pose, _ in poses:
             m = pose.to_transformation_matrix()

@@ -5,6 +5,7 @@ small-arm zoo."""
 
 import json
 import shutil
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
@@ -15,6 +16,7 @@ import embodied_envs  # noqa: F401
 from embodied_envs.layout import LayoutError, LayoutPose, parse_urdf
 from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers import PickPlaceSolver
+from embodied_envs.solvers.grasp_choice import GraspChoice, grasp_pose
 from embodied_envs.solvers.grasps import GraspConfig, asset_grasps
 from embodied_envs.solvers.gripper import GripperModel, box_corners, tcp_axes
 from embodied_envs.solvers.planar import planar_grasps, table_gap
@@ -104,3 +106,23 @@ def test_the_expert_picks_a_lying_marker_on_each_small_arm(layout, seed):
     assert result.reports[0].plan_failures == []
     assert bool(env.unwrapped.evaluate()["success"][0])
     env.close()
+
+
+@pytest.mark.parametrize("uid", ["so100", "koch-v1.1", "panda"])
+def test_a_hand_with_a_still_jaw_takes_the_object_against_it(uid):
+    hand, cfg = ROBOTS[uid].hand, GraspConfig()
+    solver = SimpleNamespace(robot_hand=hand, grasp_config=cfg)
+    cube = np.array([[x, y, z] for x in (-0.01, 0.01) for y in (-0.01, 0.01)
+                     for z in (0.74, 0.76)])  # fmt: skip
+    for closing in ([0.0, 1.0, 0.0], [1.0, 0.0, 0.0]):
+        pose = grasp_pose(np.array([0.0, 0.0, -1.0]), np.array(closing), np.array([0, 0, 0.75]))
+        [(moved, opening)] = GraspChoice._against_fixed_jaw(solver, [(pose, 0.05)], cube)
+        if not hand.fixed_jaw:  # jaws that close together: the grasp as it was
+            assert moved is pose and opening == 0.05
+            continue
+        y = moved.to_transformation_matrix()[:3, 1]
+        face = moved.p @ y + hand.fixed_jaw  # the still jaw's inner face along the closing
+        near = (cube @ y).max() if hand.fixed_jaw > 0 else (cube @ y).min()
+        assert abs(face - near) == pytest.approx(cfg.margin, abs=TOL)
+        assert np.allclose(moved.q, pose.q, atol=TOL) and moved.p[2] == pytest.approx(0.75)
+        assert opening == hand.action_openings[-1][0]  # the moving jaw its widest
