@@ -68,32 +68,36 @@ def edited_cube_layout(tmp_path, old: str, new: str):
     return path
 
 
-def test_an_object_wider_than_the_jaws_is_refused_at_make(tmp_path):
-    path = edited_cube_layout(tmp_path, 'scale="1.0 1.0 1.0"', 'scale="3.0 3.0 3.0"')
-    with pytest.raises(LayoutError) as e:
-        gym.make("PickEmbodiedGen-v1", layout_file=str(path))
-    assert str(e.value) == (
-        f"{path}: the manipulated object 'cube_30' is 9.0 cm across at its narrowest; so100's "
-        "jaws open 8.4 cm (embodied_envs/robots.py), so it cannot grasp it. Fix: a smaller "
-        "object, or a robot with a wider gripper (relation.robot or robot_uids=)"
-    )
-
-
-def test_an_object_heavier_than_the_arm_holds_is_refused_at_make(tmp_path):
+REFUSED = {  # what the cube's URDF is given -> the refusal's text after the file's name
+    "wider than the jaws": (
+        'scale="1.0 1.0 1.0"', 'scale="3.0 3.0 3.0"',
+        "the manipulated object 'cube_30' is 9.0 cm across at its narrowest; so100's jaws open "
+        "8.4 cm (embodied_envs/robots.py), so it cannot grasp it. Fix: a smaller object, or a "
+        "robot with a wider gripper (relation.robot or robot_uids=)"),
     # the SO-100's payload: its drives' 100 N m over g times its 0.30 m reach, 34.0 kg
-    assert ROBOTS["so100"].payload == pytest.approx(100.0 / (9.81 * 0.30), rel=TOL)
-    path = edited_cube_layout(tmp_path, '<mass value="0.035"/>', '<mass value="40"/>')
+    "heavier than the arm holds": (
+        '<mass value="0.035"/>', '<mass value="40"/>',
+        "the manipulated object 'cube_30' weighs 40 kg; so100's arm holds up at most 34 kg at "
+        "its reach (its drives' force limit, embodied_envs/robots.py), so it cannot lift it. "
+        "Fix: a lighter object (its URDF's inertial/mass), or a stronger robot (relation.robot "
+        "or robot_uids=)"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("why", list(REFUSED))
+def test_an_object_the_arm_cannot_take_is_refused_at_make(tmp_path, why):
+    old, new, message = REFUSED[why]
+    path = edited_cube_layout(tmp_path, old, new)
     with pytest.raises(LayoutError) as e:
         gym.make("PickEmbodiedGen-v1", layout_file=str(path))
-    assert str(e.value) == (
-        f"{path}: the manipulated object 'cube_30' weighs 40 kg; so100's arm holds up at most "
-        "34 kg at its reach (its drives' force limit, embodied_envs/robots.py), so it cannot "
-        "lift it. Fix: a lighter object (its URDF's inertial/mass), or a stronger robot "
-        "(relation.robot or robot_uids=)"
-    )
+    assert str(e.value) == f"{path}: {message}"
+
+
+def test_the_payload_is_the_drives_limit_at_the_reach(tmp_path):
+    assert ROBOTS["so100"].payload == pytest.approx(100.0 / (9.81 * 0.30), rel=TOL)
     # 30 kg is within it: the env is made
     gym.make("PickEmbodiedGen-v1", layout_file=str(edited_cube_layout(
-        tmp_path / "light", '<mass value="0.035"/>', '<mass value="30"/>'))).close()  # fmt: skip
+        tmp_path, '<mass value="0.035"/>', '<mass value="30"/>'))).close()  # fmt: skip
 
 
 @pytest.mark.parametrize(("layout", "seed"), [("so100_marker", 1), ("koch_marker", 1)])
