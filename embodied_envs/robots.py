@@ -33,6 +33,9 @@ import math
 from dataclasses import dataclass
 
 DOWNLOAD_COMMAND = "python -m mani_skill.utils.download_asset {uid}"
+GRAVITY = 9.81  # m/s^2
+MANISKILL_FORCE_LIMIT = 100.0  # N m: ManiSkill 3.0.1's arm drives (panda.py arm_force_limit,
+# so_100.py and koch.py force_limit)
 
 
 @dataclass(frozen=True)
@@ -118,6 +121,10 @@ class Hand:
     # (an arm of fewer than six joints, solvers/motion.py)
     planar: bool = False  # the hand approaches only within the arm's vertical plane (five
     # joints: base turn, three pitches, wrist roll): its grasps are aimed so
+    fixed_jaw: float = 0.0  # m: a hand with one jaw that stands still (the SO-100's): its inner
+    # face's y in the grasp frame (signed), from the robot's collision hulls
+    # (tools/make/measure_jaws.py); the expert takes an object against it, the other jaw open
+    # (solvers/grasp_choice.py); 0: the jaws close together about the origin
     tilt_reach: tuple[tuple[float, float, float], ...] = ()  # a planar hand's reachable
     # orientations: (m from the base, lowest, highest deg) the approach tilts from straight
     # down toward the far side at which its IK reaches a grasp 1.5 cm above the table, straight
@@ -182,6 +189,18 @@ class Robot:
     in_wheel: bool = True  # False: its model is a separate ManiSkill download
     hand: Hand | None = None  # what the scripted expert (solvers/) needs; None: it does not
     # drive this robot
+    arm_force_limit: float | None = None  # N m, the most its arm joints' drives exert
+    # (ManiSkill 3.0.1's controller configs: force_limit=100 for the Panda, SO-100 and Koch; their
+    # URDFs give none: so100.urdf's effort="0", the Koch's no effort); None: not read, unchecked
+
+    @property
+    def payload(self) -> float | None:
+        """The heaviest object (kg) its arm holds up at the far end of its reach: the drives'
+        force limit over the weight's lever there (its own links' weight is balanced by the
+        simulator's passive forces); None where ``arm_force_limit`` is not known."""
+        if self.arm_force_limit is None:
+            return None
+        return self.arm_force_limit / (GRAVITY * self.reach[1])
 
     @property
     def expert(self) -> bool:
@@ -235,18 +254,18 @@ PANDA_HAND = Hand(
 )  # fmt: skip
 # the SO-100's hand (its jaw's sections measured in ManiSkill 3.0.1's collision meshes, jaw at
 # 0 rad): the grasp frame's origin midway between the jaws' tip links, z along -y of Fixed_Jaw,
-# y along its x. The fixed jaw's inner face stands 0.040 m from the origin over z -0.045..0.015;
-# the moving jaw is slanted (its inner face 0.037 m from the origin at z -0.01, 0.029 at -0.02,
-# 0.018 at -0.03) and its tip ends at z -0.003, so the jaws are modelled 0.06 m apart down to
-# z -0.025, the palm behind that (0.02 m across: the jaws' roots; the jaw's motor, 0.048 m
-# across, is 0.045 m back): objects are taken 0.02 m below their top (the moving jaw's tip
-# then overlaps their side by 0.017 m; at 0.012 it rode on a block's edge), from 0.04 m back.
-# Its pd_joint_pos drives the jaw's angle: 0 open, -1.1 shut, with the arm's gains (stiffness
-# 1e3, 100 N m), so it closes gently
+# y along its x. The still jaw's inner face stands 0.0385 m from the origin (fixed_jaw), its tip
+# 0.019 m past it; the moving jaw's face swings in from -0.025 m, its tip from 0.003 m behind the
+# origin to 0.019 m past it at -0.7 rad (tools/make/measure_jaws.py). Modelled: the jaws 0.06 m
+# apart, their tips 0.019 m past the origin (at 0.012 the real tips met the table under a short
+# object), the palm behind them (0.02 m across: the jaws' roots; the jaw's motor, 0.048 m
+# across, is 0.045 m back): objects are taken 0.02 m below their top, from 0.04 m back, against
+# the still jaw (grasp_choice.py). Its pd_joint_pos drives the jaw's angle: 0 open, -1.1 shut,
+# with the arm's gains (stiffness 1e3, 100 N m), so it closes gently
 SO100_HAND = Hand(
     link="Fixed_Jaw", grasp_in_link=(-0.0306, -0.0873, 0.0, 0.5, 0.5, 0.5, -0.5),
     boxes=(("opening", 0.06), ("finger_width", 0.02), ("finger_thickness", 0.015),
-           ("finger_tip", 0.012), ("finger_length", 0.037), ("palm_size", (0.02, 0.132)),
+           ("finger_tip", 0.019), ("finger_length", 0.044), ("palm_size", (0.02, 0.132)),
            ("palm_z", (-0.12, -0.025))),
     grasp_depth=0.02, approach_offset=0.04, joint_vel=(1.5,) * 5, joint_acc=(8.0,) * 5,
     action_open=0.0, action_closed=-1.1, tilt_tolerance=0.1, planar=True,
@@ -254,6 +273,7 @@ SO100_HAND = Hand(
                      (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
     close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300, convertible=False,
+    fixed_jaw=0.0385,
     tilt_reach=((0.14, 0.0, 0.0), (0.18, 0.0, 15.0), (0.22, 0.0, 15.0), (0.26, 0.0, 30.0),
                 (0.30, 0.0, 30.0), (0.34, 15.0, 45.0)),
 )  # fmt: skip
@@ -290,7 +310,7 @@ PANDA = Robot(
     noise_joints=tuple(range(7)), reach=(0.30, 0.78), goal_inset=0.10, goal_height=(0.05, 0.25),
     gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
     camera_mount="panda_link0", camera_eye=(0.95, 0.0, 0.55), camera_target=(0.30, 0.0, 0.0),
-    hand=PANDA_HAND,
+    hand=PANDA_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT,
 )  # fmt: skip
 ROBOTS: dict[str, Robot] = {
     r.uid: r
@@ -302,6 +322,7 @@ ROBOTS: dict[str, Robot] = {
             gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
             camera_mount="panda_link0", camera_eye=PANDA.camera_eye,
             camera_target=PANDA.camera_target, hand=PANDA_HAND,
+            arm_force_limit=MANISKILL_FORCE_LIMIT,
         ),
         # ManiSkill's table scene: base at the table's edge turned +90 deg, these joints;
         # its so100 motion planner opens the jaw at 0 rad (0.084 m between the tips) and
@@ -317,7 +338,7 @@ ROBOTS: dict[str, Robot] = {
             tcp_link=None, grasp_check=JAW_GRASP, camera_mount="Base",
             camera_eye=(0.55, 0.0, 0.40), camera_target=(0.18, 0.0, 0.0), base_yaw=math.pi / 2,
             tcp_tips=("Fixed_Jaw_tip", "Moving_Jaw_tip"),
-            hand=SO100_HAND,
+            hand=SO100_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT,
         ),
         # Koch v1.1: turned +90 deg as ManiSkill's keyframes; its hand pointing down, the jaws'
         # tips 0.10 m above the table 0.12 m out (ManiSkill's rest keyframe, folded, holds
@@ -333,7 +354,7 @@ ROBOTS: dict[str, Robot] = {
                             action_index=5, action_kind="delta"),
             tcp_link="gripper_tcp", grasp_check=JAW_GRASP, camera_mount="base_link",
             camera_eye=(0.50, 0.0, 0.38), camera_target=(0.16, 0.0, 0.0), base_yaw=math.pi / 2,
-            hand=KOCH_HAND,
+            hand=KOCH_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT,
         ),
         # Fetch: ManiSkill's table-scene joints (torso up), fingers open (0.05 m each); on the
         # floor 0.345 m behind the spot (ManiSkill: 0.325 m behind the table's edge; the spot

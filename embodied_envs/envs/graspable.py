@@ -4,7 +4,9 @@ A parallel gripper takes an object only across some width that fits between its 
 convex body's narrowest width is the least, over its hull's face normals, of its extent along
 the normal. A manipulated object whose convex hull is wider than the robot's gripper opens
 (``robots.Gripper.max_opening``) everywhere cannot be grasped by that robot; the env says so
-before anything is simulated, naming the layout, the object and both widths.
+before anything is simulated, naming the layout, the object and both widths. Likewise an object
+heavier than the robot's arm holds up at the end of its reach (``robots.Robot.payload``: its
+drives' force limit), naming the object's mass and the limit.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from embodied_envs.layout import LayoutError
-from embodied_envs.layout.assets import asset_geometry
+from embodied_envs.layout.assets import DEFAULT_DENSITY, AssetSpec, asset_geometry
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.robots import Robot
 
@@ -30,17 +32,33 @@ def narrowest_width(vertices: np.ndarray) -> float:
     return float((along.max(0) - along.min(0)).min())
 
 
+def asset_mass(spec: AssetSpec) -> float:
+    """The object's mass (kg) as the scene builds it: the URDF's, else 1000 kg/m^3 over its
+    collision volume (``scene/builder.py``)."""
+    return spec.mass if spec.mass is not None else DEFAULT_DENSITY * asset_geometry(spec).volume
+
+
 def check_graspable(layout_set: LayoutSet, robot: Robot) -> None:
     """Every manipulated object of every layout (and pool member) fits ``robot``'s open jaws
-    somewhere.
+    somewhere and weighs at most what its arm holds up (``Robot.payload``).
 
     Raises:
-        LayoutError: naming the layout file, the object, its narrowest width and the opening.
+        LayoutError: naming the layout file, the object, its narrowest width and the opening,
+            or its mass and the payload.
     """
-    opening = robot.gripper.max_opening
+    opening, payload = robot.gripper.max_opening, robot.payload
     for layout in layout_set.members():
         for node in layout.manipulated_objs:
-            width = narrowest_width(asset_geometry(layout.asset_spec(node)).vertices)
+            spec = layout.asset_spec(node)
+            if payload is not None and (mass := asset_mass(spec)) > payload:
+                raise LayoutError(
+                    f"{layout.source}: the manipulated object {node!r} weighs {mass:.3g} kg; "
+                    f"{robot.uid}'s arm holds up at most {payload:.3g} kg at its reach (its "
+                    "drives' force limit, embodied_envs/robots.py), so it cannot lift it. Fix: "
+                    "a lighter object (its URDF's inertial/mass), or a stronger robot "
+                    "(relation.robot or robot_uids=)"
+                )
+            width = narrowest_width(asset_geometry(spec).vertices)
             if width > opening:
                 raise LayoutError(
                     f"{layout.source}: the manipulated object {node!r} is {width * 100:.1f} cm "

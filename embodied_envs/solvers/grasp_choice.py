@@ -155,7 +155,8 @@ class GraspChoice:
                              + synthesised)  # fmt: skip
                 continue
             if planar:
-                poses.append(self._planar(checked, closing, support, gripper))
+                poses.append(self._against_fixed_jaw(
+                    self._planar(checked, closing, support, gripper), verts))  # fmt: skip
                 continue
             down = np.array([0, 0, -1.0])
             footprint = [
@@ -220,6 +221,28 @@ class GraspChoice:
             self.grasp_config, gripper, self.cfg.grasp_candidates,
         )  # fmt: skip
         return poses + [(grasp_pose(a, c, p), o) for p, c, a, o in planar]
+
+    def _against_fixed_jaw(self, poses: list, verts: np.ndarray) -> list:
+        """``poses`` of a hand with a jaw that stands still (``robots.Hand.fixed_jaw``) moved
+        along their closing line so that the object (``verts``, world) lies the arm's precision
+        (``GraspConfig.margin``) from that jaw's inner face, the other jaw at its widest
+        (``Hand.action_openings``' last): it then presses the object that far onto the still
+        jaw, not across the gap between the open jaws (the SO-100's still jaw stands 3.85 cm
+        from the grasp origin: a 2 cm marker centred there lay 2.9 cm from it, and was pushed
+        1.4-2 cm and missed). The checks the grasp passed were the hand model's, about the
+        unmoved centre. Unchanged without one."""
+        face = self.robot_hand.fixed_jaw
+        if not face:
+            return poses
+        way = np.sign(face)
+        wide_open = self.robot_hand.action_openings[-1][0]  # the widest gap the jaw holds
+        out = []
+        for pose, _ in poses:
+            m = pose.to_transformation_matrix()
+            c = way * m[:3, 1]  # toward the still jaw
+            shift = (verts @ c).max() - m[:3, 3] @ c + self.grasp_config.margin - abs(face)
+            out.append((sapien.Pose(m[:3, 3] + shift * c, pose.q), wide_open))
+        return out
 
     def _footprint_fits(
         self, i, grasps, pose, centre, closing, support, down: np.ndarray | None = None,

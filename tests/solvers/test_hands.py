@@ -121,9 +121,10 @@ def test_so100_expert_grasps_the_block_and_carries_it_to_the_goal(so100):
     """Seed 0 of the SO-100's layout: the jaws close gently on the block (no fling: it stays
     within 1.5 cm of where it lay), and the expert holds it at the goal within 200 steps (353
     at the convertible 0.4 rad/s), and succeeds. Success also needs the arm static: ManiSkill
-    3.0.1's SO-100 reports its wrist roll's velocity at 0.1-0.6 rad/s while its jaws squeeze an
-    object and no arm joint moves 0.05 rad/s in any physics step, so the rule measures the
-    joints' displacement over the control step (``TaskReader._arm_speed``; docs/robots.md)."""
+    3.0.1's SO-100 reported its wrist roll's velocity at 0.1-0.6 rad/s while its jaws squeezed a
+    block centred between them (0.05 since the block is taken against the still jaw) and no arm
+    joint moves 0.05 rad/s in any physics step, so the rule measures the joints' displacement
+    over the control step (``TaskReader._arm_speed``; docs/robots.md)."""
     so100.reset(seed=0)
     u = so100.unwrapped
     start = u.task_scene.movers[0].pose.p[0].numpy().copy()
@@ -156,8 +157,7 @@ def test_so100_expert_grasps_the_block_and_carries_it_to_the_goal(so100):
     finally:
         del u.scene.step
     moved = np.abs(np.diff(np.stack(qpos), axis=0)).max() / u.sim_timestep
-    reported = np.abs(robot.get_qvel()[0, :5].numpy()).max()
-    assert moved < 0.05 and reported > max(0.1, 10 * moved)  # 0.16-0.24 rad/s seen
+    assert moved < 0.05
     # the rule measures the joints' displacement over the control step: static, so success
     info = u.evaluate()
     assert bool(info["is_robot_static"][0]) and bool(info["success"][0])

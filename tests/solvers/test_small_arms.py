@@ -1,9 +1,11 @@
 """The small arms (issue 50): grasps a five-joint arm can make (its approach in its vertical
 plane, tilted within what it reaches, the fingers off the table), an object wider than the
-jaws refused at gym.make in one line, and the expert on the small-arm zoo."""
+jaws or heavier than the arm holds refused at gym.make in one line, and the expert on the
+small-arm zoo."""
 
 import json
 import shutil
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
@@ -14,6 +16,7 @@ import embodied_envs  # noqa: F401
 from embodied_envs.layout import LayoutError, LayoutPose, parse_urdf
 from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers import PickPlaceSolver
+from embodied_envs.solvers.grasp_choice import GraspChoice, grasp_pose
 from embodied_envs.solvers.grasps import GraspConfig, asset_grasps
 from embodied_envs.solvers.gripper import GripperModel, box_corners, tcp_axes
 from embodied_envs.solvers.planar import planar_grasps, table_gap
@@ -49,24 +52,52 @@ def test_planar_grasps_lie_in_the_arms_plane_and_clear_the_table(uid):
             assert low[..., 2].min() >= support + table_gap(cfg) - TOL
 
 
-def test_an_object_wider_than_the_jaws_is_refused_at_make(tmp_path):
+def edited_cube_layout(tmp_path, old: str, new: str):
+    """The SO-100's 3 cm cube layout with its cube's URDF text ``old`` replaced by ``new``."""
     assets = tmp_path / "assets"
     shutil.copytree(SMALL_ZOO / "assets" / "cube_30", assets / "cube_30")
     urdf = assets / "cube_30" / "cube_30.urdf"
-    urdf.write_text(urdf.read_text().replace('scale="1.0 1.0 1.0"', 'scale="3.0 3.0 3.0"'))
+    assert old in urdf.read_text()
+    urdf.write_text(urdf.read_text().replace(old, new))
     layout = json.loads((SMALL_ZOO / "layouts" / "so100_cube_30.json").read_text())
     layout["assets"]["cube_30"] = str(assets / "cube_30")
     for node in ("background", "round_table"):
         layout["assets"][node] = str(ROOT / "embodied_envs" / "data" / "assets" / node)
-    path = tmp_path / "big_cube.json"
+    path = tmp_path / "edited_cube.json"
     path.write_text(json.dumps(layout))
+    return path
+
+
+REFUSED = {  # what the cube's URDF is given -> the refusal's text after the file's name
+    "wider than the jaws": (
+        'scale="1.0 1.0 1.0"', 'scale="3.0 3.0 3.0"',
+        "the manipulated object 'cube_30' is 9.0 cm across at its narrowest; so100's jaws open "
+        "8.4 cm (embodied_envs/robots.py), so it cannot grasp it. Fix: a smaller object, or a "
+        "robot with a wider gripper (relation.robot or robot_uids=)"),
+    # the SO-100's payload: its drives' 100 N m over g times its 0.30 m reach, 34.0 kg
+    "heavier than the arm holds": (
+        '<mass value="0.035"/>', '<mass value="40"/>',
+        "the manipulated object 'cube_30' weighs 40 kg; so100's arm holds up at most 34 kg at "
+        "its reach (its drives' force limit, embodied_envs/robots.py), so it cannot lift it. "
+        "Fix: a lighter object (its URDF's inertial/mass), or a stronger robot (relation.robot "
+        "or robot_uids=)"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("why", list(REFUSED))
+def test_an_object_the_arm_cannot_take_is_refused_at_make(tmp_path, why):
+    old, new, message = REFUSED[why]
+    path = edited_cube_layout(tmp_path, old, new)
     with pytest.raises(LayoutError) as e:
         gym.make("PickEmbodiedGen-v1", layout_file=str(path))
-    assert str(e.value) == (
-        f"{path}: the manipulated object 'cube_30' is 9.0 cm across at its narrowest; so100's "
-        "jaws open 8.4 cm (embodied_envs/robots.py), so it cannot grasp it. Fix: a smaller "
-        "object, or a robot with a wider gripper (relation.robot or robot_uids=)"
-    )
+    assert str(e.value) == f"{path}: {message}"
+
+
+def test_the_payload_is_the_drives_limit_at_the_reach(tmp_path):
+    assert ROBOTS["so100"].payload == pytest.approx(100.0 / (9.81 * 0.30), rel=TOL)
+    # 30 kg is within it: the env is made
+    gym.make("PickEmbodiedGen-v1", layout_file=str(edited_cube_layout(
+        tmp_path, '<mass value="0.035"/>', '<mass value="30"/>'))).close()  # fmt: skip
 
 
 @pytest.mark.parametrize(("layout", "seed"), [("so100_marker", 1), ("koch_marker", 1)])
@@ -79,3 +110,23 @@ def test_the_expert_picks_a_lying_marker_on_each_small_arm(layout, seed):
     assert result.reports[0].plan_failures == []
     assert bool(env.unwrapped.evaluate()["success"][0])
     env.close()
+
+
+@pytest.mark.parametrize("uid", ["so100", "koch-v1.1", "panda"])
+def test_a_hand_with_a_still_jaw_takes_the_object_against_it(uid):
+    hand, cfg = ROBOTS[uid].hand, GraspConfig()
+    solver = SimpleNamespace(robot_hand=hand, grasp_config=cfg)
+    cube = np.array([[x, y, z] for x in (-0.01, 0.01) for y in (-0.01, 0.01)
+                     for z in (0.74, 0.76)])  # fmt: skip
+    for closing in ([0.0, 1.0, 0.0], [1.0, 0.0, 0.0]):
+        pose = grasp_pose(np.array([0.0, 0.0, -1.0]), np.array(closing), np.array([0, 0, 0.75]))
+        [(moved, opening)] = GraspChoice._against_fixed_jaw(solver, [(pose, 0.05)], cube)
+        if not hand.fixed_jaw:  # jaws that close together: the grasp as it was
+            assert moved is pose and opening == 0.05
+            continue
+        y = moved.to_transformation_matrix()[:3, 1]
+        face = moved.p @ y + hand.fixed_jaw  # the still jaw's inner face along the closing
+        near = (cube @ y).max() if hand.fixed_jaw > 0 else (cube @ y).min()
+        assert abs(face - near) == pytest.approx(cfg.margin, abs=TOL)
+        assert np.allclose(moved.q, pose.q, atol=TOL) and moved.p[2] == pytest.approx(0.75)
+        assert opening == hand.action_openings[-1][0]  # the moving jaw its widest

@@ -10,7 +10,11 @@ pen) and standing (a small can, a battery), cubes of 1.5, 2.2 and 3 cm, a flat e
 a 2 cm cube into a bowl and a 2.4 cm cube onto a tray. Assets as ``make_grasp_zoo.py`` writes
 them (one OBJ object per convex part, Y-up turned Z-up by the URDF).
 
-Usage: python tools/make/make_small_zoo.py [--out tests/data/small_zoo]
+``--hidden`` writes the held-out set instead (``tests/data/small_zoo_hidden``): other sizes, none
+of them tuned on (the issue's 2.2 cm marker, 2.5 cm cube and 3 cm can, a flat domino, the 2.5 cm
+cube into a wider bowl), for a check apart from the zoo's.
+
+Usage: python tools/make/make_small_zoo.py [--out tests/data/small_zoo] [--hidden]
 then:  embodied-envs collect --num 6 --layout tests/data/small_zoo/layouts/so100_*.json
 """
 
@@ -83,6 +87,16 @@ def objects() -> dict[str, tuple[list[trimesh.Trimesh], float, str]]:
     }
 
 
+def hidden_objects() -> dict[str, tuple[list[trimesh.Trimesh], float, str]]:
+    """The held-out set's picks (``--hidden``): name -> (convex parts, mass kg, description)."""
+    return {
+        "marker_22": ([cylinder(0.011, 0.13, (0, 0, 0.011), axis="x")], 0.018, "a marker"),
+        "cube_25": (cube(0.025), 0.025, "a cube"),
+        "can_30": ([cylinder(0.015, 0.06, (0, 0, 0.03))], 0.05, "a can"),
+        "domino": ([box((0.048, 0.024, 0.008), (0, 0, 0.004))], 0.01, "a domino"),
+    }
+
+
 RECEPTACLES = {  # name -> (convex parts, mass kg, description)
     "small_bowl": (bowl(0.045, 0.03, 0.005), 0.12, "the bowl"),
     "small_tray": (tray((0.13, 0.10), 0.012, 0.005), 0.15, "the tray"),
@@ -96,6 +110,8 @@ PLACE_MOVERS = {
     "cube_20": (cube(0.02), 0.016, "a cube"),
     "cube_24": (cube(0.024), 0.025, "a cube"),
 }
+HIDDEN_RECEPTACLES = {"bowl_11": (bowl(0.055, 0.035, 0.005), 0.15, "the bowl")}
+HIDDEN_PLACES = (("cube_into_bowl", "cube_25", "bowl_11", "Put the cube into the bowl."),)
 
 
 def layout(robot: str, movers: dict[str, str], receptacle: str | None, task: str,
@@ -121,7 +137,7 @@ def layout(robot: str, movers: dict[str, str], receptacle: str | None, task: str
     desc = {"background": ROUND["objs_desc"]["background"],
             "round_table": ROUND["objs_desc"]["round_table"], **movers}
     if receptacle:
-        desc[receptacle] = RECEPTACLES[receptacle][2]
+        desc[receptacle] = {**RECEPTACLES, **HIDDEN_RECEPTACLES}[receptacle][2]
     return {
         "tree": {
             "background": [["round_table", "FLOOR"], [robot, "IN"]],
@@ -152,25 +168,32 @@ def layout(robot: str, movers: dict[str, str], receptacle: str | None, task: str
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--out", type=Path, default=SMALL_ZOO)
-    out = ap.parse_args(argv).out
+    ap.add_argument("--out", type=Path, default=None, help="default: tests/data/small_zoo "
+                    "(with --hidden: tests/data/small_zoo_hidden)")  # fmt: skip
+    ap.add_argument("--hidden", action="store_true", help="the held-out set")
+    args = ap.parse_args(argv)
+    out = args.out or SMALL_ZOO.with_name("small_zoo_hidden" if args.hidden else "small_zoo")
+    if args.hidden:  # the held-out set's place mover is one of its picks
+        picks, places, movers = hidden_objects(), HIDDEN_PLACES, HIDDEN_RECEPTACLES
+    else:
+        picks, places, movers = objects(), PLACES, {**PLACE_MOVERS, **RECEPTACLES}
+    movers = {**picks, **movers}
     assets, layouts = out / "assets", out / "layouts"
     for folder in (assets, layouts):
         if folder.exists():
             shutil.rmtree(folder)
         folder.mkdir(parents=True)
-    for name, (parts, mass, _) in {**objects(), **PLACE_MOVERS, **RECEPTACLES}.items():
+    for name, (parts, mass, _) in movers.items():
         write_asset(assets / name, name, parts, mass)
     files = 0
     for arm, robot in ARMS.items():
-        for name, (_, _, desc) in objects().items():
+        for name, (_, _, desc) in picks.items():
             data = layout(robot, {name: desc}, None,
                           f"Pick up {desc} and hold it at the green goal.", assets, layouts)
             (layouts / f"{arm}_{name}.json").write_text(json.dumps(data, indent=4) + "\n")
             files += 1
-        for stem, mover, receptacle, task in PLACES:
-            data = layout(robot, {mover: PLACE_MOVERS[mover][2]}, receptacle, task, assets,
-                          layouts)
+        for stem, mover, receptacle, task in places:
+            data = layout(robot, {mover: movers[mover][2]}, receptacle, task, assets, layouts)
             (layouts / f"{arm}_{stem}.json").write_text(json.dumps(data, indent=4) + "\n")
             files += 1
     print(f"wrote {files} layouts to {layouts} and their assets to {assets}")
