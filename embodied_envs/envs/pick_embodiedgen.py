@@ -58,14 +58,11 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     the table's top, or its origin outside the top's footprint (docs/layouts.md, "The floor").
 
     **Observation Space:** ManiSkill's agent state plus ``extra``: ``is_grasped``, ``tcp_pose``,
-    ``goal_pos`` (the pick goal, or the first mover's destination), ``task_kind`` (one-hot:
-    pick, place, move); state modes add every mover's and the receptacle's state in fixed
-    slots, one shape over any layout set (``envs/observation.py`` ``STATE_KEYS``:
-    ``mover_pose``, ``tcp_to_mover_pos``, ``mover_to_goal_pos``, ``mover_mask`` for
-    ``MAX_MOVERS`` slots, ``receptacle_pose``, ``receptacle_geometry``, ``receptacle_mask``;
-    docs/tasks.md, "Observations"); visual modes the 128x128 ``base_camera``. **Action
-    Space:** the robot controller's (default ``pd_joint_delta_pos``). **Rewards:**
-    :meth:`compute_dense_reward`; normalised to [0, 1].
+    ``goal_pos`` (the pick goal, or the first mover's destination), ``task_kind`` (one-hot);
+    state modes add every mover and the receptacle in fixed, masked slots, one shape over any
+    layout set (``envs/observation.py``; docs/tasks.md, "Observations"); visual modes the
+    128x128 ``base_camera``. **Action Space:** the robot controller's (default
+    ``pd_joint_delta_pos``). **Rewards:** :meth:`compute_dense_reward`; normalised to [0, 1].
 
     **Episode End:** ``terminated`` on ``success`` or ``fail``; truncated after
     ``MAX_EPISODE_STEPS`` (500) control steps, 10 s.
