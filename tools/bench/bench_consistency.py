@@ -7,10 +7,10 @@ about the vertical (a nearby start: the same layout, robot and goal). Per layout
 
 - detours: moves per episode that ran an RRT-Connect path (the rest: straight joint lines
   and screw moves), and RRT-Connect searches per episode;
-- grasp flips: pairs whose first grasp turned the hand about the vertical by more than 90
-  degrees, or tilted its approach by more than 30 (another grasp family), between the two starts;
+- grasp changes: pairs whose first grasp, in the object's frame, moved more than 1 cm or turned
+  more than 15 degrees (another grasp), of them flips: turned more than 90 degrees;
 - branch changes: pairs whose arm stood, at its first grasp, more than 0.5 rad (largest joint)
-  apart with no grasp flip (the IK took another branch);
+  apart with the same grasp (the IK took another branch);
 - spread: the joint-target trajectories' distance, RMS over the episode with both resampled to
   the same 101 instants (rad), median and 90th percentile over pairs, and how many exceed 0.2;
 - success and mean steps of both runs.
@@ -42,8 +42,9 @@ from embodied_envs.solvers.driver import ArmDriver  # noqa: E402
 from embodied_envs.solvers.motion import SeededPlanner  # noqa: E402
 from embodied_envs.solvers.pick_place import SolverConfig  # noqa: E402
 
-FLIP_YAW = 90.0  # deg: the hand turned more about the vertical is another grasp
-FLIP_TILT = 30.0  # deg: the approach tilted more is another grasp family
+MOVED = 0.01  # m: a grasp moved this far on the object is another grasp
+TURNED = 15.0  # deg: or turned this far
+FLIP = 90.0  # deg: a grasp turned this far is a flip
 BRANCH = 0.5  # rad: the arm's largest joint this far apart at the same grasp is another branch
 SPREAD = 0.2  # rad RMS: trajectories farther apart are counted
 SAMPLES = 101  # instants both trajectories are resampled to
@@ -92,9 +93,16 @@ def first_grasp(solver) -> dict:
         chosen = per_env(stage, *a, **k)
         if stage == "approach" and "pose" not in out and chosen[0] is not None:
             out["pose"], out["q"] = chosen[0], solver.command[0].copy()
+            out["on_object"] = out["object"].inv() * chosen[0]
         return chosen
 
-    solver._per_env = wrapped
+    def before(stage, *a, **k):
+        if stage == "approach" and "pose" not in out:
+            raw = solver.target.pose.raw_pose[0].cpu().numpy().astype(np.float64)
+            out["object"] = sapien.Pose(raw[:3], raw[3:])
+        return wrapped(stage, *a, **k)
+
+    solver._per_env = before
     return out
 
 
@@ -178,7 +186,7 @@ def main() -> None:
         moves = np.mean([sum(e["ran"].values()) for e in eps])
         with_detour = sum(e["ran"].get("rrt", 0) > 0 for e in eps)
         searches = np.mean([e["searches"] for e in eps])
-        flips = branches = 0
+        changes = flips = branches = 0
         spreads = []
         for seed, (a, b) in enumerate(runs, args.first):
             spreads.append(spread(a["actions"], b["actions"]))
@@ -192,12 +200,13 @@ def main() -> None:
                       f"{b['steps']}, success {a['success']} / {b['success']}")
             if "pose" not in a["grasp"] or "pose" not in b["grasp"]:
                 continue
-            (ya, ta), (yb, tb) = hand_angles(a["grasp"]["pose"]), hand_angles(b["grasp"]["pose"])
-            dyaw = abs((ya - yb + 180) % 360 - 180)
-            flip = dyaw > FLIP_YAW or abs(ta - tb) > FLIP_TILT
-            flips += flip
+            rel = a["grasp"]["on_object"].inv() * b["grasp"]["on_object"]
+            turned = np.degrees(2 * np.arccos(np.clip(abs(rel.q[0]), 0, 1)))
+            changed = np.linalg.norm(rel.p) > MOVED or turned > TURNED
+            changes += changed
+            flips += turned > FLIP
             far = np.abs(a["grasp"]["q"] - b["grasp"]["q"]).max() > BRANCH
-            branches += far and not flip
+            branches += far and not changed
         s = np.array(spreads)
         ok = sum(e["success"] for e in eps)
         steps = np.mean([e["steps"] for e in eps if e["success"]] or [0])
@@ -205,8 +214,9 @@ def main() -> None:
         print(
             f"{path.name:16s} pairs {args.seeds}: detours {detours:.2f}/episode of {moves:.1f} "
             f"moves ({with_detour}/{len(eps)} episodes), RRT searches {searches:.2f}/episode; "
-            f"grasp flips {flips}/{args.seeds}, branch changes {branches}/{args.seeds}; spread "
-            f"median {np.median(s):.3f} p90 {np.percentile(s, 90):.3f} rad, "
+            f"grasp changes {changes}/{args.seeds} (flips {flips}), branch changes "
+            f"{branches}/{args.seeds}; spread median {np.median(s):.3f} "
+            f"p90 {np.percentile(s, 90):.3f} rad, "
             f">{SPREAD}: {(s > SPREAD).sum()}/{args.seeds}; success {ok}/{len(eps)}, "
             f"mean {steps:.0f} steps, {wall:.1f} s/episode",
             flush=True,
