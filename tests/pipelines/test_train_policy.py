@@ -30,8 +30,8 @@ def trained(tmp_path_factory):
                         control_mode=MODE), root / "demos")  # fmt: skip
     demos = root / "demos" / DEFAULT_LAYOUT.stem / "trajectory.h5"
     out = root / "run"
-    train_policy.main(["--demos", str(demos), "--out", str(out), "--minutes", "0.05",
-                       "--chunk", str(CHUNK), "--decay", str(DECAY), "--hidden", "64", "64"])  # fmt: skip
+    args = ["--minutes", "0.05", "--chunk", str(CHUNK), "--decay", str(DECAY), "--hidden", "64"]
+    train_policy.main(["--demos", str(demos), "--out", str(out), *args])
     return demos, out
 
 

@@ -193,7 +193,7 @@ def train(args: argparse.Namespace) -> dict:
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
     observations, actions, env_info = load_episodes(args.demos, args.num_demos)
-    obs = np.concatenate([o[: len(a)] for o, a in zip(observations, actions)])
+    obs = np.concatenate([o[: len(a)] for o, a in zip(observations, actions, strict=True)])
     targets, valid = chunk_targets(actions, args.chunk)
     flat = np.concatenate(actions)
     obs_std = obs.std(0)
