@@ -62,8 +62,9 @@ def test_training_writes_a_policy_that_eval_runs(trained, tmp_path, capsys):
 def test_the_dropped_group_does_not_change_the_action(trained):
     demos, out = trained
     policy = torch.jit.load(str(out / "policy.pt"))
-    observations, _, env_info = train_policy.load_episodes(demos, -1)
-    qvel = train_policy.obs_groups(env_info, observations[0].shape[1])["agent/qvel"]
+    observations, _, _ = train_policy.load_episodes(demos, -1)
+    qvel = train_policy.agent_groups(demos)["qvel"]
+    assert qvel == slice(9, 18)  # the Panda's 9 joints: qpos, then qvel
     obs = torch.from_numpy(observations[0][5:6])
     moved = obs.clone()
     moved[:, qvel] += 1.0

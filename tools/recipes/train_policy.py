@@ -42,9 +42,12 @@ from torch import nn
 
 from embodied_envs.paths import atomic_output
 
-TORCH_THREADS = 2  # the 2-core machine the recipe is measured on; the evaluation runs beside it
+# one thread: on the shared 2-core machine (load 20) a training step took 3x longer with two
+# (7.8 against 2.5 steps/s, a 256x256 MLP), whose threads wait for each other
+TORCH_THREADS = 1
 MIN_STD = 1e-3  # a dimension varying less than this over the dataset is not rescaled
 LOG_EVERY_S = 30.0  # seconds between progress lines
+ARTICULATION_POSE_VEL = 13  # an articulation's recorded state: root pose (7), velocities (6), ...
 
 
 class ChunkPolicy(nn.Module):
@@ -141,50 +144,30 @@ def chunk_targets(actions: list[np.ndarray], chunk: int) -> tuple[np.ndarray, np
     return np.concatenate(targets), np.concatenate(valid)
 
 
-def obs_groups(env_info: dict, obs_dim: int) -> dict[str, slice]:
-    """The slice of the flat state observation each leaf of the env's ``state_dict``
-    observation fills (e.g. ``agent/qvel``), from the env the dataset names."""
-    import gymnasium as gym
-
-    import embodied_envs  # noqa: F401  (registers the env)
-
-    kwargs = dict(env_info.get("env_kwargs", {}), obs_mode="state_dict", render_mode=None)
-    env = gym.make(env_info["env_id"].split(":")[-1], **kwargs)
-    try:
-        obs, _ = env.reset(seed=0)
-    finally:
-        env.close()
-    groups, start = {}, 0
-
-    def walk(node, prefix):
-        nonlocal start
-        for key, value in node.items():
-            if isinstance(value, dict):
-                walk(value, f"{prefix}{key}/")
-            else:
-                size = int(np.prod(value.shape[1:]))
-                groups[f"{prefix}{key}"] = slice(start, start + size)
-                start += size
-
-    walk(obs, "")
-    if start != obs_dim:
-        sys.exit(f"the env's state observation has {start} values, the dataset's {obs_dim}")
-    return groups
+def agent_groups(path: Path) -> dict[str, slice]:
+    """The slices of the flat state observation that hold the robot's ``qpos`` and ``qvel``
+    (ManiSkill's agent state leads it), found by matching the recorded observation of the first
+    episode against a recorded articulation's joint state (ManiSkill's articulation state:
+    pose 7, velocities 6, then ``qpos`` and ``qvel``)."""
+    with h5py.File(path, "r") as f:
+        traj = f[next(iter(f.keys()))]
+        obs = np.asarray(traj["obs"])
+        for node in traj["env_states"]["articulations"].values():
+            state = np.asarray(node)
+            dof = (state.shape[1] - ARTICULATION_POSE_VEL) // 2
+            joints = state[:, ARTICULATION_POSE_VEL:]
+            if 2 * dof <= obs.shape[1] and np.array_equal(obs[:, : 2 * dof], joints):
+                return {"qpos": slice(0, dof), "qvel": slice(dof, 2 * dof)}
+    sys.exit(f"{path}: no recorded articulation's qpos and qvel lead the observation")
 
 
-def keep_mask(drop: list[str], env_info: dict, obs_dim: int) -> np.ndarray:
-    """1 per observation value the policy sees, 0 for those of the groups in ``drop`` (a group
-    is named by its last key, e.g. ``qvel``, or its path, e.g. ``agent/qvel``)."""
+def keep_mask(drop: list[str], path: Path, obs_dim: int) -> np.ndarray:
+    """1 per observation value the policy sees, 0 for those of the groups in ``drop``."""
     keep = np.ones(obs_dim, np.float32)
-    if not drop:
-        return keep
-    groups = obs_groups(env_info, obs_dim)
-    for name in drop:
-        hits = [k for k in groups if k == name or k.endswith("/" + name)]
-        if not hits:
-            sys.exit(f"--drop {name}: no such observation group; the groups: {', '.join(groups)}")
-        for key in hits:
-            keep[groups[key]] = 0.0
+    if drop:
+        groups = agent_groups(path)
+        for name in drop:
+            keep[groups[name]] = 0.0
     return keep
 
 
@@ -200,7 +183,7 @@ def train(args: argparse.Namespace) -> dict:
     act_std = flat.std(0)
     policy = ChunkPolicy(
         obs.mean(0), np.where(obs_std < MIN_STD, 1.0, obs_std),
-        keep_mask(args.drop, env_info, obs.shape[1]), flat.mean(0),
+        keep_mask(args.drop, args.demos, obs.shape[1]), flat.mean(0),
         np.where(act_std < MIN_STD, 1.0, act_std), flat.min(0), flat.max(0),
         args.chunk, args.hidden, args.decay,
     )  # fmt: skip
@@ -271,13 +254,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--chunk", type=int, default=16, help="actions predicted per step")
     ap.add_argument("--decay", type=float, default=0.1,
                     help="temporal ensembling: a prediction j steps ahead weighs exp(-decay*j)")
-    ap.add_argument("--hidden", type=int, nargs="+", default=[512, 512, 512],
+    ap.add_argument("--hidden", type=int, nargs="+", default=[256, 256],
                     help="the MLP's hidden widths")
-    ap.add_argument("--drop", nargs="*", default=["qvel"],
-                    help="observation groups the policy does not see (default qvel)")
+    ap.add_argument("--drop", nargs="*", default=["qvel"], choices=["qpos", "qvel"],
+                    help="the robot's joint state groups the policy does not see (default qvel)")
     ap.add_argument("--obs-noise", type=float, default=0.1,
                     help="training noise on the normalised observation (standard deviations)")
-    ap.add_argument("--batch-size", type=int, default=512)
+    ap.add_argument("--batch-size", type=int, default=256)
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--weight-decay", type=float, default=1e-4)
     ap.add_argument("--seed", type=int, default=0)
