@@ -35,13 +35,16 @@ def trained(tmp_path_factory):
     return demos, out
 
 
-def test_chunk_targets_pad_past_the_episode_end_and_mask_it():
+def test_chunk_targets_past_the_episode_end_are_masked_or_held():
     acts = np.arange(6, dtype=np.float32).reshape(3, 2)  # 3 steps, 2 action values
-    targets, valid = train_policy.chunk_targets([acts], 2)
+    targets, valid = train_policy.chunk_targets([acts], 2, hold=False)
     assert targets.shape == (3, 2, 2) and valid.shape == (3, 2)
     np.testing.assert_array_equal(targets[0], acts[0:2])
-    np.testing.assert_array_equal(targets[2], [acts[2], [0, 0]])
+    np.testing.assert_array_equal(targets[2], [acts[2], acts[2]])
     np.testing.assert_array_equal(valid, [[True, True], [True, True], [True, False]])
+    held, valid = train_policy.chunk_targets([acts], 2, hold=True)
+    np.testing.assert_array_equal(held, targets)
+    assert valid.all()
 
 
 def test_training_writes_a_policy_that_eval_runs(trained, tmp_path, capsys):

@@ -131,16 +131,18 @@ def load_episodes(path: Path, num_demos: int) -> tuple[list, list, dict]:
     return observations, actions, meta["env_info"]
 
 
-def chunk_targets(actions: list[np.ndarray], chunk: int) -> tuple[np.ndarray, np.ndarray]:
+def chunk_targets(
+    actions: list[np.ndarray], chunk: int, hold: bool
+) -> tuple[np.ndarray, np.ndarray]:
     """Per step of every episode, its next ``chunk`` actions ``(N, chunk, A)`` and which of them
-    lie inside the episode ``(N, chunk)`` (the rest are zeros, left out of the loss)."""
+    count in the loss ``(N, chunk)``. Past the episode's end: the last action repeated, counted
+    with ``hold`` (the arm is still at a success: the policy learns to stay), else left out."""
     targets, valid = [], []
     for acts in actions:
         steps = len(acts)
-        padded = np.concatenate([acts, np.zeros((chunk, acts.shape[1]), np.float32)])
         index = np.arange(steps)[:, None] + np.arange(chunk)[None, :]
-        targets.append(padded[index])
-        valid.append(index < steps)
+        targets.append(acts[np.minimum(index, steps - 1)])
+        valid.append(np.ones_like(index, bool) if hold else index < steps)
     return np.concatenate(targets), np.concatenate(valid)
 
 
@@ -177,7 +179,7 @@ def train(args: argparse.Namespace) -> dict:
     rng = np.random.default_rng(args.seed)
     observations, actions, env_info = load_episodes(args.demos, args.num_demos)
     obs = np.concatenate([o[: len(a)] for o, a in zip(observations, actions, strict=True)])
-    targets, valid = chunk_targets(actions, args.chunk)
+    targets, valid = chunk_targets(actions, args.chunk, args.hold)
     flat = np.concatenate(actions)
     obs_std = obs.std(0)
     act_std = flat.std(0)
@@ -228,6 +230,7 @@ def train(args: argparse.Namespace) -> dict:
         "decay": args.decay,
         "hidden": args.hidden,
         "drop": args.drop,
+        "hold": args.hold,
         "obs_noise": args.obs_noise,
         "batch_size": args.batch_size,
         "lr": args.lr,
@@ -258,6 +261,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="the MLP's hidden widths")
     ap.add_argument("--drop", nargs="*", default=["qvel"], choices=["qpos", "qvel"],
                     help="the robot's joint state groups the policy does not see (default qvel)")
+    ap.add_argument("--hold", action="store_true",
+                    help="train the chunk's steps past an episode's end as its last action")
     ap.add_argument("--obs-noise", type=float, default=0.1,
                     help="training noise on the normalised observation (standard deviations)")
     ap.add_argument("--batch-size", type=int, default=256)
