@@ -76,6 +76,12 @@ def add_parser(sub) -> None:
         "demos that convert to pd_ee_delta_pos, which cannot turn the hand",
     )
     p.add_argument(
+        "--diverse",
+        action="store_true",
+        help="the former expert: grasp and arm branch chosen afresh per start, so nearby starts "
+        "may give distant paths (default: consistent demos, docs/expert.md)",
+    )
+    p.add_argument(
         "--control-mode",
         choices=EXPERT_MODES,
         default="pd_joint_pos",
@@ -134,6 +140,7 @@ def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
         workers=workers,
         video=args.video,
         fixed_hand=args.fixed_hand,
+        diverse=args.diverse,
         control_mode=args.control_mode,
         env_kwargs=config,
         ray=args.ray,

@@ -21,6 +21,7 @@ from embodied_envs.envs import agents, fast_control, fast_reads, keywords, physx
 from embodied_envs.envs.arguments import check_quaternion
 from embodied_envs.envs.base import CheckedEnv
 from embodied_envs.envs.graspable import check_graspable
+from embodied_envs.envs.observation import StateObservation, check_movers
 from embodied_envs.envs.rendering import HybridRendering, render_camera, robot_camera
 from embodied_envs.envs.tasks import INFO_KEYS, KIND_IDS, RULES, pick
 from embodied_envs.envs.tasks.scene import TaskReader, TaskScene, as_tensor
@@ -56,10 +57,11 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     Conditions:** a mover, or a receptacle object, off the table: more than ``fail_drop`` below
     the table's top, or its origin outside the top's footprint (docs/layouts.md, "The floor").
 
-    **Observation Space:** ManiSkill's agent state plus ``extra``: ``tcp_pose``, ``goal_pos``
-    (the pick goal, or the first mover's destination), ``is_grasped``, ``task_kind`` (one-hot:
-    pick, place, move); state modes add ``obj_pose``, ``tcp_to_obj_pos``, ``obj_to_goal_pos``;
-    visual modes the 128x128 ``base_camera``. **Action Space:** the robot controller's (default
+    **Observation Space:** ManiSkill's agent state plus ``extra``: ``is_grasped``, ``tcp_pose``,
+    ``goal_pos`` (the pick goal, or the first mover's destination), ``task_kind`` (one-hot);
+    state modes add every mover and the receptacle in fixed, masked slots, one shape over any
+    layout set (``envs/observation.py``; docs/tasks.md, "Observations"); visual modes the
+    128x128 ``base_camera``. **Action Space:** the robot controller's (default
     ``pd_joint_delta_pos``). **Rewards:** :meth:`compute_dense_reward`; normalised to [0, 1].
 
     **Episode End:** ``terminated`` on ``success`` or ``fail``; truncated after
@@ -122,6 +124,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         robot, self.robot_entries = keywords.robot_arms(self.layout_set, robot_uids)
         self.robot_entry = self.robot_entries[0]  # the arm the task's TCP and grasp follow
         check_graspable(self.layout_set, self.robot_entry)  # an object its jaws cannot take
+        check_movers(self.layout_set.layouts)  # more movers than the observation's slots
         if len(self.robot_entries) > 1:  # ManiSkill's multi-agent env (warns if not listed)
             self.SUPPORTED_ROBOTS = [*SUPPORTED_ROBOTS, robot]
         # each arm's rest joints (robot_init_qpos: its length now, its limits once loaded)
@@ -202,6 +205,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         self.task_scene = TaskScene.build(self.layouts, ls.env_actors, spots, span)
         self.tasks = self.task_scene.tasks  # one per env (layout/task.py)
         self.task_reader = TaskReader(self, self.task_scene, ls.top_z)
+        self.state_observation = StateObservation(self.task_scene, self.task_reader, self.device)
         # each arm's spot (the layout's; a second arm's across the table) and base pose
         self.robot_spots, self.robot_bases = agents.arm_bases(
             self.robot_entries, spots, ls.episodes.top_arrays, self.placement_limits.hull_margin,
@@ -278,12 +282,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
             task_kind=torch.nn.functional.one_hot(self.task_scene.kinds, len(RULES)).to(
                 self.device, torch.float32),  # pick, place, move  # fmt: skip
         )
-        if "state" in self.obs_mode:
-            obs.update(
-                obj_pose=self.obj.pose.raw_pose,
-                tcp_to_obj_pos=self.obj.pose.p - tcp.p,
-                obj_to_goal_pos=self.goal_site.pose.p - self.obj.pose.p,
-            )
+        if "state" in self.obs_mode:  # every mover and the receptacle, in fixed slots
+            obs.update(self.state_observation.extras(tcp.p))
         return obs
 
     def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):

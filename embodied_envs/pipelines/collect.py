@@ -58,6 +58,10 @@ FIXED_HAND_DESC = (
     "; every grasp top-down at the hand's start orientation, carried without turning it "
     "(collect --fixed-hand: demos for pd_ee_delta_pos)"
 )
+DIVERSE_DESC = (
+    "; the former, diverse expert (collect --diverse): grasp and IK branch chosen afresh per "
+    "start, so nearby starts may give distant paths"
+)
 OBS_MODES = ("none", "state", "rgb", "rgbd")
 MANISKILL_LOGGER = "mani_skill "  # ManiSkill's logger's name (mani_skill/utils/logging_utils.py)
 
@@ -83,6 +87,8 @@ class CollectPlan:
         video: also write one MP4 per kept episode.
         fixed_hand: the expert keeps the hand's orientation (``SolverConfig.fixed_hand``): demos
             that ``pd_ee_delta_pos`` replays.
+        diverse: the former expert (``SolverConfig.consistent=False``): nearby starts may take
+            other grasps and arm branches (docs/expert.md, "Consistent demonstrations").
         control_mode: the mode the expert's actions are recorded in (``solvers/modes.py``):
             each step's joint targets as that mode's action, graded on the run they make.
         env_kwargs: further ``gym.make`` keywords (from ``--config`` files), recorded with the
@@ -103,6 +109,7 @@ class CollectPlan:
     workers: int = 1
     video: bool = False
     fixed_hand: bool = False
+    diverse: bool = False
     control_mode: str = "pd_joint_pos"
     env_kwargs: dict = field(default_factory=dict)
     ray: str | None = None
@@ -175,7 +182,8 @@ def recorder(env, plan: CollectPlan, out_dir: str, name: str) -> EpisodeRecorder
         save_on_reset=False,
         record_reward=True,
         source_type="motionplanning",
-        source_desc=SOURCE_DESC + (FIXED_HAND_DESC if plan.fixed_hand else ""),
+        source_desc=SOURCE_DESC + (FIXED_HAND_DESC if plan.fixed_hand else "")
+        + (DIVERSE_DESC if plan.diverse else ""),
         video_fps=int(round(1 / env.unwrapped.control_timestep)),
     )
 
@@ -184,7 +192,8 @@ def record_seed(env: EpisodeRecorder, plan: CollectPlan, seed: int) -> Episode:
     """The episode of ``seed``, by the expert, recorded by ``env`` (kept in its file when it
     succeeded or ``plan`` keeps every episode; with its video when filming): what every worker,
     local or on Ray, does per seed."""
-    drive = functools.partial(expert, config=SolverConfig(fixed_hand=plan.fixed_hand))
+    config = SolverConfig(fixed_hand=plan.fixed_hand, consistent=not plan.diverse)
+    drive = functools.partial(expert, config=config)
     episode = run_episode(env, seed, drive)
     episode.kept = episode.success or not plan.only_success
     env.flush_trajectory(save=episode.kept)

@@ -204,6 +204,7 @@ class ArmDriver:
         on_choice=None,
         planned=None,
         open_before: int = 0,
+        rank_first: bool = False,
     ) -> list[sapien.Pose | None]:
         """Plan and execute one stage in every env that has not failed yet.
 
@@ -228,6 +229,10 @@ class ArmDriver:
                 ended), or None to plan it here.
             open_before: each env's hand is commanded open this many steps before its path
                 ends (``_execute``).
+            rank_first: with ``option_steps``, the first option in rank order that plans (its
+                ``then`` too) wins, a straight joint line to any option before a detour to
+                any: a choice that follows the options' order, not the steps they cost
+                (``SolverConfig.consistent``).
 
         Returns:
             Per env the pose that was planned to (None where none could be).
@@ -243,7 +248,8 @@ class ArmDriver:
                 best = (len(ready), ready, target, 0)
             elif target is not None and not self.reports[i].plan_failures:
                 best, failures = self._choose(
-                    i, options, qpos[i], methods, obstacles, option_steps, then, path_ok
+                    i, options, qpos[i], methods, obstacles, option_steps, then, path_ok,
+                    rank_first,
                 )
                 if best is None:
                     self.reports[i].plan_failures.append(f"{stage}: " + "; ".join(failures))
@@ -267,7 +273,9 @@ class ArmDriver:
         self._execute(paths, settle, arrived if settle else None, open_before)
         return chosen
 
-    def _choose(self, i, options, qpos, methods, obstacles, option_steps, then, path_ok):
+    def _choose(
+        self, i, options, qpos, methods, obstacles, option_steps, then, path_ok, rank_first=False
+    ):
         """``_per_env``'s choice for env i: ``(cost, path, pose, k)`` of the option that wins
         (None when none plans) and the failures.
 
@@ -312,10 +320,13 @@ class ArmDriver:
                     if then is not None:
                         end = np.concatenate([path[-1][: self.arm_dof], qpos[self.arm_dof :]])
                         more = then(i, k, end)
+                        if more is None and rank_first:
+                            failures.append(f"{label}{how}: what follows does not plan")
+                            continue
                         cost += self.cfg.max_path_steps if more is None else more
                     if best is None or (cost, k) < (best[0], best[3]):
                         best = (cost, path, options[k], k)
-                    if option_steps is None:
+                    if option_steps is None or rank_first:
                         return best, failures
                 todo = blocked
             if best is not None:

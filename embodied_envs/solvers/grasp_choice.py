@@ -136,10 +136,14 @@ class GraspChoice:
             taken = [] if planar else posed_grasps(
                 grasps, pose.matrix(), support, self.clouds[i], self.grasp_config, gripper,
                 limit=self.cfg.grasp_candidates, with_index=True, keep=keep,
+                roomy_first=not self.cfg.consistent,
             )  # fmt: skip
-            synthesised = [  # with a fixed hand, closing along the hand's (the jaws' symmetry)
+            # with a fixed hand or a consistent expert, closing along the hand's (the jaws'
+            # symmetry): the same grasp at the wrist angle nearest the hand's
+            fold = self.cfg.fixed_hand or self.cfg.consistent
+            synthesised = [
                 (grasp_pose(approach, closing * np.sign(closing @ hand_y or 1.0), centre), opening)
-                if self.cfg.fixed_hand else (grasp_pose(approach, closing, centre), opening)
+                if fold else (grasp_pose(approach, closing, centre), opening)
                 for centre, closing, approach, opening, _ in taken
             ]  # fmt: skip
             # the asset's own annotated grasps (affordance_annot.json) lead when one is takeable

@@ -425,6 +425,7 @@ def posed_grasps(
     limit: int = 8,
     with_index: bool = False,
     keep: np.ndarray | None = None,
+    roomy_first: bool = True,
 ) -> list[tuple]:
     """The grasps the gripper can take in this episode, best first, as world
     ``(centre, closing, approach, opening)``: approach within ``max_tilt_deg`` of straight down, the
@@ -433,7 +434,8 @@ def posed_grasps(
     obstacles by ``wide_margin`` first (among the ``posed_scan`` best, or until ``limit`` are
     clear). At most ``limit``; an empty list when none. ``with_index``: each tuple ends with
     the grasp's index in ``grasps``. ``keep``: ``(n,)`` bool, the grasps considered (all when
-    None)."""
+    None). ``roomy_first=False``: the clear grasps in their rank alone, which a centimetre's
+    move of the object leaves in place (``SolverConfig.consistent``)."""
     cfg, gripper = cfg or GraspConfig(), gripper or GripperModel()
     rot, t = object_to_world[:3, :3], object_to_world[:3, 3]
     centre = grasps.centre @ rot.T + t
@@ -452,8 +454,8 @@ def posed_grasps(
         clear, wide = posed_clearance(
             centre[part], closing[part], approach[part], boxes[part], support_z, obstacles, cfg
         )
-        roomy.extend(part[wide])
-        tight.extend(part[clear & ~wide])
+        roomy.extend(part[wide if roomy_first else clear])
+        tight.extend(part[clear & ~wide] if roomy_first else [])
         if len(roomy) >= limit or (s + 64 >= cfg.posed_scan and len(roomy) + len(tight) >= limit):
             break
     best = (roomy + tight)[:limit]

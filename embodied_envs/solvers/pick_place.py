@@ -66,6 +66,11 @@ class SolverConfig:
     convertible: bool = True  # joint targets every arm controller can replay (``follow.py``:
     # speeds and per-step changes within pd_joint_delta_pos's and pd_joint_vel's limits);
     # False: the speeds above, which only pd_joint_pos replays
+    consistent: bool = True  # demos made to be learned: nearby starts take the same grasp (the
+    # first in rank order that plans, straight joint lines before detours; the synthesised
+    # grasps ranked without the roomy-first preference a centimetre's move flips, each one's
+    # closing folded toward the hand's), so they give nearby paths; False: the former,
+    # diverse expert (the grasp whose approach costs fewest steps; ``collect --diverse``)
     fixed_hand: bool = False  # every grasp top-down with the hand's closing direction as it
     # starts, and no turn of the hand on the carry: demos that pd_ee_delta_pos, which keeps the
     # hand's orientation, replays (``grasp_choice.py``); an object the hand cannot take so fails
@@ -329,7 +334,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
 
         pre = self._per_env(
             "approach", targets, ("rrt", "screw"), settle=cfg.settle_steps,
-            option_steps=cfg.option_steps,
+            option_steps=cfg.option_steps, rank_first=cfg.consistent,
             then=lambda i, k, q: None if (p := descent(i, k, q)) is None else len(p),
             on_choice=take,
         )  # fmt: skip

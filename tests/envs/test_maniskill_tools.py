@@ -33,7 +33,9 @@ def test_a_record_episode_dataset_replays_with_maniskills_replay_trajectory(tmp_
     """20 random pd_joint_pos steps recorded by ManiSkill's RecordEpisode store the id with
     its package; ``python -m mani_skill.trajectory.replay_trajectory`` (which imports only
     mani_skill) re-creates the env from it, from a folder where ``embodied_envs`` is no module,
-    and replaying the actions from the recorded seed gives the recorded states."""
+    and replaying the actions from the recorded seed gives the recorded states and state
+    observations (every mover's slots, docs/tasks.md), which ManiSkill's dataset loads."""
+    from mani_skill.trajectory.dataset import ManiSkillTrajectoryDataset
     from mani_skill.utils.wrappers.record import RecordEpisode
 
     e = gym.make(ENV_ID, obs_mode="state", control_mode="pd_joint_pos")
@@ -63,6 +65,11 @@ def test_a_record_episode_dataset_replays_with_maniskills_replay_trajectory(tmp_
         for name in a["traj_0/env_states/actors"]:
             want = a[f"traj_0/env_states/actors/{name}"][:]
             np.testing.assert_allclose(b[f"traj_0/env_states/actors/{name}"][:], want, atol=1e-5)
+        width = e.observation_space.shape[-1]
+        assert a["traj_0/obs"].shape == b["traj_0/obs"].shape == (21, width)
+        np.testing.assert_allclose(b["traj_0/obs"][:], a["traj_0/obs"][:], atol=1e-4)
+    data = ManiSkillTrajectoryDataset(str(out), load_count=-1, success_only=False)
+    assert len(data) == 20 and data[0]["obs"].shape == (width,)
 
 
 def test_cached_reset_wrapper_resets_to_its_cached_states(env):

@@ -9,6 +9,7 @@ from mani_skill.utils.structs.pose import Pose
 from placement_checks import check_constraints
 
 import embodied_envs  # noqa: F401
+from embodied_envs.envs.observation import MAX_MOVERS, STATE_KEYS
 from embodied_envs.layout import LayoutError, LayoutPose
 from embodied_envs.paths import default_layout
 from embodied_envs.robots import PANDA
@@ -180,12 +181,10 @@ def test_state_dict_obs_mode_has_task_fields():
             "tcp_pose",
             "goal_pos",
             "is_grasped",
-            "obj_pose",
-            "tcp_to_obj_pos",
-            "obj_to_goal_pos",
+            *STATE_KEYS,
         ):
             assert key in obs["extra"], key
-        assert obs["extra"]["obj_pose"].shape == (1, 7)
+        assert obs["extra"]["mover_pose"].shape == (1, 7 * MAX_MOVERS)
     finally:
         e.close()
 

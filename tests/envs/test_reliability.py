@@ -100,7 +100,7 @@ def test_same_seed_is_bit_identical_over_50_steps_including_reconfigure(state_en
 def test_different_seeds_give_different_start_states(state_env):
     a = flat(state_env.reset(seed=1)[0])
     b = flat(state_env.reset(seed=2)[0])
-    assert not np.array_equal(a["extra"]["obj_pose"], b["extra"]["obj_pose"])
+    assert not np.array_equal(a["extra"]["mover_pose"], b["extra"]["mover_pose"])
     assert not np.array_equal(a["agent"]["qpos"], b["agent"]["qpos"])
 
 
@@ -121,7 +121,9 @@ def test_state_dict_round_trip(state_env):
         for name in kept[group]:  # PhysX renormalises quaternions: equal to float rounding
             np.testing.assert_allclose(restored[group][name], kept[group][name], atol=1e-6)
     now = flat(u.get_obs())
-    np.testing.assert_allclose(now["extra"]["obj_pose"], obs_then["extra"]["obj_pose"], atol=1e-6)
+    np.testing.assert_allclose(
+        now["extra"]["mover_pose"], obs_then["extra"]["mover_pose"], atol=1e-6
+    )
     np.testing.assert_allclose(now["agent"]["qpos"], obs_then["agent"]["qpos"], atol=1e-6)
 
 

@@ -15,13 +15,14 @@ from embodied_envs import robots
 from embodied_envs.cli.layout_cmds import validate_problems
 from embodied_envs.config import resolve_robot
 from embodied_envs.envs import agents
+from embodied_envs.envs.observation import STATE_KEYS
 from embodied_envs.layout import LayoutError
 
 ENV_ID = "PickEmbodiedGen-v1"
 WHEEL = ("panda", "panda_wristcam", "so100", "koch-v1.1", "fetch")
 # state obs: qpos and qvel, then the extras: tcp_pose 7, goal_pos 3, is_grasped 1,
-# task_kind 3, obj_pose 7, tcp_to_obj_pos 3, obj_to_goal_pos 3
-EXTRA_STATE = 7 + 3 + 1 + 3 + 7 + 3 + 3
+# task_kind 3, and the task's slots (envs/observation.py)
+EXTRA_STATE = 7 + 3 + 1 + 3 + sum(STATE_KEYS.values())
 DOF = {"panda": 9, "panda_wristcam": 9, "so100": 6, "koch-v1.1": 6, "fetch": 15}
 
 

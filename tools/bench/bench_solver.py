@@ -7,7 +7,9 @@ by the env's own ``evaluate()`` at the end. Prints success rate, mean and max ep
 (control steps), failures by stage with the conditions of success each one missed
 (``env.task_reader.unmet()``), and wall time.
 
-Usage: python tools/bench/bench_solver.py [--episodes 50] [--layout FILE ...]
+``--diverse``: the former expert (``SolverConfig(consistent=False)``, ``collect --diverse``).
+
+Usage: python tools/bench/bench_solver.py [--episodes 50] [--layout FILE ...] [--diverse]
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np  # noqa: E402
 import embodied_envs  # noqa: E402,F401
 from embodied_envs.paths import shipped_layouts  # noqa: E402
 from embodied_envs.solvers import PickPlaceSolver  # noqa: E402
+from embodied_envs.solvers.pick_place import SolverConfig  # noqa: E402
 
 
 def main() -> None:
@@ -34,14 +37,16 @@ def main() -> None:
     )
     ap.add_argument("--episodes", type=int, default=50)
     ap.add_argument("--layout", type=Path, nargs="+", default=None)
+    ap.add_argument("--diverse", action="store_true", help="the former expert")
     args = ap.parse_args()
+    config = SolverConfig(consistent=not args.diverse)
     for path in args.layout or shipped_layouts():
         env = gym.make("PickEmbodiedGen-v1", layout_file=str(path), control_mode="pd_joint_pos")
         limit = gym.spec("PickEmbodiedGen-v1").max_episode_steps
         ok, steps, stages, t0 = 0, [], Counter(), time.perf_counter()
         for seed in range(args.episodes):
             env.reset(seed=seed)
-            result = PickPlaceSolver(env, seed=seed).solve()
+            result = PickPlaceSolver(env, config, seed=seed).solve()
             success = bool(env.unwrapped.evaluate()["success"][0])
             ok += success
             if success:

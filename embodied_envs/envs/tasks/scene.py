@@ -139,6 +139,9 @@ class TaskScene:
     rim: np.ndarray  # (n,) receptacle top in its frame
     floor: np.ndarray  # (n,) its floor in its frame (``cavity_floor``; the top: no inside)
     dest_local: np.ndarray  # (n, m, 3) each mover's destination in the receptacle's frame
+    # (n, 6) in the receptacle's frame: its footprint's box centre (x, y) and size (x, y), its
+    # rim (``rim``) and floor (``floor``) heights (the state observation's ``receptacle_geometry``)
+    rec_geometry: np.ndarray
     is_in: np.ndarray  # (n,) bool
     rec_is_table: np.ndarray  # (n,) bool
     direction: np.ndarray  # (n, 2) world XY unit vector of a move
@@ -159,7 +162,7 @@ class TaskScene:
         receptacle = Actor.merge(
             [env_actors[f"env{i}"][rec_nodes[i]] for i in range(n)], name="receptacle"
         )
-        hulls, centres, polys, rims, floors, dests = [], [], [], [], [], []
+        hulls, centres, polys, rims, floors, dests, geometry = [], [], [], [], [], [], []
         for i, layout in enumerate(layouts):
             geoms = [asset_geometry(layout.asset_spec(node)) for node in nodes[i]]
             hulls.append([_hull_points(g.vertices) for g in geoms])
@@ -169,6 +172,8 @@ class TaskScene:
             polys.append(poly)
             rims.append(rec.max_z)
             floors.append(rec.max_z if rec_nodes[i] == layout.context else cavity_floor(rec, poly))
+            low, high = poly.min(0), poly.max(0)
+            geometry.append([*(low + high) / 2, *(high - low), rims[-1], floors[-1]])
             widths = [2 * np.linalg.norm(h[:, :2] - c[:2], axis=1).max()
                       for h, c in zip(hulls[-1], centres[-1], strict=True)]  # fmt: skip
             dests.append(_destinations(rec, poly, [g.min_z for g in geoms], centres[-1], widths))
@@ -194,6 +199,7 @@ class TaskScene:
             rim=np.array(rims, np.float32),
             floor=np.array(floors, np.float32),
             dest_local=np.array(dests, np.float32),
+            rec_geometry=np.array(geometry, np.float32),
             is_in=np.array([t.relation == "in" for t in tasks]),
             rec_is_table=np.array([r == x.context for r, x in zip(rec_nodes, layouts, strict=1)]),
             direction=direction.astype(np.float32),
