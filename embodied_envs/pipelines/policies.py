@@ -3,7 +3,9 @@
 Policies (:func:`load_policy`): ``expert`` (the scripted motion-planned solver, on
 ``pd_joint_pos``), ``random`` (uniform over the action space, seeded by the episode), ``zero``,
 a TorchScript file ``path/to/policy.pt`` (a module from observations to actions, as
-``tools/recipes/train_bc.py`` saves), or ``module:factory`` / ``path/to/file.py:factory``:
+``tools/recipes/train_policy.py`` saves; its exported ``reset()``, if any, is called at each
+episode start: a policy with state per env, e.g. temporal ensembling, clears it), or
+``module:factory`` / ``path/to/file.py:factory``:
 ``factory(env)`` (or ``factory()``) returns a callable from observations to actions or a
 ``torch.nn.Module`` (its ``reset(seed)``, if any, is called at each episode start). A policy
 receives the env's observation as ManiSkill returns it (torch tensors with a leading batch of 1,
@@ -84,6 +86,8 @@ def load_policy(spec: str, env) -> Policy | None:
     """
     if spec == "expert":
         return None
+    if spec.endswith((".pt", ".ts")) and ":" not in spec:
+        return _torchscript_policy(spec)
     space = env.action_space
     shape = tuple(space.shape)
     if spec == "zero":
@@ -96,8 +100,6 @@ def load_policy(spec: str, env) -> Policy | None:
             state["rng"] = np.random.default_rng(seed)
 
         return Policy(lambda obs: state["rng"].uniform(low, high).astype(np.float32), reseed)
-    if spec.endswith((".pt", ".ts")) and ":" not in spec:
-        return _torchscript_policy(spec)
     factory = _import_target(spec)
     if not callable(factory):
         raise EvalError(f"--policy {spec}: {type(factory).__name__} is not callable")
@@ -145,6 +147,8 @@ def _torchscript_policy(spec: str) -> Policy:
             "it with torch.jit.save(torch.jit.script(model), path), or use module:factory"
         ) from None
 
+    reset = getattr(module, "reset", None)  # a scripted module's exported reset(), if any
+
     def run(obs):
         if not isinstance(obs, torch.Tensor):
             raise TypeError(
@@ -154,7 +158,7 @@ def _torchscript_policy(spec: str) -> Policy:
         with torch.no_grad():
             return module(obs.float())
 
-    return Policy(run)
+    return Policy(run, None if reset is None else lambda seed: reset())
 
 
 def at_step(step: int, seed: int, layout: str) -> str:

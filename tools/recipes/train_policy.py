@@ -1,0 +1,291 @@
+#!/usr/bin/env python
+"""Train a state policy on a dataset of this env, on the CPU, in minutes: behaviour cloning with
+action chunking, executed with temporal ensembling (ACT's scheme, with an MLP in place of its
+transformer).
+
+The policy maps a state observation to the next ``--chunk`` actions. Observations are normalised
+per dimension with the dataset's mean and standard deviation (dimensions that never vary keep
+scale 1), and the observation groups named by ``--drop`` (e.g. ``qvel``) are zeroed; training
+adds Gaussian noise of ``--obs-noise`` standard deviations to the normalised observation. The loss
+is L1 on the normalised actions, with the steps of a chunk past its episode's end left out. At
+run time each step's chunk is added to a running weighted sum of the predictions for the coming
+steps (the prediction made ``j`` steps ahead of the step it is for weighs ``exp(-decay * j)``),
+and the step's action is that weighted mean, clamped to the demonstrated range. The module keeps
+that sum per env; its ``reset()`` (TorchScript-exported, called by ``embodied-envs eval`` at each
+episode start) clears it.
+
+Training runs for ``--minutes`` of wall-clock time (cosine learning-rate decay over that time),
+then writes ``OUT/policy.pt`` (TorchScript, run by ``embodied-envs eval --policy OUT/policy.pt``)
+and ``OUT/train.json`` (the dataset, control mode, sizes, settings, iterations, final loss).
+
+    embodied-envs collect --layout layouts/default.json --num 200 --seed 0 --only-success \\
+        --obs-mode state --control-mode pd_joint_delta_pos --out demos
+    python tools/recipes/train_policy.py --demos demos/default/trajectory.h5 --out runs/act \\
+        --minutes 20
+    embodied-envs eval --policy runs/act/policy.pt --control-mode pd_joint_delta_pos \\
+        --layout layouts/default.json --episodes 30 --seed 10000 --out outputs/eval_act
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import torch
+from torch import nn
+
+from embodied_envs.paths import atomic_output
+
+# one thread: on the shared 2-core machine (load 20) a training step took 3x longer with two
+# (7.8 against 2.5 steps/s, a 256x256 MLP), whose threads wait for each other
+TORCH_THREADS = 1
+MIN_STD = 1e-3  # a dimension varying less than this over the dataset is not rescaled
+LOG_EVERY_S = 30.0  # seconds between progress lines
+ARTICULATION_POSE_VEL = 13  # an articulation's recorded state: root pose (7), velocities (6), ...
+
+
+class ChunkPolicy(nn.Module):
+    """Observation -> the next ``chunk`` actions (``raw``), and the temporally ensembled action
+    of this step (``forward``), per env of the batch."""
+
+    def __init__(
+        self, obs_mean, obs_std, obs_keep, act_mean, act_std, act_low, act_high,
+        chunk: int, hidden: list[int], decay: float,
+    ):  # fmt: skip
+        super().__init__()
+        obs_dim, act_dim = len(obs_mean), len(act_mean)
+        self.chunk, self.act_dim = chunk, act_dim
+        for name, value in dict(
+            obs_mean=obs_mean, obs_std=obs_std, obs_keep=obs_keep, act_mean=act_mean,
+            act_std=act_std, act_low=act_low, act_high=act_high,
+            weights=np.exp(-decay * np.arange(chunk)),
+        ).items():  # fmt: skip
+            self.register_buffer(name, torch.as_tensor(np.asarray(value), dtype=torch.float32))
+        layers: list[nn.Module] = []
+        size = obs_dim
+        for width in hidden:
+            layers += [nn.Linear(size, width), nn.ReLU()]
+            size = width
+        layers.append(nn.Linear(size, chunk * act_dim))
+        self.net = nn.Sequential(*layers)
+        # the running sums of each env's predictions for its next `chunk` steps, and their weights
+        self.pending = torch.zeros(0, chunk, act_dim)
+        self.pending_weight = torch.zeros(0, chunk)
+
+    def normalise(self, obs: torch.Tensor) -> torch.Tensor:
+        return (obs - self.obs_mean) / self.obs_std * self.obs_keep
+
+    def raw_normalised(self, x: torch.Tensor) -> torch.Tensor:
+        """Normalised observations -> normalised action chunks ``(B, chunk, A)``."""
+        return self.net(x).view(-1, self.chunk, self.act_dim)
+
+    def raw(self, obs: torch.Tensor) -> torch.Tensor:
+        """Observations -> action chunks ``(B, chunk, A)`` in the env's action units."""
+        return self.raw_normalised(self.normalise(obs)) * self.act_std + self.act_mean
+
+    @torch.jit.export
+    def reset(self) -> None:
+        """Forget every env's pending predictions (an episode starts)."""
+        self.pending = torch.zeros(0, self.chunk, self.act_dim)
+        self.pending_weight = torch.zeros(0, self.chunk)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        chunk = self.raw(obs)
+        batch = chunk.shape[0]
+        if self.pending.shape[0] != batch:  # the first step after reset(), or a new batch
+            self.pending = torch.zeros_like(chunk)
+            self.pending_weight = torch.zeros(batch, self.chunk, device=chunk.device)
+        pending = self.pending + chunk * self.weights[None, :, None]
+        weight = self.pending_weight + self.weights[None, :]
+        action = pending[:, 0] / weight[:, :1]
+        self.pending = torch.cat([pending[:, 1:], torch.zeros_like(pending[:, :1])], 1)
+        self.pending_weight = torch.cat([weight[:, 1:], torch.zeros_like(weight[:, :1])], 1)
+        return torch.clamp(action, self.act_low, self.act_high)
+
+
+def load_episodes(path: Path, num_demos: int) -> tuple[list, list, dict]:
+    """Each episode's state observations ``(T+1, D)`` and actions ``(T, A)``, and the
+    dataset's ``env_info``."""
+    meta = json.loads(path.with_suffix(".json").read_text())
+    episodes = meta["episodes"][: num_demos if num_demos > 0 else None]
+    observations, actions = [], []
+    with h5py.File(path, "r") as f:
+        for ep in episodes:
+            traj = f[f"traj_{ep['episode_id']}"]
+            if not isinstance(traj["obs"], h5py.Dataset) or traj["obs"].ndim != 2:
+                sys.exit(
+                    f"{path}: the observations are not a state vector. Fix: collect with "
+                    "--obs-mode state, or replay it with `embodied-envs replay --traj-path ... "
+                    "-o state --save-traj`"
+                )
+            observations.append(np.asarray(traj["obs"], np.float32))
+            actions.append(np.asarray(traj["actions"], np.float32))
+    if not episodes:
+        sys.exit(f"{path}: no episodes")
+    return observations, actions, meta["env_info"]
+
+
+def chunk_targets(
+    actions: list[np.ndarray], chunk: int, hold: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per step of every episode, its next ``chunk`` actions ``(N, chunk, A)`` and which of them
+    count in the loss ``(N, chunk)``. Past the episode's end: the last action repeated, counted
+    with ``hold`` (the arm is still at a success: the policy learns to stay), else left out."""
+    targets, valid = [], []
+    for acts in actions:
+        steps = len(acts)
+        index = np.arange(steps)[:, None] + np.arange(chunk)[None, :]
+        targets.append(acts[np.minimum(index, steps - 1)])
+        valid.append(np.ones_like(index, bool) if hold else index < steps)
+    return np.concatenate(targets), np.concatenate(valid)
+
+
+def agent_groups(path: Path) -> dict[str, slice]:
+    """The slices of the flat state observation that hold the robot's ``qpos`` and ``qvel``
+    (ManiSkill's agent state leads it), found by matching the recorded observation of the first
+    episode against a recorded articulation's joint state (ManiSkill's articulation state:
+    pose 7, velocities 6, then ``qpos`` and ``qvel``)."""
+    with h5py.File(path, "r") as f:
+        traj = f[next(iter(f.keys()))]
+        obs = np.asarray(traj["obs"])
+        for node in traj["env_states"]["articulations"].values():
+            state = np.asarray(node)
+            dof = (state.shape[1] - ARTICULATION_POSE_VEL) // 2
+            joints = state[:, ARTICULATION_POSE_VEL:]
+            if 2 * dof <= obs.shape[1] and np.array_equal(obs[:, : 2 * dof], joints):
+                return {"qpos": slice(0, dof), "qvel": slice(dof, 2 * dof)}
+    sys.exit(f"{path}: no recorded articulation's qpos and qvel lead the observation")
+
+
+def keep_mask(drop: list[str], path: Path, obs_dim: int) -> np.ndarray:
+    """1 per observation value the policy sees, 0 for those of the groups in ``drop``."""
+    keep = np.ones(obs_dim, np.float32)
+    if drop:
+        groups = agent_groups(path)
+        for name in drop:
+            keep[groups[name]] = 0.0
+    return keep
+
+
+def train(args: argparse.Namespace) -> dict:
+    torch.set_num_threads(TORCH_THREADS)
+    torch.manual_seed(args.seed)
+    rng = np.random.default_rng(args.seed)
+    observations, actions, env_info = load_episodes(args.demos, args.num_demos)
+    obs = np.concatenate([o[: len(a)] for o, a in zip(observations, actions, strict=True)])
+    targets, valid = chunk_targets(actions, args.chunk, args.hold)
+    flat = np.concatenate(actions)
+    obs_std = obs.std(0)
+    act_std = flat.std(0)
+    policy = ChunkPolicy(
+        obs.mean(0), np.where(obs_std < MIN_STD, 1.0, obs_std),
+        keep_mask(args.drop, args.demos, obs.shape[1]), flat.mean(0),
+        np.where(act_std < MIN_STD, 1.0, act_std), flat.min(0), flat.max(0),
+        args.chunk, args.hidden, args.decay,
+    )  # fmt: skip
+    x = policy.normalise(torch.from_numpy(obs))
+    y = (torch.from_numpy(targets) - policy.act_mean) / policy.act_std
+    mask = torch.from_numpy(valid).float()[:, :, None]
+    optim = torch.optim.AdamW(policy.parameters(), lr=args.lr, weight_decay=args.weight_decay)
+    budget = args.minutes * 60.0
+    start = last_log = time.perf_counter()
+    iters, loss = 0, torch.tensor(float("nan"))
+    while (elapsed := time.perf_counter() - start) < budget:
+        for group in optim.param_groups:  # cosine decay over the time budget
+            group["lr"] = args.lr * 0.5 * (1.0 + math.cos(math.pi * elapsed / budget))
+        batch = torch.from_numpy(rng.integers(0, len(x), args.batch_size))
+        inputs = x[batch]
+        if args.obs_noise > 0:
+            inputs = inputs + args.obs_noise * torch.randn_like(inputs) * policy.obs_keep
+        err = (policy.raw_normalised(inputs) - y[batch]).abs() * mask[batch]
+        loss = err.sum() / (mask[batch].sum() * y.shape[2])
+        optim.zero_grad()
+        loss.backward()
+        optim.step()
+        iters += 1
+        if time.perf_counter() - last_log > LOG_EVERY_S:
+            last_log = time.perf_counter()
+            print(f"{elapsed / 60:5.1f} min, iteration {iters}: loss {loss.item():.4f}", flush=True)
+    seconds = time.perf_counter() - start
+    args.out.mkdir(parents=True, exist_ok=True)
+    with atomic_output(args.out / "policy.pt") as tmp:
+        torch.jit.save(torch.jit.script(policy.eval()), str(tmp))
+    kwargs = env_info.get("env_kwargs", {})
+    info = {
+        "demos": str(args.demos),
+        "episodes": len(actions),
+        "env_id": env_info.get("env_id"),
+        "control_mode": kwargs.get("control_mode"),
+        "layout_file": kwargs.get("layout_file"),
+        "pairs": len(x),
+        "obs_dim": int(x.shape[1]),
+        "act_dim": int(flat.shape[1]),
+        "chunk": args.chunk,
+        "decay": args.decay,
+        "hidden": args.hidden,
+        "drop": args.drop,
+        "hold": args.hold,
+        "obs_noise": args.obs_noise,
+        "batch_size": args.batch_size,
+        "lr": args.lr,
+        "weight_decay": args.weight_decay,
+        "seed": args.seed,
+        "minutes": args.minutes,
+        "iterations": iters,
+        "final_loss": float(loss.item()),
+        "train_seconds": round(seconds, 1),
+    }
+    with atomic_output(args.out / "train.json") as tmp:
+        tmp.write_text(json.dumps(info, indent=2) + "\n")
+    return info
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--demos", type=Path, required=True, help="a state dataset (.h5)")
+    ap.add_argument("--out", type=Path, required=True, help="folder for policy.pt, train.json")
+    ap.add_argument("--minutes", type=float, default=20.0, help="training time (wall clock)")
+    ap.add_argument("--num-demos", type=int, default=-1, help="episodes to load (-1: all)")
+    ap.add_argument("--chunk", type=int, default=16, help="actions predicted per step")
+    ap.add_argument("--decay", type=float, default=0.1,
+                    help="temporal ensembling: a prediction j steps ahead weighs exp(-decay*j)")
+    ap.add_argument("--hidden", type=int, nargs="+", default=[256, 256],
+                    help="the MLP's hidden widths")
+    ap.add_argument("--drop", nargs="*", default=["qvel"], choices=["qpos", "qvel"],
+                    help="the robot's joint state groups the policy does not see (default qvel)")
+    ap.add_argument("--hold", action="store_true",
+                    help="train the chunk's steps past an episode's end as its last action")
+    ap.add_argument("--obs-noise", type=float, default=0.1,
+                    help="training noise on the normalised observation (standard deviations)")
+    ap.add_argument("--batch-size", type=int, default=256)
+    ap.add_argument("--lr", type=float, default=1e-3)
+    ap.add_argument("--weight-decay", type=float, default=1e-4)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    if not args.demos.is_file() or not args.demos.with_suffix(".json").is_file():
+        ap.error(f"{args.demos}: no such dataset (an .h5 with its .json beside it)")
+    if args.chunk < 1 or args.minutes <= 0:
+        ap.error("--chunk must be >= 1 and --minutes > 0")
+    return args
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
+    info = train(args)
+    print(json.dumps(info, indent=2))
+    print(
+        f"evaluate: embodied-envs eval --policy {args.out / 'policy.pt'} --control-mode "
+        f"{info['control_mode']} --layout LAYOUT --episodes 30 --seed 10000 --out OUT"
+    )
+
+
+if __name__ == "__main__":
+    main()
