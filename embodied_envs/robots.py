@@ -261,7 +261,8 @@ PANDA_HAND = Hand(
 # object), the palm behind them (0.02 m across: the jaws' roots; the jaw's motor, 0.048 m
 # across, is 0.045 m back): objects are taken 0.02 m below their top, from 0.04 m back, against
 # the still jaw (grasp_choice.py). Its pd_joint_pos drives the jaw's angle: 0 open, -1.1 shut,
-# with the arm's gains (stiffness 1e3, 100 N m), so it closes gently
+# with the arm's gains (stiffness 1e3, 100 N m), so it closes gently; holding an object against
+# the still jaw its wrist gives way 0.1-0.26 rad (drifts: docs/robots.md, "Small objects")
 SO100_HAND = Hand(
     link="Fixed_Jaw", grasp_in_link=(-0.0306, -0.0873, 0.0, 0.5, 0.5, 0.5, -0.5),
     boxes=(("opening", 0.06), ("finger_width", 0.02), ("finger_thickness", 0.015),
