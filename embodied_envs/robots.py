@@ -261,7 +261,8 @@ PANDA_HAND = Hand(
 # object), the palm behind them (0.02 m across: the jaws' roots; the jaw's motor, 0.048 m
 # across, is 0.045 m back): objects are taken 0.02 m below their top, from 0.04 m back, against
 # the still jaw (grasp_choice.py). Its pd_joint_pos drives the jaw's angle: 0 open, -1.1 shut,
-# with the arm's gains (stiffness 1e3, 100 N m), so it closes gently
+# with the arm's gains (stiffness 1e3, 100 N m), so it closes gently; holding an object against
+# the still jaw its wrist gives way 0.1-0.26 rad (drifts: docs/robots.md, "Small objects")
 SO100_HAND = Hand(
     link="Fixed_Jaw", grasp_in_link=(-0.0306, -0.0873, 0.0, 0.5, 0.5, 0.5, -0.5),
     boxes=(("opening", 0.06), ("finger_width", 0.02), ("finger_thickness", 0.015),
@@ -273,7 +274,7 @@ SO100_HAND = Hand(
                      (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
     close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300, convertible=False,
-    fixed_jaw=0.0385,
+    fixed_jaw=0.0385, drifts=True,
     tilt_reach=((0.14, 0.0, 0.0), (0.18, 0.0, 15.0), (0.22, 0.0, 15.0), (0.26, 0.0, 30.0),
                 (0.30, 0.0, 30.0), (0.34, 15.0, 45.0)),
 )  # fmt: skip

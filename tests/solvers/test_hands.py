@@ -164,6 +164,35 @@ def test_so100_expert_grasps_the_block_and_carries_it_to_the_goal(so100):
     assert bool(result.success[0])
 
 
+def test_so100_gives_way_holding_against_its_still_jaw_and_corrects_at_the_goal(so100):
+    """Seed 5 of the SO-100's layout: holding the block against its still jaw, its wrist gives
+    way (off its target by more than 0.05 rad after the lift; ``Hand.drifts``). Planned from the
+    measured joints, the give-way compounded over the lift and the carry (0.37 rad; the block 6.3
+    cm off the goal, no settle planned); planned from its targets and corrected at the goal, the
+    block is held within ``goal_tolerance`` of it and the episode succeeds."""
+    assert SO100_HAND.drifts
+    so100.reset(seed=5)
+    solver = PickPlaceSolver(so100, seed=5)
+    off = []
+    per_env = solver._per_env
+
+    def watched(stage, *args, **kwargs):
+        out = per_env(stage, *args, **kwargs)
+        if stage == "lift":
+            off.append(np.abs(solver._qpos()[0, :5] - solver.command[0]).max())
+        return out
+
+    solver._per_env = watched
+    result = solver.solve()
+    u = so100.unwrapped
+    goal = u.goal_site.pose.p[0].numpy()
+    block = u.task_scene.movers[0].pose.p[0].numpy()
+    assert off and off[0] > 0.05
+    assert not solver.reports[0].plan_failures
+    assert np.linalg.norm(block - goal) < solver.cfg.goal_tolerance
+    assert bool(result.success[0])
+
+
 @pytest.fixture(scope="module")
 def koch():
     env = gym.make(ENV_ID, layout_file=str(KOCH_LAYOUT), control_mode="pd_joint_pos")
@@ -210,7 +239,7 @@ def test_koch_plans_from_its_joint_targets(koch):
     is the measured frame while the arm stands at its targets."""
     koch.reset(seed=0)
     solver = PickPlaceSolver(koch, seed=0)
-    assert KOCH_HAND.drifts and not SO100_HAND.drifts
+    assert KOCH_HAND.drifts
     np.testing.assert_allclose(solver._plan_start()[0, :5], solver.command[0])
     measured = solver._tcp().raw_pose[0].numpy()
     planned = solver._hand_pose()[0]
