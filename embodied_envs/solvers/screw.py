@@ -66,6 +66,9 @@ def polyline_trajectory(
     return out
 
 
+SCREW_END_TOLERANCE = 0.003  # m, a five-joint arm's screw walk ends at most this far from its goal
+
+
 def screw_waypoints(planner: mplib.Planner, goal_base: np.ndarray, qpos: np.ndarray,
                     qpos_step: float = 0.1) -> tuple[np.ndarray | None, str]:  # fmt: skip
     """mplib's ``plan_screw`` walk (mplib 0.1.1, step for step) from ``qpos`` (every joint of
@@ -118,4 +121,11 @@ def screw_waypoints(planner: mplib.Planner, goal_base: np.ndarray, qpos: np.ndar
             return None, "screw plan failed"
         path.append(q[idx].copy())
         if last:
+            # an arm of fewer than six joints walks the twist only in the least-squares sense:
+            # its end may stand off the goal (the Koch's descent onto a can: 2.3 cm); six or
+            # more walk it to first order (the Panda: a few mm, as mplib's), unchecked
+            model.compute_forward_kinematics(q)
+            off = float(np.linalg.norm(model.get_link_pose(ee)[:3] - goal_base[:3]))
+            if len(idx) < 6 and off > SCREW_END_TOLERANCE:
+                return None, f"screw plan failed (ends {off:.3f} m off the goal)"
             return np.asarray(path), ""
