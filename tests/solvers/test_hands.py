@@ -168,10 +168,10 @@ def test_so100_expert_grasps_the_block_and_carries_it_to_the_goal(so100):
 def test_so100_gives_way_holding_against_its_still_jaw_and_corrects_at_the_goal(so100):
     """Seed 5 of the SO-100's layout: holding the block against its still jaw, its wrist gives
     way (off its target by more than 0.03 rad after the lift, ``Hand.drifts``: 0.040 with the
-    consistent expert's grasp, 0.01-0.04 over seeds 0-11; 0.1-0.26 with the grasp before it). Planned from the
-    measured joints, the give-way compounded over the lift and the carry (0.37 rad; the block 6.3
-    cm off the goal, no settle planned); planned from its targets and corrected at the goal, the
-    block is held within ``goal_tolerance`` of it and the episode succeeds."""
+    consistent expert's grasp, 0.01-0.04 over seeds 0-11; 0.1-0.26 with the grasp before it).
+    Planned from the measured joints, the give-way compounded over the lift and the carry (0.37
+    rad; the block 6.3 cm off the goal, no settle planned); planned from its targets and corrected
+    at the goal, the block is held within ``goal_tolerance`` of it and the episode succeeds."""
     assert SO100_HAND.drifts
     so100.reset(seed=5)
     solver = PickPlaceSolver(so100, seed=5)
