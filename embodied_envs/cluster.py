@@ -59,10 +59,13 @@ class ClusterError(RuntimeError):
 _EARLY: dict[tuple, tuple[threading.Thread, dict]] = {}  # start_early's Ray starts, by args
 
 
-def start_early(address: str | None, cpus: int | None = None) -> None:
+def start_early(address: str | None, cpus: int | None = None, warm: tuple[str, ...] = ()) -> None:
     """Begins :func:`ray_session`'s start of Ray in a thread, so that Ray's processes come up
     while the command imports the simulator and checks its inputs (a Ray start took 4-22 s
-    on the busy 2-core machine); the session with the same arguments waits for it.
+    on the busy 2-core machine); the session with the same arguments waits for it. Once Ray
+    is up, a task per CPU imports the modules ``warm`` names, so that the worker processes
+    the episodes then run in have imported the simulator meanwhile (5-8 s each here), not
+    after the driver is ready (:func:`_warm`).
 
     The thread lives until the session ends: the processes a local Ray starts die with the
     thread that started them (their parent-death signal follows the thread). A command that
@@ -72,6 +75,7 @@ def start_early(address: str | None, cpus: int | None = None) -> None:
     def init() -> None:
         try:
             _init(address, cpus)
+            _warm(warm)
         except BaseException as e:  # raised again by the session, in the command's thread
             outcome["error"] = e
             return
@@ -82,6 +86,24 @@ def start_early(address: str | None, cpus: int | None = None) -> None:
     thread = threading.Thread(target=init, name="ray-start", daemon=True)
     thread.start()
     _EARLY[(address, cpus)] = (thread, outcome)
+
+
+def _import(modules: tuple[str, ...]) -> None:
+    """A warm-up task: imports ``modules`` in this worker process (kept for the next tasks)."""
+    for name in modules:
+        importlib.import_module(name)
+
+
+def _warm(modules: tuple[str, ...]) -> None:
+    """Starts a task per CPU of the cluster that imports ``modules`` (not waited for: the
+    episodes' tasks queue behind them and reuse their worker processes, which Ray keeps)."""
+    if not modules:
+        return
+    import ray  # only where a command runs on Ray
+
+    remote = ray.remote(num_cpus=1)(_import)
+    for _ in range(cluster_cpus()):
+        remote.remote(modules)
 
 
 def starting(address: str | None, cpus: int | None = None) -> bool:

@@ -97,7 +97,8 @@ def cmd_collect(args) -> int:
     from embodied_envs.pipelines.on_ray import session, start
 
     workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs
-    start(args.ray, workers)  # Ray comes up while the simulator is imported and inputs checked
+    # Ray comes up (its workers importing the episodes' module) while the inputs are checked
+    start(args.ray, workers, "embodied_envs.pipelines.collect")
     # the pipeline imports the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.collect import CollectError, CollectPlan, owned_output
 

@@ -97,7 +97,8 @@ def cmd_eval(args) -> int:
     from embodied_envs.pipelines.on_ray import start
 
     workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs
-    start(args.ray, workers)  # Ray comes up while the simulator is imported and inputs checked
+    # Ray comes up (its workers importing the episodes' module) while the inputs are checked
+    start(args.ray, workers, "embodied_envs.pipelines.evaluate")
     config = env_config(args.config, OWNED_KEYS)
     layouts = checked_layouts(args.layout)
     if args.policy == "expert" and args.control_mode not in (None, "pd_joint_pos"):

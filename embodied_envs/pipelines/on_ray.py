@@ -37,6 +37,8 @@ from embodied_envs.pipelines.episodes import Episode
 from embodied_envs.workers import started
 
 RESUME_PREFIX = ".resume-"  # in --out: what an interrupted --ray run received
+TASKS_AHEAD = 2  # tasks queued per worker: a worker starts its next episode at once, not after
+# the driver has received and stored its last (one at a time cost ~0.2 s an episode of 0.6)
 RUN_KEYS = ("workers", "ray")  # plan fields that do not change the episodes (not in resume)
 
 
@@ -59,11 +61,12 @@ def session(address: str | None, workers: int):
         yield
 
 
-def start(address: str | None, workers: int) -> None:
+def start(address: str | None, workers: int, warm: str) -> None:
     """Begins the start of :func:`session`'s Ray (none for ``address`` None) while the command
-    checks its inputs (``cluster.start_early``)."""
+    checks its inputs, its workers importing the module ``warm`` whose episodes they will
+    run (``cluster.start_early``)."""
     if address is not None:
-        start_early(*_session_args(address, workers))
+        start_early(*_session_args(address, workers), warm=(warm,))
 
 
 def _session_args(address: str, workers: int) -> tuple[str | None, int | None]:
@@ -98,8 +101,9 @@ def resume_store(out: Path, name: str, plan, bundle: Bundle) -> ResumeStore:
 
 
 def in_flight(plan) -> int:
-    """The tasks a plan runs at once: its ``workers``, else the cluster's CPUs."""
-    return plan.workers or cluster_cpus()
+    """The tasks a plan has on the cluster at once: ``TASKS_AHEAD`` per worker (its
+    ``workers``, else the cluster's CPUs)."""
+    return TASKS_AHEAD * (plan.workers or cluster_cpus())
 
 
 def episode_of(folder: Path) -> Episode:

@@ -224,3 +224,25 @@ def test_paths_map_whole_folder_names_both_ways():
     assert node.plan_failures == ["/data/scenery/x: /tmp/n/1/p.py"], "whole names, longest first"
     assert paths.to_driver(node) == episode
     assert paths.to_node({"/data/scene": ("/data/scene",)}) == {"/tmp/n/0": ("/tmp/n/0",)}
+
+
+WARMED = "xml.dom.minidom"  # a module no task of this test imports itself
+
+
+def test_a_local_rays_workers_import_the_episodes_module_while_the_driver_starts():
+    """``start_early``'s warm-up: the worker that then runs the episode has the module
+    imported before the task arrives (the same process, kept by Ray)."""
+    from embodied_envs.cluster import ray_session, start_early
+
+    def _imported(name: str = WARMED) -> tuple[bool, int]:  # travels by value to the worker
+        import os
+        import sys
+
+        return name in sys.modules, os.getpid()
+
+    start_early(None, 1, warm=(WARMED,))
+    with ray_session(None, 1):
+        remote = ray.remote(num_cpus=1)(_imported)
+        results = ray.get([remote.remote() for _ in range(3)])
+    assert [warm for warm, _ in results] == [True] * 3
+    assert len({pid for _, pid in results}) == 1, "one worker process, reused"
