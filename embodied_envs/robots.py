@@ -293,7 +293,7 @@ KOCH_HAND = Hand(
     boxes=(("opening", 0.045), ("finger_width", 0.03), ("finger_thickness", 0.015),
            ("finger_tip", 0.011), ("finger_length", 0.033), ("palm_size", (0.052, 0.07)),
            ("palm_z", (-0.115, -0.022))),
-    grasp_depth=0.015, approach_offset=0.04, joint_vel=(1.5,) * 5, joint_acc=(8.0,) * 5,
+    grasp_depth=0.005, approach_offset=0.04, joint_vel=(1.5,) * 5, joint_acc=(8.0,) * 5,
     action_open=1.6, action_closed=0.0, tilt_tolerance=0.1, planar=True,
     action_openings=((0.0027, 0.0), (0.0078, 0.1), (0.0129, 0.2), (0.0178, 0.3),
                      (0.0211, 0.4), (0.0243, 0.5), (0.0277, 0.6), (0.0315, 0.7),
