@@ -283,8 +283,12 @@ SO100_HAND = Hand(
 # link_6's -y at x 0.007, z -0.013, 0 rad shut (tips 3 mm apart), 1.6 open. The grasp frame: z
 # along link_6's -z, y along its x, origin mid-opening 0.058 down (the tips 0.011 past it).
 # The moving jaw is slanted when open (its face furthest out at its tip), so the gap per angle
-# is measured at the object's top (0.015 above the origin: grasp_depth): 0.0445 m at 1.0 rad;
+# is measured 0.015 above the origin (lower on the slanted jaw it is wider): 0.0445 m at 1.0 rad;
 # above 1.25 rad its tip no longer reaches down there. Palm: link_5 and the jaws' roots above.
+# The moving jaw's inner face ends at a knuckle 8-11 mm above the origin at the angles that
+# close on 2-3 cm (0.33-0.6 rad): an object's top above it meets the knuckle's edge, and a 3 cm
+# cube slipped out at every lift (grasp_depth 0.015); taken 0.005 below its top, the top stays
+# below the knuckle by the descent's error (SCREW_END_TOLERANCE, 3 mm) and the face holds it.
 # Its pd_joint_pos drives the jaw with stiffness 100, damping 1 (1 mrad: about 3 N on an object);
 # the jaw, slanted by its angle, holds a 2 cm block (0.33 rad) with a squeeze of 0.01 rad, and
 # the arm gives way under it (drifts: docs/robots.md, "The Koch")
