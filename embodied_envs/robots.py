@@ -283,8 +283,12 @@ SO100_HAND = Hand(
 # link_6's -y at x 0.007, z -0.013, 0 rad shut (tips 3 mm apart), 1.6 open. The grasp frame: z
 # along link_6's -z, y along its x, origin mid-opening 0.058 down (the tips 0.011 past it).
 # The moving jaw is slanted when open (its face furthest out at its tip), so the gap per angle
-# is measured at the object's top (0.015 above the origin: grasp_depth): 0.0445 m at 1.0 rad;
+# is measured 0.015 above the origin (lower on the slanted jaw it is wider): 0.0445 m at 1.0 rad;
 # above 1.25 rad its tip no longer reaches down there. Palm: link_5 and the jaws' roots above.
+# The moving jaw's inner face ends at a knuckle 8-11 mm above the origin at the angles that
+# close on 2-3 cm (0.33-0.6 rad): an object's top above it meets the knuckle's edge, and a 3 cm
+# cube slipped out at every lift (grasp_depth 0.015); taken 0.005 below its top, the top stays
+# below the knuckle by the descent's error (SCREW_END_TOLERANCE, 3 mm) and the face holds it.
 # Its pd_joint_pos drives the jaw with stiffness 100, damping 1 (1 mrad: about 3 N on an object);
 # the jaw, slanted by its angle, holds a 2 cm block (0.33 rad) with a squeeze of 0.01 rad, and
 # the arm gives way under it (drifts: docs/robots.md, "The Koch")
@@ -293,7 +297,7 @@ KOCH_HAND = Hand(
     boxes=(("opening", 0.045), ("finger_width", 0.03), ("finger_thickness", 0.015),
            ("finger_tip", 0.011), ("finger_length", 0.033), ("palm_size", (0.052, 0.07)),
            ("palm_z", (-0.115, -0.022))),
-    grasp_depth=0.015, approach_offset=0.04, joint_vel=(1.5,) * 5, joint_acc=(8.0,) * 5,
+    grasp_depth=0.005, approach_offset=0.04, joint_vel=(1.5,) * 5, joint_acc=(8.0,) * 5,
     action_open=1.6, action_closed=0.0, tilt_tolerance=0.1, planar=True,
     action_openings=((0.0027, 0.0), (0.0078, 0.1), (0.0129, 0.2), (0.0178, 0.3),
                      (0.0211, 0.4), (0.0243, 0.5), (0.0277, 0.6), (0.0315, 0.7),

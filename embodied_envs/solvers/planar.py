@@ -86,7 +86,8 @@ def planar_grasps(
     straight down toward the far side tried for a closing line across the plane; ``reach``:
     the tilts (deg, lowest and highest) its arm reaches the object with
     (``robots.Hand.tilts_at``): grasps tilted outside rank after the others, by how far; an
-    empty list when none passes."""
+    empty list when none passes. The ``limit`` best, then each with its closing the other way
+    (the same grasp at the wrist roll's other half-turn)."""
     rot, t = object_to_world[:3, :3], object_to_world[:3, 3]
     centre_o, closing_o, width = contact_pairs(grasps)
     centre, closing = centre_o @ rot.T + t, closing_o @ rot.T
@@ -146,4 +147,7 @@ def planar_grasps(
         + lean[keep] / cone  # the closing turned off the pair's line: up to one step
     )
     best = keep[np.argsort(score, kind="stable")][:limit]
-    return [(at[j], close[j], approach[j], float(opening[j])) for j in best]
+    # then each the other way the wrist roll takes it (its range may hold only one: the Koch
+    # took a flat eraser 0.24 m out closing one way only, IK failing the other)
+    return [(at[j], way * close[j], approach[j], float(opening[j])) for way in (1.0, -1.0)
+            for j in best]  # fmt: skip

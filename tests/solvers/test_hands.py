@@ -6,18 +6,21 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import sapien
-from conftest import DATA
+from conftest import DATA, ROOT
 
 import embodied_envs  # noqa: F401
+from embodied_envs.layout import LayoutPose
+from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.robots import KOCH_HAND, PANDA_HAND, ROBOTS, SO100_HAND
 from embodied_envs.solvers import PickPlaceSolver
 from embodied_envs.solvers.follow import MARGIN, SPEED_SHARE, follow_limits
-from embodied_envs.solvers.grasp_choice import grasp_pose
+from embodied_envs.solvers.grasp_choice import asset_spec, grasp_pose
 from embodied_envs.solvers.screw import SCREW_END_TOLERANCE, screw_waypoints
 
 ENV_ID = "PickEmbodiedGen-v1"
 SO100_LAYOUT = DATA / "layouts" / "so100_block.json"
 KOCH_LAYOUT = DATA / "layouts" / "koch_block.json"
+SMALL_ZOO = ROOT / "tests" / "data" / "small_zoo" / "layouts"
 
 
 @pytest.fixture(scope="module")
@@ -299,7 +302,56 @@ def test_koch_expert_holds_the_block_at_the_goal(koch):
     info = u.evaluate()
     assert closed and np.linalg.norm(closed[0][0][:2] - start[:2]) < 0.015
     assert 0.25 < closed[0][1] < 0.4
-    assert closed[0][2] > 0.01  # rad: the arm stands off its targets while the jaw squeezes
+    # rad: the arm stands off its targets while the jaw squeezes (0.007 with grasp_depth 0.005,
+    # 0.023 with 0.015)
+    assert closed[0][2] > 0.005
     assert bool(info["is_grasped"][0]) and bool(info["success"][0])
     assert np.linalg.norm(info["obj_to_goal_pos"][0].numpy()) < solver.cfg.goal_tolerance
     assert not solver.reports[0].plan_failures and result.steps < 250
+
+
+def hull_vertices(shape) -> np.ndarray:
+    """A convex collision shape's vertices in its link's frame."""
+    local = shape.get_local_pose().to_transformation_matrix()
+    return np.asarray(shape.vertices) * np.asarray(shape.scale) @ local[:3, :3].T + local[:3, 3]
+
+
+def test_koch_takes_a_3cm_cube_below_its_moving_jaws_knuckle():
+    """The Koch's moving jaw is slanted when open; its inner face ends at a knuckle 8-11 mm
+    above the grasp origin at the angles that close on 2-3 cm (its collision hulls). With the
+    object's top above the knuckle (``grasp_depth`` 0.015) the knuckle's edge met the 3 cm cube
+    4 mm below its top and the cube slipped out at every lift (seed 0: three misses); taken
+    ``grasp_depth`` below its top, the cube's top stays below the knuckle, the jaw's face
+    closes on it, and the cube is held at the goal (zoo layout, seed 0)."""
+    env = gym.make(ENV_ID, layout_file=str(SMALL_ZOO / "koch_cube_30.json"),
+                   control_mode="pd_joint_pos")  # fmt: skip
+    env.reset(seed=0)
+    u = env.unwrapped
+    solver = PickPlaceSolver(env, seed=0)
+    closed = []
+    gentle = solver._close_gently
+
+    def watched(envs):
+        gentle(envs)
+        to_grasp = np.linalg.inv(solver._tcp().to_transformation_matrix()[0].numpy())
+        link = u.agent.robot.links_map["gripper"]
+        m = to_grasp @ link.pose.to_transformation_matrix()[0].numpy()
+        jaw = np.concatenate([hull_vertices(s) for s in link._objs[0].collision_shapes
+                              if hasattr(s, "vertices")]) @ m[:3, :3].T + m[:3, 3]  # fmt: skip
+        # the jaw's inner face: its points within 1 cm of the frame's x = 0 plane (as
+        # tools/make/measure_jaws.py); the knuckle is the one nearest the still jaw (at -y)
+        face = jaw[np.abs(jaw[:, 0]) < 0.01]
+        knuckle = face[np.argmin(face[:, 1])]
+        pose = LayoutPose.from_raw(u.task_scene.movers[0].pose.raw_pose[0].numpy())
+        cube = pose.transform_points(asset_geometry(asset_spec(u.layouts[0], "cube_30")).vertices)
+        top = (np.c_[cube, np.ones(len(cube))] @ to_grasp.T)[:, 2].min()
+        closed.append((solver._fingers()[0, 0], knuckle[2], top))
+
+    solver._close_gently = watched
+    solver.solve()
+    assert bool(u.evaluate()["success"][0]) and not solver.reports[0].misses
+    jaw, knuckle, top = closed[0]
+    assert 0.45 < jaw < 0.65  # rad: closed on 3 cm
+    assert -0.012 < knuckle < -0.007  # m: 7-12 mm above the grasp origin
+    assert top > knuckle + SCREW_END_TOLERANCE  # the cube's top below it, by the descent's error
+    env.close()

@@ -52,6 +52,22 @@ def test_planar_grasps_lie_in_the_arms_plane_and_clear_the_table(uid):
             assert low[..., 2].min() >= support + table_gap(cfg) - TOL
 
 
+
+def test_planar_grasps_come_the_other_way_after_their_own():
+    # the wrist roll's range may hold one way only (the Koch's eraser 0.24 m out: IK failed for
+    # every pair's own way): the best pairs' own ways first, then the same grasps turned a half
+    # turn about the approach, in the same order
+    hand = ROBOTS["koch-v1.1"].hand
+    gripper, cfg = GripperModel(**dict(hand.boxes)), GraspConfig(sweep=hand.approach_offset)
+    grasps = asset_grasps(parse_urdf(SMALL_ZOO / "assets" / "marker" / "marker.urdf"), cfg, gripper)
+    pose = LayoutPose.from_layout([0.2, 0.05, 0.74, 0.0, 0.0, 0.0, 1.0]).matrix()
+    found = planar_grasps(grasps, pose, np.zeros(2), 0.74, None, (30.0, 15.0, 0.0),
+                          hand.tilts_at(0.2), cfg, gripper, 3)  # fmt: skip
+    assert len(found) == 6
+    for own, other in zip(found[:3], found[3:], strict=True):
+        assert np.allclose(other[0], own[0]) and np.allclose(other[2], own[2])
+        assert np.allclose(other[1], -own[1]) and other[3] == own[3]
+
 def edited_cube_layout(tmp_path, old: str, new: str):
     """The SO-100's 3 cm cube layout with its cube's URDF text ``old`` replaced by ``new``."""
     assets = tmp_path / "assets"
