@@ -101,9 +101,12 @@ def resume_store(out: Path, name: str, plan, bundle: Bundle) -> ResumeStore:
 
 
 def in_flight(plan) -> int:
-    """The tasks a plan has on the cluster at once: ``TASKS_AHEAD`` per worker (its
-    ``workers``, else the cluster's CPUs)."""
-    return TASKS_AHEAD * (plan.workers or cluster_cpus())
+    """The tasks a plan has on the cluster at once: its ``workers`` (else the cluster's CPUs),
+    ``TASKS_AHEAD`` per worker where the cluster's CPUs run no more than that many (the
+    further ones queue; on a larger cluster they would run: ``--workers`` caps the running)."""
+    cpus = cluster_cpus()
+    workers = plan.workers or cpus
+    return TASKS_AHEAD * workers if workers >= cpus else workers
 
 
 def episode_of(folder: Path) -> Episode:
