@@ -246,3 +246,16 @@ def test_a_local_rays_workers_import_the_episodes_module_while_the_driver_starts
         results = ray.get([remote.remote() for _ in range(3)])
     assert [warm for warm, _ in results] == [True] * 3
     assert len({pid for _, pid in results}) == 1, "one worker process, reused"
+
+
+@pytest.mark.parametrize("cpus, workers, expected", [(2, 2, 4), (2, 0, 4), (1, 1, 2), (16, 2, 2)])
+def test_tasks_queue_ahead_only_where_the_cluster_would_not_run_them(monkeypatch, cpus, workers,
+                                                                     expected):  # fmt: skip
+    """Two tasks per worker where they queue (a worker starts its next at once); on a larger
+    cluster ``--workers`` caps the episodes running, so none ahead."""
+    from types import SimpleNamespace
+
+    from embodied_envs.pipelines import on_ray
+
+    monkeypatch.setattr(on_ray, "cluster_cpus", lambda: cpus)
+    assert on_ray.in_flight(SimpleNamespace(workers=workers)) == expected
