@@ -14,12 +14,14 @@ from conftest import ROOT
 
 import embodied_envs  # noqa: F401
 from embodied_envs.layout import LayoutError, LayoutPose, parse_urdf
+from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers import PickPlaceSolver
-from embodied_envs.solvers.grasp_choice import GraspChoice, grasp_pose
+from embodied_envs.solvers.grasp_choice import GraspChoice, asset_spec, grasp_pose
 from embodied_envs.solvers.grasps import GraspConfig, asset_grasps
 from embodied_envs.solvers.gripper import GripperModel, box_corners, tcp_axes
 from embodied_envs.solvers.planar import planar_grasps, table_gap
+from embodied_envs.solvers.screw import SCREW_END_TOLERANCE
 
 SMALL_ZOO = ROOT / "tests" / "data" / "small_zoo"
 TOL = 1e-6  # unit vectors' products, in float64
@@ -146,3 +148,33 @@ def test_a_hand_with_a_still_jaw_takes_the_object_against_it(uid):
         assert abs(face - near) == pytest.approx(cfg.margin, abs=TOL)
         assert np.allclose(moved.q, pose.q, atol=TOL) and moved.p[2] == pytest.approx(0.75)
         assert opening == hand.action_openings[-1][0]  # the moving jaw its widest
+
+
+def test_the_koch_takes_a_thin_domino_between_its_jaws_faces():
+    """A 0.8 cm domino (held-out layout, seed 0): the open fingers held the obstacle margin
+    above the table as well (5 mm) left the Koch's tips 3 mm of it, the moving jaw's tip rode
+    over its edge and shut (three misses). Held the descent's error above it, the tips stand
+    in its lower half at the close, the jaw closes on its 2.4 cm side and it is held."""
+    layout = ROOT / "tests" / "data" / "small_zoo_hidden" / "layouts" / "koch_domino.json"
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
+    env.reset(seed=0)
+    u = env.unwrapped
+    solver = PickPlaceSolver(env, seed=0)
+    closed = []
+    gentle = solver._close_gently
+
+    def watched(envs):
+        tips = solver._tcp().p[0, 2].item() - dict(ROBOTS["koch-v1.1"].hand.boxes)["finger_tip"]
+        gentle(envs)
+        pose = LayoutPose.from_raw(u.task_scene.movers[0].pose.raw_pose[0].numpy())
+        z = pose.transform_points(asset_geometry(asset_spec(u.layouts[0], "domino")).vertices)[:, 2]
+        closed.append((solver._fingers()[0, 0], tips - z.min(), z.max() - z.min()))
+
+    solver._close_gently = watched
+    solver.solve()
+    assert bool(u.evaluate()["success"][0]) and not solver.reports[0].misses
+    jaw, tips, height = closed[0]
+    assert 0.3 < jaw < 0.5  # rad: closed on 2.2-2.6 cm (robots.KOCH_HAND.action_openings)
+    assert tips < height / 2  # the tips in its lower half, not 3 mm off its top
+    assert tips > -SCREW_END_TOLERANCE  # the descent ends at most that far low
+    env.close()
