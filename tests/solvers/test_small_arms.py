@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, solve_watching_close
 
 import embodied_envs  # noqa: F401
 from embodied_envs.layout import LayoutError, LayoutPose, parse_urdf
@@ -156,24 +156,19 @@ def test_the_koch_takes_a_thin_domino_between_its_jaws_faces():
     over its edge and shut (three misses). Held the descent's error above it, the tips stand
     in its lower half at the close, the jaw closes on its 2.4 cm side and it is held."""
     layout = ROOT / "tests" / "data" / "small_zoo_hidden" / "layouts" / "koch_domino.json"
-    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
-    env.reset(seed=0)
-    u = env.unwrapped
-    solver = PickPlaceSolver(env, seed=0)
-    closed = []
-    gentle = solver._close_gently
+    tip = dict(ROBOTS["koch-v1.1"].hand.boxes)["finger_tip"]
 
-    def watched(envs):
-        tips = solver._tcp().p[0, 2].item() - dict(ROBOTS["koch-v1.1"].hand.boxes)["finger_tip"]
-        gentle(envs)
+    def look(solver):
+        u = solver.base
         pose = LayoutPose.from_raw(u.task_scene.movers[0].pose.raw_pose[0].numpy())
         z = pose.transform_points(asset_geometry(asset_spec(u.layouts[0], "domino")).vertices)[:, 2]
-        closed.append((solver._fingers()[0, 0], tips - z.min(), z.max() - z.min()))
+        tips = solver._tcp().p[0, 2].item() - tip
+        return solver._fingers()[0, 0], tips - z.min(), z.max() - z.min()
 
-    solver._close_gently = watched
-    solver.solve()
+    env, solver, closed = solve_watching_close(layout, 0, look)
+    u = env.unwrapped
     assert bool(u.evaluate()["success"][0]) and not solver.reports[0].misses
-    jaw, tips, height = closed[0]
+    (_, tips, height), (jaw, _, _) = closed[0]  # the tips and the domino before, the jaw after
     assert 0.3 < jaw < 0.5  # rad: closed on 2.2-2.6 cm (robots.KOCH_HAND.action_openings)
     assert tips < height / 2  # the tips in its lower half, not 3 mm off its top
     assert tips > -SCREW_END_TOLERANCE  # the descent ends at most that far low
