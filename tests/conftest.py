@@ -103,3 +103,27 @@ def panda_planner():
                        move_group="panda_hand_tcp")  # fmt: skip
     mp.set_base_pose([0, 0, 0, 1, 0, 0, 0])
     return mp
+
+
+def solve_watching_close(layout: Path, seed: int, look) -> tuple:
+    """The expert on ``layout``'s episode ``seed`` (``pd_joint_pos``), ``look(solver)`` called
+    right before and right after each gentle close of the jaw: ``(env, solver, [(before,
+    after) per close])``."""
+    import gymnasium as gym
+
+    import embodied_envs  # noqa: F401
+    from embodied_envs.solvers import PickPlaceSolver
+
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
+    env.reset(seed=seed)
+    solver, seen = PickPlaceSolver(env, seed=seed), []
+    gentle = solver._close_gently
+
+    def watched(envs):
+        before = look(solver)
+        gentle(envs)
+        seen.append((before, look(solver)))
+
+    solver._close_gently = watched
+    solver.solve()
+    return env, solver, seen

@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import sapien
-from conftest import DATA, ROOT
+from conftest import DATA, ROOT, solve_watching_close
 
 import embodied_envs  # noqa: F401
 from embodied_envs.layout import LayoutPose
@@ -323,16 +323,8 @@ def test_koch_takes_a_3cm_cube_below_its_moving_jaws_knuckle():
     4 mm below its top and the cube slipped out at every lift (seed 0: three misses); taken
     ``grasp_depth`` below its top, the cube's top stays below the knuckle, the jaw's face
     closes on it, and the cube is held at the goal (zoo layout, seed 0)."""
-    env = gym.make(ENV_ID, layout_file=str(SMALL_ZOO / "koch_cube_30.json"),
-                   control_mode="pd_joint_pos")  # fmt: skip
-    env.reset(seed=0)
-    u = env.unwrapped
-    solver = PickPlaceSolver(env, seed=0)
-    closed = []
-    gentle = solver._close_gently
-
-    def watched(envs):
-        gentle(envs)
+    def look(solver):
+        u = solver.base
         to_grasp = np.linalg.inv(solver._tcp().to_transformation_matrix()[0].numpy())
         link = u.agent.robot.links_map["gripper"]
         m = to_grasp @ link.pose.to_transformation_matrix()[0].numpy()
@@ -345,12 +337,12 @@ def test_koch_takes_a_3cm_cube_below_its_moving_jaws_knuckle():
         pose = LayoutPose.from_raw(u.task_scene.movers[0].pose.raw_pose[0].numpy())
         cube = pose.transform_points(asset_geometry(asset_spec(u.layouts[0], "cube_30")).vertices)
         top = (np.c_[cube, np.ones(len(cube))] @ to_grasp.T)[:, 2].min()
-        closed.append((solver._fingers()[0, 0], knuckle[2], top))
+        return solver._fingers()[0, 0], knuckle[2], top
 
-    solver._close_gently = watched
-    solver.solve()
+    env, solver, closed = solve_watching_close(SMALL_ZOO / "koch_cube_30.json", 0, look)
+    u = env.unwrapped
     assert bool(u.evaluate()["success"][0]) and not solver.reports[0].misses
-    jaw, knuckle, top = closed[0]
+    jaw, knuckle, top = closed[0][1]
     assert 0.45 < jaw < 0.65  # rad: closed on 3 cm
     assert -0.012 < knuckle < -0.007  # m: 7-12 mm above the grasp origin
     assert top > knuckle + SCREW_END_TOLERANCE  # the cube's top below it, by the descent's error

@@ -10,16 +10,18 @@ from types import SimpleNamespace
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, solve_watching_close
 
 import embodied_envs  # noqa: F401
 from embodied_envs.layout import LayoutError, LayoutPose, parse_urdf
+from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers import PickPlaceSolver
-from embodied_envs.solvers.grasp_choice import GraspChoice, grasp_pose
+from embodied_envs.solvers.grasp_choice import GraspChoice, asset_spec, grasp_pose
 from embodied_envs.solvers.grasps import GraspConfig, asset_grasps
 from embodied_envs.solvers.gripper import GripperModel, box_corners, tcp_axes
 from embodied_envs.solvers.planar import planar_grasps, table_gap
+from embodied_envs.solvers.screw import SCREW_END_TOLERANCE
 
 SMALL_ZOO = ROOT / "tests" / "data" / "small_zoo"
 TOL = 1e-6  # unit vectors' products, in float64
@@ -162,3 +164,28 @@ def test_a_hand_with_a_still_jaw_takes_the_object_against_it(uid):
         assert abs(face - near) == pytest.approx(cfg.margin, abs=TOL)
         assert np.allclose(moved.q, pose.q, atol=TOL) and moved.p[2] == pytest.approx(0.75)
         assert opening == hand.action_openings[-1][0]  # the moving jaw its widest
+
+
+def test_the_koch_takes_a_thin_domino_between_its_jaws_faces():
+    """A 0.8 cm domino (held-out layout, seed 0): the open fingers held the obstacle margin
+    above the table as well (5 mm) left the Koch's tips 3 mm of it, the moving jaw's tip rode
+    over its edge and shut (three misses). Held the descent's error above it, the tips stand
+    in its lower half at the close, the jaw closes on its 2.4 cm side and it is held."""
+    layout = ROOT / "tests" / "data" / "small_zoo_hidden" / "layouts" / "koch_domino.json"
+    tip = dict(ROBOTS["koch-v1.1"].hand.boxes)["finger_tip"]
+
+    def look(solver):
+        u = solver.base
+        pose = LayoutPose.from_raw(u.task_scene.movers[0].pose.raw_pose[0].numpy())
+        z = pose.transform_points(asset_geometry(asset_spec(u.layouts[0], "domino")).vertices)[:, 2]
+        tips = solver._tcp().p[0, 2].item() - tip
+        return solver._fingers()[0, 0], tips - z.min(), z.max() - z.min()
+
+    env, solver, closed = solve_watching_close(layout, 0, look)
+    u = env.unwrapped
+    assert bool(u.evaluate()["success"][0]) and not solver.reports[0].misses
+    (_, tips, height), (jaw, _, _) = closed[0]  # the tips and the domino before, the jaw after
+    assert 0.3 < jaw < 0.5  # rad: closed on 2.2-2.6 cm (robots.KOCH_HAND.action_openings)
+    assert tips < height / 2  # the tips in its lower half, not 3 mm off its top
+    assert tips > -SCREW_END_TOLERANCE  # the descent ends at most that far low
+    env.close()
