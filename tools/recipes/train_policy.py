@@ -336,7 +336,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="the robot's joint state groups the policy does not see (default qvel)")
     ap.add_argument("--hold", action="store_true",
                     help="train the chunk's steps past an episode's end as its last action")
-    ap.add_argument("--obs-noise", type=float, default=0.1,
+    ap.add_argument("--obs-noise", type=float, default=0.02,
                     help="training noise on the normalised observation (standard deviations)")
     ap.add_argument("--batch-size", type=int, default=256)
     ap.add_argument("--lr", type=float, default=1e-3)
