@@ -45,6 +45,13 @@ def test_chunk_targets_past_the_episode_end_are_masked_or_held():
     held, valid = train_policy.chunk_targets([acts], 2, hold=True)
     np.testing.assert_array_equal(held, targets)
     assert valid.all()
+    # relative to each step's anchor: the action a step ahead plus how far the anchor moved
+    anchor = np.array([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0]], np.float32)
+    relative, _ = train_policy.chunk_targets([acts], 2, hold=False, anchors=[anchor])
+    np.testing.assert_array_equal(relative[:, 0], acts)  # a step's own action is unchanged
+    np.testing.assert_array_equal(relative[0, 1], acts[1] + [1.0, 0.0])
+    np.testing.assert_array_equal(relative[1, 1], acts[2] + [2.0, 0.0])
+    np.testing.assert_array_equal(relative[2, 1], acts[2])  # past the end: held, no motion
 
 
 def test_training_writes_a_policy_that_eval_runs(trained, tmp_path, capsys):
@@ -53,7 +60,11 @@ def test_training_writes_a_policy_that_eval_runs(trained, tmp_path, capsys):
     observations, actions, _ = train_policy.load_episodes(demos, -1)
     assert info["control_mode"] == MODE and info["act_dim"] == 8 and info["episodes"] == 2
     assert info["pairs"] == sum(len(a) for a in actions) > 100 and info["iterations"] > 0
-    assert info["chunk"] == CHUNK and info["drop"] == ["qvel"]
+    assert info["chunk"] == CHUNK and info["drop"] == ["qvel"] and info["frame"] == "target"
+    # the Panda's arm (pd_joint_delta_pos, 0.1 rad per unit action) is run as joint targets
+    assert info["target_joints"] == list(range(7))
+    policy = torch.jit.load(str(out / "policy.pt"))
+    torch.testing.assert_close(policy.coef, torch.tensor([10.0] * 7 + [0.0]))
     code = main(["eval", "--policy", str(out / "policy.pt"), "--control-mode", MODE,
                  "--episodes", "1", "--seed", "3", "--max-episode-steps", "20", "--video", "none",
                  "--out", str(tmp_path / "ev")])  # fmt: skip
@@ -82,9 +93,13 @@ def test_temporal_ensembling_and_the_reset_hook(trained):
     module = torch.jit.load(str(out / "policy.pt"))  # the TorchScript round trip
     low, high = module.act_low, module.act_high
     chunk_a, chunk_b = module.raw(first)[0], module.raw(second)[0]
-    # step 2's action: its own prediction (weight 1) and step 1's (made a step ahead)
+    target_a, target_b = module.targets(first)[0], module.targets(second)[0]
+    anchor_b = module.anchor(second)[0]  # the arm's joints as targets, in action units
+    torch.testing.assert_close(target_b - chunk_b, anchor_b.expand_as(chunk_b))
+    # step 2's action: its own prediction (weight 1) and step 1's (made a step ahead), as the
+    # joint targets they set, less the joints at step 2
     w = math.exp(-DECAY)
-    expected = torch.clamp((chunk_b[0] + w * chunk_a[1]) / (1 + w), low, high)
+    expected = torch.clamp((target_b[0] + w * target_a[1]) / (1 + w) - anchor_b, low, high)
     policy = load_policy(str(out / "policy.pt"), env=None)  # eval's loader
     with torch.no_grad():
         torch.testing.assert_close(policy.act(first)[0], torch.clamp(chunk_a[0], low, high))

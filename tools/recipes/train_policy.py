@@ -7,12 +7,20 @@ The policy maps a state observation to the next ``--chunk`` actions. Observation
 per dimension with the dataset's mean and standard deviation (dimensions that never vary keep
 scale 1), and the observation groups named by ``--drop`` (e.g. ``qvel``) are zeroed; training
 adds Gaussian noise of ``--obs-noise`` standard deviations to the normalised observation. The loss
-is L1 on the normalised actions, with the steps of a chunk past its episode's end left out. At
-run time each step's chunk is added to a running weighted sum of the predictions for the coming
-steps (the prediction made ``j`` steps ahead of the step it is for weighs ``exp(-decay * j)``),
-and the step's action is that weighted mean, clamped to the demonstrated range. The module keeps
-that sum per env; its ``reset()`` (TorchScript-exported, called by ``embodied-envs eval`` at each
-episode start) clears it.
+is L1 on the normalised actions (per step of the chunk), with the steps of a chunk past its
+episode's end left out. At run time each step's chunk is added to a running weighted sum of the
+predictions for the coming steps (the prediction made ``j`` steps ahead of the step it is for
+weighs ``exp(-decay * j)``), and the step's action is that weighted mean, clamped to the
+demonstrated range. The module keeps that sum per env; its ``reset()`` (TorchScript-exported,
+called by ``embodied-envs eval`` at each episode start) clears it.
+
+``--frame target`` (the default): an arm controller that adds its action to the joints' positions
+(``pd_joint_delta_pos``: target = joints now + action) is learned and ensembled in the joint
+targets its actions set, as ACT and diffusion policy predict absolute joint targets: the chunk
+predicted at step ``t`` is the targets of steps ``t..t+chunk-1`` less the joints at ``t``, the
+ensemble sums targets, and the action run at a step is the ensembled target less the joints
+then. Learned as deltas (``--frame action``), a prediction's error is a joint velocity that the
+controller integrates (the arm drifts away and never holds still); as targets it is an offset.
 
 Training runs for ``--minutes`` of wall-clock time (cosine learning-rate decay over that time),
 then writes ``OUT/policy.pt`` (TorchScript, run by ``embodied-envs eval --policy OUT/policy.pt``)
@@ -56,17 +64,19 @@ class ChunkPolicy(nn.Module):
 
     def __init__(
         self, obs_mean, obs_std, obs_keep, act_mean, act_std, act_low, act_high,
-        chunk: int, hidden: list[int], decay: float,
+        chunk: int, hidden: list[int], decay: float, frame: tuple[np.ndarray, np.ndarray],
     ):  # fmt: skip
         super().__init__()
-        obs_dim, act_dim = len(obs_mean), len(act_mean)
+        obs_dim, act_dim = len(obs_mean), len(act_low)
         self.chunk, self.act_dim = chunk, act_dim
+        coef, joint = frame  # target_frame: per action, its joint's observed position's weight
         for name, value in dict(
             obs_mean=obs_mean, obs_std=obs_std, obs_keep=obs_keep, act_mean=act_mean,
             act_std=act_std, act_low=act_low, act_high=act_high,
-            weights=np.exp(-decay * np.arange(chunk)),
+            weights=np.exp(-decay * np.arange(chunk)), coef=coef,
         ).items():  # fmt: skip
             self.register_buffer(name, torch.as_tensor(np.asarray(value), dtype=torch.float32))
+        self.register_buffer("joint", torch.as_tensor(np.asarray(joint), dtype=torch.long))
         layers: list[nn.Module] = []
         size = obs_dim
         for width in hidden:
@@ -86,8 +96,19 @@ class ChunkPolicy(nn.Module):
         return self.net(x).view(-1, self.chunk, self.act_dim)
 
     def raw(self, obs: torch.Tensor) -> torch.Tensor:
-        """Observations -> action chunks ``(B, chunk, A)`` in the env's action units."""
+        """Observations -> action chunks ``(B, chunk, A)`` in the env's action units, each step's
+        relative to the joints of ``obs`` (the actions were the joints to stay there)."""
         return self.raw_normalised(self.normalise(obs)) * self.act_std + self.act_mean
+
+    def anchor(self, obs: torch.Tensor) -> torch.Tensor:
+        """``(B, A)``: what the actions of a delta-joint controller are relative to in
+        ``obs`` (its joints' positions over the action's scale; 0 for the other actions)."""
+        return obs[:, self.joint] * self.coef
+
+    def targets(self, obs: torch.Tensor) -> torch.Tensor:
+        """Observations -> the chunks as targets ``(B, chunk, A)``: :meth:`raw` plus the
+        anchor (a delta-joint controller's joint targets, in action units)."""
+        return self.raw(obs) + self.anchor(obs)[:, None]
 
     @torch.jit.export
     def reset(self) -> None:
@@ -96,14 +117,14 @@ class ChunkPolicy(nn.Module):
         self.pending_weight = torch.zeros(0, self.chunk)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        chunk = self.raw(obs)
+        chunk = self.targets(obs)
         batch = chunk.shape[0]
         if self.pending.shape[0] != batch:  # the first step after reset(), or a new batch
             self.pending = torch.zeros_like(chunk)
             self.pending_weight = torch.zeros(batch, self.chunk, device=chunk.device)
         pending = self.pending + chunk * self.weights[None, :, None]
         weight = self.pending_weight + self.weights[None, :]
-        action = pending[:, 0] / weight[:, :1]
+        action = pending[:, 0] / weight[:, :1] - self.anchor(obs)
         self.pending = torch.cat([pending[:, 1:], torch.zeros_like(pending[:, :1])], 1)
         self.pending_weight = torch.cat([weight[:, 1:], torch.zeros_like(weight[:, :1])], 1)
         return torch.clamp(action, self.act_low, self.act_high)
@@ -132,18 +153,59 @@ def load_episodes(path: Path, num_demos: int) -> tuple[list, list, dict]:
 
 
 def chunk_targets(
-    actions: list[np.ndarray], chunk: int, hold: bool
+    actions: list[np.ndarray], chunk: int, hold: bool, anchors: list[np.ndarray] | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per step of every episode, its next ``chunk`` actions ``(N, chunk, A)`` and which of them
     count in the loss ``(N, chunk)``. Past the episode's end: the last action repeated, counted
-    with ``hold`` (the arm is still at a success: the policy learns to stay), else left out."""
+    with ``hold`` (the arm is still at a success: the policy learns to stay), else left out.
+
+    ``anchors`` (per episode ``(T, A)``, :meth:`ChunkPolicy.anchor` of its observations): each
+    action ``j`` steps ahead is taken relative to the step's own anchor, not its own step's (a
+    delta-joint controller's target ``a[t+j] + anchor[t+j]``, less ``anchor[t]``)."""
     targets, valid = [], []
-    for acts in actions:
+    for e, acts in enumerate(actions):
         steps = len(acts)
-        index = np.arange(steps)[:, None] + np.arange(chunk)[None, :]
-        targets.append(acts[np.minimum(index, steps - 1)])
-        valid.append(np.ones_like(index, bool) if hold else index < steps)
+        index = np.minimum(np.arange(steps)[:, None] + np.arange(chunk)[None, :], steps - 1)
+        target = acts[index]
+        if anchors is not None:
+            anchor = anchors[e][:steps]
+            target = target + anchor[index] - anchor[:, None]
+        targets.append(target)
+        valid.append(np.ones_like(index, bool) if hold else
+                     np.arange(steps)[:, None] + np.arange(chunk)[None, :] < steps)  # fmt: skip
     return np.concatenate(targets), np.concatenate(valid)
+
+
+def target_frame(env_info: dict, obs_dim: int, act_dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per action value, ``(coef, joint)``: for an arm controller that adds its action to the
+    joints' positions (ManiSkill's ``use_delta`` without ``use_target``: ``pd_joint_delta_pos``),
+    the observed joint it moves (``qpos`` leads the state observation) and one over the action's
+    scale, so that ``action + coef * obs[joint]`` is the joint target it sets (in action units,
+    less a constant); 0 for every other action. Read from the dataset's env, made once."""
+    import gymnasium as gym
+
+    kwargs = dict(env_info.get("env_kwargs", {}), obs_mode="state", render_mode=None)
+    env = gym.make(env_info["env_id"], **kwargs)
+    try:
+        controller = env.unwrapped.agent.controller
+        parts = getattr(controller, "controllers", {"all": controller})
+        mapping = getattr(controller, "action_mapping", {"all": (0, act_dim)})
+        coef, joint = np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64)
+        for uid, part in parts.items():
+            cfg, (start, end) = part.config, mapping[uid]
+            joints = np.asarray(part.active_joint_indices.cpu()).reshape(-1)
+            relative = getattr(cfg, "use_delta", False) and not getattr(cfg, "use_target", True)
+            if not relative or len(joints) != end - start or joints.max() >= obs_dim:
+                continue
+            half = np.ones(len(joints))
+            if getattr(part, "_normalize_action", False):  # actions in [-1, 1]: lower..upper
+                low, high = (np.broadcast_to(np.asarray(v, np.float64), half.shape)
+                             for v in (cfg.lower, cfg.upper))  # fmt: skip
+                half = (high - low) / 2
+            coef[start:end], joint[start:end] = 1.0 / half, joints
+    finally:
+        env.close()
+    return coef, joint
 
 
 def agent_groups(path: Path) -> dict[str, slice]:
@@ -179,15 +241,20 @@ def train(args: argparse.Namespace) -> dict:
     rng = np.random.default_rng(args.seed)
     observations, actions, env_info = load_episodes(args.demos, args.num_demos)
     obs = np.concatenate([o[: len(a)] for o, a in zip(observations, actions, strict=True)])
-    targets, valid = chunk_targets(actions, args.chunk, args.hold)
-    flat = np.concatenate(actions)
+    act_dim = actions[0].shape[1]
+    frame = (np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64))
+    if args.frame == "target":
+        frame = target_frame(env_info, obs.shape[1], act_dim)
+    anchors = [o[:, frame[1]] * frame[0] for o in observations]
+    targets, valid = chunk_targets(actions, args.chunk, args.hold, anchors)
+    flat = targets[:, 0]  # the step's own action (relative to its own anchor: the action)
     obs_std = obs.std(0)
-    act_std = flat.std(0)
+    act_std = targets.std(0)  # per step of the chunk and action: (chunk, A)
     policy = ChunkPolicy(
         obs.mean(0), np.where(obs_std < MIN_STD, 1.0, obs_std),
-        keep_mask(args.drop, args.demos, obs.shape[1]), flat.mean(0),
+        keep_mask(args.drop, args.demos, obs.shape[1]), targets.mean(0),
         np.where(act_std < MIN_STD, 1.0, act_std), flat.min(0), flat.max(0),
-        args.chunk, args.hidden, args.decay,
+        args.chunk, args.hidden, args.decay, frame,
     )  # fmt: skip
     x = policy.normalise(torch.from_numpy(obs))
     y = (torch.from_numpy(targets) - policy.act_mean) / policy.act_std
@@ -227,6 +294,8 @@ def train(args: argparse.Namespace) -> dict:
         "obs_dim": int(x.shape[1]),
         "act_dim": int(flat.shape[1]),
         "chunk": args.chunk,
+        "frame": args.frame,
+        "target_joints": [int(j) for j, c in zip(frame[1], frame[0], strict=True) if c != 0],
         "decay": args.decay,
         "hidden": args.hidden,
         "drop": args.drop,
@@ -257,13 +326,17 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--chunk", type=int, default=16, help="actions predicted per step")
     ap.add_argument("--decay", type=float, default=0.1,
                     help="temporal ensembling: a prediction j steps ahead weighs exp(-decay*j)")
+    ap.add_argument("--frame", choices=["target", "action"], default="target",
+                    help="target: a delta-joint controller's actions are predicted and ensembled "
+                    "as the joint targets they set and run relative to the joints of the step "
+                    "they run at; action: as the actions")
     ap.add_argument("--hidden", type=int, nargs="+", default=[256, 256],
                     help="the MLP's hidden widths")
     ap.add_argument("--drop", nargs="*", default=["qvel"], choices=["qpos", "qvel"],
                     help="the robot's joint state groups the policy does not see (default qvel)")
     ap.add_argument("--hold", action="store_true",
                     help="train the chunk's steps past an episode's end as its last action")
-    ap.add_argument("--obs-noise", type=float, default=0.1,
+    ap.add_argument("--obs-noise", type=float, default=0.02,
                     help="training noise on the normalised observation (standard deviations)")
     ap.add_argument("--batch-size", type=int, default=256)
     ap.add_argument("--lr", type=float, default=1e-3)
