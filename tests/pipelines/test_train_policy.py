@@ -6,16 +6,20 @@ import math
 import sys
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 import torch
 from conftest import DEFAULT_LAYOUT
+from mani_skill.trajectory import utils as trajectory_utils
+from mani_skill.trajectory.dataset import load_h5_data
 
 from embodied_envs.cli.main import main
 from embodied_envs.pipelines.collect import CollectPlan, collect
 from embodied_envs.pipelines.policies import load_policy
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools" / "recipes"))
+import perturb  # noqa: E402
 import train_policy  # noqa: E402
 
 MODE = "pd_joint_delta_pos"
@@ -57,7 +61,7 @@ def test_chunk_targets_past_the_episode_end_are_masked_or_held():
 def test_training_writes_a_policy_that_eval_runs(trained, tmp_path, capsys):
     demos, out = trained
     info = json.loads((out / "train.json").read_text())
-    observations, actions, _ = train_policy.load_episodes(demos, -1)
+    observations, actions, _, _ = train_policy.load_episodes(demos, -1)
     assert info["control_mode"] == MODE and info["act_dim"] == 8 and info["episodes"] == 2
     assert info["pairs"] == sum(len(a) for a in actions) > 100 and info["iterations"] > 0
     assert info["chunk"] == CHUNK and info["drop"] == ["qvel"] and info["frame"] == "target"
@@ -76,8 +80,8 @@ def test_training_writes_a_policy_that_eval_runs(trained, tmp_path, capsys):
 def test_the_dropped_group_does_not_change_the_action(trained):
     demos, out = trained
     policy = torch.jit.load(str(out / "policy.pt"))
-    observations, _, _ = train_policy.load_episodes(demos, -1)
-    qvel = train_policy.agent_groups(demos)["qvel"]
+    observations, _, _, _ = train_policy.load_episodes(demos, -1)
+    qvel = train_policy.agent_groups(demos)[0]["qvel"]
     assert qvel == slice(9, 18)  # the Panda's 9 joints: qpos, then qvel
     obs = torch.from_numpy(observations[0][5:6])
     moved = obs.clone()
@@ -87,7 +91,7 @@ def test_the_dropped_group_does_not_change_the_action(trained):
 
 def test_temporal_ensembling_and_the_reset_hook(trained):
     demos, out = trained
-    observations, _, _ = train_policy.load_episodes(demos, -1)
+    observations, _, _, _ = train_policy.load_episodes(demos, -1)
     obs = torch.from_numpy(observations[0][:2])
     first, second = obs[:1], obs[1:2]
     module = torch.jit.load(str(out / "policy.pt"))  # the TorchScript round trip
@@ -106,3 +110,96 @@ def test_temporal_ensembling_and_the_reset_hook(trained):
         torch.testing.assert_close(policy.act(second)[0], expected)
         policy.reset(0)  # the episode starts again: nothing pending
         torch.testing.assert_close(policy.act(second)[0], torch.clamp(chunk_b[0], low, high))
+
+
+POS_TOL = 1e-4  # m: float32 observations of poses ~1 m from the origin, pinocchio against PhysX
+
+
+def test_corrective_copies_observe_what_the_env_observes_with_the_arm_moved(trained):
+    """A copy's observation equals the env's own with its arm set to the moved joints (its TCP,
+    the TCP-to-mover vector); with no offset it is the demonstrated step."""
+    demos, _ = trained
+    observations, _, bases, env_info = train_policy.load_episodes(demos, -1)
+    obs, base = observations[0][:40:8], bases[0][:40:8]  # steps before the grasp
+    env = train_policy.dataset_env(env_info)
+    try:
+        slices, kin = perturb.obs_slices(env), perturb.Kinematics(env)
+        same, _, _ = perturb.corrective_copies(obs, base, np.arange(7), kin, slices, 0.0, 1,
+                                               np.random.default_rng(0))  # fmt: skip
+        np.testing.assert_allclose(same, obs, atol=POS_TOL)
+        copies, index, offset = perturb.corrective_copies(
+            obs, base, np.arange(7), kin, slices, 0.05, 2, np.random.default_rng(1))
+        assert copies.shape == (10, obs.shape[1]) and list(index) == [0, 1, 2, 3, 4] * 2
+        moved_by = np.linalg.norm(copies[:, 19:22] - obs[index, 19:22], axis=1)
+        assert np.median(moved_by) > 0.01  # 0.05 rad moves the TCP by centimetres
+        env.reset(seed=3)  # the demos' first seed: the same scene as episode 0
+        with h5py.File(demos, "r") as f:  # the recorded scene at each step (ManiSkill's replay)
+            states = trajectory_utils.dict_to_list_of_dicts(load_h5_data(f["traj_0"]["env_states"]))
+        robot = env.unwrapped.agent.robot
+        for row in range(len(copies)):
+            env.unwrapped.set_state_dict(states[0:40:8][index[row]])
+            robot.set_qpos(torch.from_numpy(copies[row : row + 1, slices["qpos"]]))
+            seen = env.unwrapped.get_obs()
+            for group in ("qpos", "tcp_pose", "tcp_to_mover_pos"):
+                got = np.asarray(seen["extra" if group != "qpos" else "agent"][group])[0]
+                want = copies[row, slices[group]]
+                if group == "tcp_pose" and np.dot(got[3:], want[3:]) < 0:
+                    got[3:] *= -1  # q and -q are the same turn
+                np.testing.assert_allclose(got, want, atol=POS_TOL, err_msg=group)
+    finally:
+        env.close()
+
+
+def test_corrective_copies_keep_the_targets_and_move_the_labels(trained, tmp_path):
+    """Trained with copies, the pairs double and train.json says so; a copy's label is the
+    demonstrated joint targets less its moved joints."""
+    demos, _ = trained
+    observations, actions, bases, env_info = train_policy.load_episodes(demos, -1)
+    env = train_policy.dataset_env(env_info)
+    try:
+        frame = train_policy.target_frame(env, observations[0].shape[1], 8)
+        anchors = [o[:, frame[1]] * frame[0] for o in observations]
+        targets, valid = train_policy.chunk_targets(actions, CHUNK, False, anchors)
+        obs = np.concatenate([o[: len(a)] for o, a in zip(observations, actions, strict=True)])
+        args = train_policy.parse_args(["--demos", str(demos), "--out", str(tmp_path),
+                                        "--perturb", "0.03", "--perturb-copies", "1"])  # fmt: skip
+        big, labels, mask = train_policy.with_corrective_copies(
+            args, env, (observations, actions, bases), obs, targets, valid, frame)
+    finally:
+        env.close()
+    n = len(obs)
+    assert len(big) == len(labels) == len(mask) == 2 * n
+    coef = frame[0][:7]  # 10 per radian: the Panda's 0.1 rad per unit action
+    moved = (big[n:, :7] - obs[:, :7]) * coef  # the copies' joint offsets, in action units
+    # the joint targets (label + anchor) are the demonstrated ones, for every step of the chunk
+    np.testing.assert_allclose(labels[n:, :, :7] + (big[n:, None, :7] * coef),
+                               targets[:, :, :7] + (obs[:, None, :7] * coef), atol=1e-4)
+    # the gripper's where the TCP moved off while nothing is held: open (as at the start); as
+    # demonstrated elsewhere (the copies of held steps keep the release ahead)
+    reopen = np.linalg.norm(big[n:, 19:22] - obs[:, 19:22], axis=1) > perturb.GRASP_TOL
+    reopen &= obs[:, 18] < 0.5
+    assert 0 < reopen.sum() < n and (targets[~reopen, :, 7] < 0).any()  # some closing kept
+    np.testing.assert_array_equal(labels[n:][~reopen, :, 7], targets[~reopen, :, 7])
+    np.testing.assert_array_equal(labels[n:][reopen, :, 7], actions[0][0, 7])
+    assert np.abs(moved).max() > 0.1 and (mask[n:] == valid).all()
+
+
+def test_a_dataset_whose_layout_moved_names_the_field_and_the_fix(trained, tmp_path):
+    """A dataset copied from another machine names a layout file not here: one line naming
+    the dataset, the field and --layout; with --layout the env is made."""
+    demos, _ = trained
+    moved = tmp_path / "trajectory.h5"
+    moved.write_bytes(demos.read_bytes())
+    meta = json.loads(demos.with_suffix(".json").read_text())
+    meta["env_info"]["env_kwargs"]["layout_file"] = "/elsewhere/default.json"
+    moved.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(SystemExit) as e:
+        train_policy.main(["--demos", str(moved), "--out", str(tmp_path / "run")])
+    assert str(e.value) == (f"{moved}: env_info.env_kwargs.layout_file /elsewhere/default.json "
+                            "does not exist here. Fix: --layout FILE, the layout the "
+                            "demonstrations were collected on")  # fmt: skip
+    env = train_policy.dataset_env(meta["env_info"], DEFAULT_LAYOUT, moved)
+    try:
+        assert Path(env.unwrapped.layout_set.files[0]) == DEFAULT_LAYOUT
+    finally:
+        env.close()

@@ -50,6 +50,9 @@ from torch import nn
 
 from embodied_envs.paths import atomic_output
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import perturb  # noqa: E402
+
 # one thread: on the shared 2-core machine (load 20) a training step took 3x longer with two
 # (7.8 against 2.5 steps/s, a 256x256 MLP), whose threads wait for each other
 TORCH_THREADS = 1
@@ -130,12 +133,13 @@ class ChunkPolicy(nn.Module):
         return torch.clamp(action, self.act_low, self.act_high)
 
 
-def load_episodes(path: Path, num_demos: int) -> tuple[list, list, dict]:
-    """Each episode's state observations ``(T+1, D)`` and actions ``(T, A)``, and the
-    dataset's ``env_info``."""
+def load_episodes(path: Path, num_demos: int) -> tuple[list, list, list, dict]:
+    """Each episode's state observations ``(T+1, D)``, actions ``(T, A)`` and the robot's
+    recorded base poses ``(T+1, 7)``, and the dataset's ``env_info``."""
     meta = json.loads(path.with_suffix(".json").read_text())
     episodes = meta["episodes"][: num_demos if num_demos > 0 else None]
-    observations, actions = [], []
+    observations, actions, bases = [], [], []
+    robot = agent_groups(path)[1] if episodes else ""
     with h5py.File(path, "r") as f:
         for ep in episodes:
             traj = f[f"traj_{ep['episode_id']}"]
@@ -147,9 +151,10 @@ def load_episodes(path: Path, num_demos: int) -> tuple[list, list, dict]:
                 )
             observations.append(np.asarray(traj["obs"], np.float32))
             actions.append(np.asarray(traj["actions"], np.float32))
+            bases.append(np.asarray(traj["env_states"]["articulations"][robot][:, : perturb.POSE]))
     if not episodes:
         sys.exit(f"{path}: no episodes")
-    return observations, actions, meta["env_info"]
+    return observations, actions, bases, meta["env_info"]
 
 
 def chunk_targets(
@@ -176,52 +181,99 @@ def chunk_targets(
     return np.concatenate(targets), np.concatenate(valid)
 
 
-def target_frame(env_info: dict, obs_dim: int, act_dim: int) -> tuple[np.ndarray, np.ndarray]:
+def dataset_env(env_info: dict, layout: Path | None = None, demos: Path | None = None):
+    """The dataset's env, made once, with the state observation as a dict (its groups' slices);
+    ``layout`` in place of the layout file the dataset names (a dataset moved between machines)."""
+    import gymnasium as gym
+
+    kwargs = dict(env_info.get("env_kwargs", {}), obs_mode="state_dict", render_mode=None)
+    if layout is not None:
+        kwargs["layout_file"] = str(layout)
+    named = kwargs.get("layout_file")
+    if named is not None and not Path(named).exists():
+        sys.exit(f"{demos}: env_info.env_kwargs.layout_file {named} does not exist here. Fix: "
+                 "--layout FILE, the layout the demonstrations were collected on")  # fmt: skip
+    return gym.make(env_info["env_id"], **kwargs)
+
+
+def target_frame(env, obs_dim: int, act_dim: int) -> tuple[np.ndarray, np.ndarray]:
     """Per action value, ``(coef, joint)``: for an arm controller that adds its action to the
     joints' positions (ManiSkill's ``use_delta`` without ``use_target``: ``pd_joint_delta_pos``),
     the observed joint it moves (``qpos`` leads the state observation) and one over the action's
     scale, so that ``action + coef * obs[joint]`` is the joint target it sets (in action units,
-    less a constant); 0 for every other action. Read from the dataset's env, made once."""
-    import gymnasium as gym
-
-    kwargs = dict(env_info.get("env_kwargs", {}), obs_mode="state", render_mode=None)
-    env = gym.make(env_info["env_id"], **kwargs)
-    try:
-        controller = env.unwrapped.agent.controller
-        parts = getattr(controller, "controllers", {"all": controller})
-        mapping = getattr(controller, "action_mapping", {"all": (0, act_dim)})
-        coef, joint = np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64)
-        for uid, part in parts.items():
-            cfg, (start, end) = part.config, mapping[uid]
-            joints = np.asarray(part.active_joint_indices.cpu()).reshape(-1)
-            relative = getattr(cfg, "use_delta", False) and not getattr(cfg, "use_target", True)
-            if not relative or len(joints) != end - start or joints.max() >= obs_dim:
-                continue
-            half = np.ones(len(joints))
-            if getattr(part, "_normalize_action", False):  # actions in [-1, 1]: lower..upper
-                low, high = (np.broadcast_to(np.asarray(v, np.float64), half.shape)
-                             for v in (cfg.lower, cfg.upper))  # fmt: skip
-                half = (high - low) / 2
-            coef[start:end], joint[start:end] = 1.0 / half, joints
-    finally:
-        env.close()
+    less a constant); 0 for every other action. Read from the dataset's env's controller."""
+    controller = env.unwrapped.agent.controller
+    parts = getattr(controller, "controllers", {"all": controller})
+    mapping = getattr(controller, "action_mapping", {"all": (0, act_dim)})
+    coef, joint = np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64)
+    for uid, part in parts.items():
+        cfg, (start, end) = part.config, mapping[uid]
+        joints = np.asarray(part.active_joint_indices.cpu()).reshape(-1)
+        relative = getattr(cfg, "use_delta", False) and not getattr(cfg, "use_target", True)
+        if not relative or len(joints) != end - start or joints.max() >= obs_dim:
+            continue
+        half = np.ones(len(joints))
+        if getattr(part, "_normalize_action", False):  # actions in [-1, 1]: lower..upper
+            low, high = (np.broadcast_to(np.asarray(v, np.float64), half.shape)
+                         for v in (cfg.lower, cfg.upper))  # fmt: skip
+            half = (high - low) / 2
+        coef[start:end], joint[start:end] = 1.0 / half, joints
     return coef, joint
 
 
-def agent_groups(path: Path) -> dict[str, slice]:
+def with_corrective_copies(
+    args, env, episodes: tuple[list, list, list], obs, targets, valid, frame,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The training pairs with ``--perturb-copies`` corrective copies of every step added
+    (``perturb.py``): the arm's observed joints moved by ``--perturb`` radians, the observation
+    recomputed, the chunk the same joint targets less the moved joints. ``episodes``: the
+    observations, actions and base poses :func:`load_episodes` read."""
+    observations, actions, bases = episodes
+    coef, joint = frame
+    arm, hand = np.flatnonzero(coef), np.flatnonzero(coef == 0)
+    if args.perturb <= 0 or args.perturb_copies < 1:
+        return obs, targets, valid
+    if not len(arm):
+        sys.exit(
+            f"{args.demos}: --perturb needs a controller whose actions are joint deltas "
+            "(pd_joint_delta_pos). Fix: --perturb 0, or collect with that controller"
+        )
+    slices = perturb.obs_slices(env)
+    base = np.concatenate([b[: len(a)] for b, a in zip(bases, actions, strict=True)])
+    copies, index, offset = perturb.corrective_copies(
+        obs, base, joint[arm], perturb.Kinematics(env), slices, args.perturb,
+        args.perturb_copies, np.random.default_rng(args.seed + 1),
+    )  # fmt: skip
+    moved = targets[index].copy()
+    moved[:, :, arm] -= (offset * coef[arm])[:, None, :]  # the same targets from moved joints
+    # the hand's other actions (its gripper) as at the episode's start (open) where the copy's
+    # TCP is off the demonstrated one and nothing is held: the expert closes at its grasp only
+    # (a held copy keeps the demonstrated ones: the release ahead, learned from them)
+    tcp = slices["tcp_pose"].start
+    off = np.linalg.norm(copies[:, tcp : tcp + 3] - obs[index, tcp : tcp + 3], axis=1)
+    held = obs[index, slices["is_grasped"].start] > 0.5
+    first = np.concatenate([np.repeat(a[:1], len(a), 0) for a in actions])[index]
+    reopen = np.flatnonzero((off > perturb.GRASP_TOL) & ~held)
+    moved[reopen[:, None], :, hand[None, :]] = first[reopen[:, None], hand[None, :]][:, :, None]
+    return (np.concatenate([obs, copies]), np.concatenate([targets, moved]),
+            np.concatenate([valid, valid[index]]))  # fmt: skip
+
+
+def agent_groups(path: Path) -> tuple[dict[str, slice], str]:
     """The slices of the flat state observation that hold the robot's ``qpos`` and ``qvel``
-    (ManiSkill's agent state leads it), found by matching the recorded observation of the first
-    episode against a recorded articulation's joint state (ManiSkill's articulation state:
-    pose 7, velocities 6, then ``qpos`` and ``qvel``)."""
+    (ManiSkill's agent state leads it), and the robot's name among the recorded articulations,
+    found by matching the recorded observation of the first episode against a recorded
+    articulation's joint state (ManiSkill's articulation state: pose 7, velocities 6, then
+    ``qpos`` and ``qvel``)."""
     with h5py.File(path, "r") as f:
         traj = f[next(iter(f.keys()))]
         obs = np.asarray(traj["obs"])
-        for node in traj["env_states"]["articulations"].values():
+        for name, node in traj["env_states"]["articulations"].items():
             state = np.asarray(node)
             dof = (state.shape[1] - ARTICULATION_POSE_VEL) // 2
             joints = state[:, ARTICULATION_POSE_VEL:]
             if 2 * dof <= obs.shape[1] and np.array_equal(obs[:, : 2 * dof], joints):
-                return {"qpos": slice(0, dof), "qvel": slice(dof, 2 * dof)}
+                return {"qpos": slice(0, dof), "qvel": slice(dof, 2 * dof)}, name
     sys.exit(f"{path}: no recorded articulation's qpos and qvel lead the observation")
 
 
@@ -229,7 +281,7 @@ def keep_mask(drop: list[str], path: Path, obs_dim: int) -> np.ndarray:
     """1 per observation value the policy sees, 0 for those of the groups in ``drop``."""
     keep = np.ones(obs_dim, np.float32)
     if drop:
-        groups = agent_groups(path)
+        groups = agent_groups(path)[0]
         for name in drop:
             keep[groups[name]] = 0.0
     return keep
@@ -239,19 +291,27 @@ def train(args: argparse.Namespace) -> dict:
     torch.set_num_threads(TORCH_THREADS)
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
-    observations, actions, env_info = load_episodes(args.demos, args.num_demos)
+    observations, actions, bases, env_info = load_episodes(args.demos, args.num_demos)
     obs = np.concatenate([o[: len(a)] for o, a in zip(observations, actions, strict=True)])
     act_dim = actions[0].shape[1]
     frame = (np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64))
-    if args.frame == "target":
-        frame = target_frame(env_info, obs.shape[1], act_dim)
-    anchors = [o[:, frame[1]] * frame[0] for o in observations]
-    targets, valid = chunk_targets(actions, args.chunk, args.hold, anchors)
-    flat = targets[:, 0]  # the step's own action (relative to its own anchor: the action)
-    obs_std = obs.std(0)
-    act_std = targets.std(0)  # per step of the chunk and action: (chunk, A)
+    env = dataset_env(env_info, args.layout, args.demos)
+    try:
+        if args.frame == "target":
+            frame = target_frame(env, obs.shape[1], act_dim)
+        anchors = [o[:, frame[1]] * frame[0] for o in observations]
+        targets, valid = chunk_targets(actions, args.chunk, args.hold, anchors)
+        flat = targets[:, 0]  # the step's own action (relative to its own anchor: the action)
+        obs_std = obs.std(0)  # the scales: of the demonstrations alone
+        act_std = targets.std(0)  # per step of the chunk and action: (chunk, A)
+        demo_obs = obs
+        obs, targets, valid = with_corrective_copies(
+            args, env, (observations, actions, bases), obs, targets, valid, frame
+        )
+    finally:
+        env.close()
     policy = ChunkPolicy(
-        obs.mean(0), np.where(obs_std < MIN_STD, 1.0, obs_std),
+        demo_obs.mean(0), np.where(obs_std < MIN_STD, 1.0, obs_std),
         keep_mask(args.drop, args.demos, obs.shape[1]), targets.mean(0),
         np.where(act_std < MIN_STD, 1.0, act_std), flat.min(0), flat.max(0),
         args.chunk, args.hidden, args.decay, frame,
@@ -290,7 +350,8 @@ def train(args: argparse.Namespace) -> dict:
         "env_id": env_info.get("env_id"),
         "control_mode": kwargs.get("control_mode"),
         "layout_file": kwargs.get("layout_file"),
-        "pairs": len(x),
+        "pairs": len(demo_obs),
+        "pairs_with_copies": len(x),
         "obs_dim": int(x.shape[1]),
         "act_dim": int(flat.shape[1]),
         "chunk": args.chunk,
@@ -301,6 +362,8 @@ def train(args: argparse.Namespace) -> dict:
         "drop": args.drop,
         "hold": args.hold,
         "obs_noise": args.obs_noise,
+        "perturb": args.perturb,
+        "perturb_copies": args.perturb_copies,
         "batch_size": args.batch_size,
         "lr": args.lr,
         "weight_decay": args.weight_decay,
@@ -322,6 +385,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--demos", type=Path, required=True, help="a state dataset (.h5)")
     ap.add_argument("--out", type=Path, required=True, help="folder for policy.pt, train.json")
     ap.add_argument("--minutes", type=float, default=20.0, help="training time (wall clock)")
+    ap.add_argument("--layout", type=Path, default=None,
+                    help="the layout the demos were collected on, where the dataset's own "
+                    "env_kwargs.layout_file is not on this machine")
     ap.add_argument("--num-demos", type=int, default=-1, help="episodes to load (-1: all)")
     ap.add_argument("--chunk", type=int, default=16, help="actions predicted per step")
     ap.add_argument("--decay", type=float, default=0.1,
@@ -338,6 +404,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="train the chunk's steps past an episode's end as its last action")
     ap.add_argument("--obs-noise", type=float, default=0.02,
                     help="training noise on the normalised observation (standard deviations)")
+    ap.add_argument("--perturb", type=float, default=0.03,
+                    help="corrective copies: the arm's joints moved by Gaussian offsets of this "
+                    "many radians, the observation recomputed, the same joint targets (0: none)")
+    ap.add_argument("--perturb-copies", type=int, default=1,
+                    help="corrective copies of each demonstrated step")
     ap.add_argument("--batch-size", type=int, default=256)
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--weight-decay", type=float, default=1e-4)
