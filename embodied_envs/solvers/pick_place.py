@@ -107,7 +107,9 @@ class SolverConfig:
     release_clearance: float = 0.04  # m, a carried mover's lowest point above the
     # receptacle's top (or the table) over its destination, before it is lowered
     release_gap: float = 0.01  # m, its lowest point above the surface when the hand opens
-    open_before: int = 3  # control steps before the lowering ends that the hand starts opening
+    open_before: int = 0  # control steps before the lowering ends that the hand starts opening:
+    # none, it opens once the arm has settled at the bottom (at 3 it opened while the arm still
+    # moved down, a state a policy cloned from it never reached: docs/evaluation.md)
     carry_yaws: tuple[float, ...] = (0.0, np.pi / 2, -np.pi / 2, np.pi)  # rad, hand turns at
     # the goal about the vertical, tried in order
     release_carry_methods: tuple[str, ...] = ("rrt", "screw")  # a carry to a release: the

@@ -8,6 +8,7 @@ by the env's own ``evaluate()`` at the end. Prints success rate, mean and max ep
 (``env.task_reader.unmet()``), and wall time.
 
 ``--diverse``: the former expert (``SolverConfig(consistent=False)``, ``collect --diverse``).
+``--open-before N``: the hand opens N steps before a place's lowering ends (``SolverConfig``).
 
 Usage: python tools/bench/bench_solver.py [--episodes 50] [--layout FILE ...] [--diverse]
 """
@@ -38,8 +39,10 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=50)
     ap.add_argument("--layout", type=Path, nargs="+", default=None)
     ap.add_argument("--diverse", action="store_true", help="the former expert")
+    ap.add_argument("--open-before", type=int, default=SolverConfig.open_before,
+                    help="steps before a lowering ends that the hand opens (SolverConfig)")
     args = ap.parse_args()
-    config = SolverConfig(consistent=not args.diverse)
+    config = SolverConfig(consistent=not args.diverse, open_before=args.open_before)
     for path in args.layout or shipped_layouts():
         env = gym.make("PickEmbodiedGen-v1", layout_file=str(path), control_mode="pd_joint_pos")
         limit = gym.spec("PickEmbodiedGen-v1").max_episode_steps

@@ -10,7 +10,9 @@ adds Gaussian noise of ``--obs-noise`` standard deviations to the normalised obs
 is L1 on the normalised actions (per step of the chunk), with the steps of a chunk past its
 episode's end left out. At run time each step's chunk is added to a running weighted sum of the
 predictions for the coming steps (the prediction made ``j`` steps ahead of the step it is for
-weighs ``exp(-decay * j)``), and the step's action is that weighted mean, clamped to the
+weighs ``exp(-decay * j)``; ``--decay -0.1``, the default: the older weigh more, as in ACT, so
+that an action predicted for a step is taken there, not postponed by each newer prediction),
+and the step's action is that weighted mean, clamped to the
 demonstrated range. The module keeps that sum per env; its ``reset()`` (TorchScript-exported,
 called by ``embodied-envs eval`` at each episode start) clears it.
 
@@ -390,8 +392,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     "env_kwargs.layout_file is not on this machine")
     ap.add_argument("--num-demos", type=int, default=-1, help="episodes to load (-1: all)")
     ap.add_argument("--chunk", type=int, default=16, help="actions predicted per step")
-    ap.add_argument("--decay", type=float, default=0.1,
-                    help="temporal ensembling: a prediction j steps ahead weighs exp(-decay*j)")
+    ap.add_argument("--decay", type=float, default=-0.1,
+                    help="temporal ensembling: a prediction made j steps ago weighs "
+                    "exp(-decay*j); negative: the older weigh more, as ACT's exp(-k*i), i from "
+                    "the oldest")
     ap.add_argument("--frame", choices=["target", "action"], default="target",
                     help="target: a delta-joint controller's actions are predicted and ensembled "
                     "as the joint targets they set and run relative to the joints of the step "
