@@ -13,11 +13,8 @@ Prints successful demonstrations per minute of each and their ratio, the median 
 ``wall_time_s`` (without the process's start-up and Ray's). The commands run in a temporary
 folder and import the installed package: ``PYTHONPATH=$PWD`` measures this checkout's.
 
-``--address auto`` runs ``--ray auto`` against a cluster started beforehand (``ray start --head``):
-Ray's start is then paid once for every command, as on a cluster, not by each.
-
 Usage: python tools/bench/bench_ray.py [--num 20] [--rounds 2] [--workers-list 1 2]
-       [--layout FILE] [--control-mode pd_joint_delta_pos] [--address auto]
+       [--layout FILE] [--control-mode pd_joint_delta_pos]
 """
 
 from __future__ import annotations
@@ -39,18 +36,14 @@ from embodied_envs.paths import default_layout  # noqa: E402
 TARGET = 0.9  # Ray's demos per minute against the local workers' (overhead <= 10%)
 
 
-def run(
-    num: int, layout: Path, workers: int, mode: str, ray: bool, address: str | None = None
-) -> tuple[float, float]:
-    """Demonstrations per minute: of the whole command, and of its collection alone
-    (``address``: ``--ray ADDRESS``, a running cluster, in place of a Ray of the command's)."""
+def run(num: int, layout: Path, workers: int, mode: str, ray: bool) -> tuple[float, float]:
+    """Demonstrations per minute: of the whole command, and of its collection alone."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "embodied_envs.cli.main", "collect", "--layout",
                str(layout), "--num", str(num), "--seed", "0", "--only-success", "--workers",
                str(workers), "--control-mode", mode, "--out", tmp]  # fmt: skip
         t = time.perf_counter()
-        flags = (["--ray"] + ([address] if address else [])) if ray else []
-        subprocess.run(cmd + flags, cwd=tmp, check=True, capture_output=True)
+        subprocess.run(cmd + (["--ray"] if ray else []), cwd=tmp, check=True, capture_output=True)
         minutes = (time.perf_counter() - t) / 60
         summary = json.loads((Path(tmp) / layout.stem / "summary.json").read_text())
         return num / minutes, num / (summary["wall_time_s"] / 60)
@@ -63,14 +56,12 @@ def main() -> None:
     ap.add_argument("--workers-list", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--layout", type=Path, default=default_layout())
     ap.add_argument("--control-mode", default="pd_joint_delta_pos")
-    ap.add_argument("--address", default=None,
-                    help="--ray ADDRESS: a running cluster (e.g. auto after `ray start --head`)")
     args = ap.parse_args()
     for workers in args.workers_list:
         rows = []
         for _ in range(args.rounds):  # alternate: the machine drifts
             local = run(args.num, args.layout, workers, args.control_mode, ray=False)
-            ray = run(args.num, args.layout, workers, args.control_mode, True, args.address)
+            ray = run(args.num, args.layout, workers, args.control_mode, ray=True)
             rows.append((local, ray))
             print(f"  workers {workers}: local {local[0]:.1f} demos/min ({local[1]:.1f} "
                   f"collecting), ray {ray[0]:.1f} ({ray[1]:.1f})", flush=True)  # fmt: skip
