@@ -203,3 +203,30 @@ def test_a_dataset_whose_layout_moved_names_the_field_and_the_fix(trained, tmp_p
         assert Path(env.unwrapped.layout_set.files[0]) == DEFAULT_LAYOUT
     finally:
         env.close()
+
+
+def test_a_held_mover_moves_with_the_hand_in_its_copies(trained):
+    """In a copy of a step that holds the can, the can keeps its pose in the hand's frame and
+    its vector to the goal moves with it; the goal stays."""
+    demos, _ = trained
+    observations, _, bases, env_info = train_policy.load_episodes(demos, -1)
+    held = observations[0][:, 18] > 0.5
+    assert held.sum() > 10  # the demo lifts the can
+    obs, base = observations[0][held][::5], bases[0][held][::5]
+    env = train_policy.dataset_env(env_info)
+    try:
+        slices, kin = perturb.obs_slices(env), perturb.Kinematics(env)
+        copies, index, _ = perturb.corrective_copies(obs, base, np.arange(7), kin, slices, 0.05,
+                                                     1, np.random.default_rng(2))  # fmt: skip
+    finally:
+        env.close()
+
+    def in_hand(rows):  # the can's position in the TCP's frame
+        tcp, can = rows[:, 19:26].astype(np.float64), rows[:, 32:35].astype(np.float64)
+        return perturb.quat_rotate(perturb.conj(tcp[:, 3:]), can - tcp[:, :3])
+
+    assert np.abs(copies[:, 32:35] - obs[index, 32:35]).max() > 0.01  # the can moved
+    np.testing.assert_allclose(in_hand(copies), in_hand(obs[index]), atol=POS_TOL)
+    goal = copies[:, 62:65] + copies[:, 32:35]  # mover_to_goal + mover
+    np.testing.assert_allclose(goal, obs[index, 62:65] + obs[index, 32:35], atol=POS_TOL)
+    np.testing.assert_allclose(copies[:, 53:56], copies[:, 32:35] - copies[:, 19:22], atol=POS_TOL)

@@ -19,10 +19,6 @@ from __future__ import annotations
 
 import numpy as np
 
-# the state observation's groups this module reads and rewrites (envs/pick_embodiedgen.py
-# `_get_obs_extra` and envs/state_observation.py)
-GROUPS = ("qpos", "is_grasped", "tcp_pose", "mover_pose", "tcp_to_mover_pos",
-          "mover_to_goal_pos", "mover_mask")  # fmt: skip
 POSE = 7  # a pose: position (3) and wxyz quaternion (4)
 # m: a copy whose TCP is farther than this from the demonstrated step's is taught to keep its
 # gripper open (the demonstrations close with the object within 0.2-0.5 cm of the same place)
@@ -30,11 +26,11 @@ GRASP_TOL = 0.01
 
 
 def obs_slices(env) -> dict[str, slice]:
-    """Each group of the flat state observation (ManiSkill flattens ``state_dict`` in its order)."""
-    obs, _ = env.reset(seed=0, options=None) if env.unwrapped.obs_mode == "state_dict" else (
-        None, None)  # fmt: skip
-    if obs is None:
+    """Each group of the flat state observation (ManiSkill flattens ``state_dict`` in its order),
+    read from ``env`` (made with ``obs_mode="state_dict"``)."""
+    if env.unwrapped.obs_mode != "state_dict":
         raise ValueError("obs_slices needs an env made with obs_mode='state_dict'")
+    obs, _ = env.reset(seed=0)
     slices, start = {}, 0
 
     def walk(node):
@@ -99,9 +95,10 @@ def corrective_copies(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """``copies`` perturbed copies of every step ``obs`` ``(N, D)`` (base poses ``(N, 7)``): the
     observed joints ``joints`` moved by Gaussian offsets of ``sigma`` radians, the TCP pose and
-    the TCP-to-mover vectors recomputed, a grasped first mover carried rigidly (its pose and its
-    mover-to-goal vector). Returns the copies' observations ``(copies*N, D)``, the index of the
-    step each copies (``(copies*N,)``) and the joint offsets ``(copies*N, len(joints))``."""
+    the TCP-to-mover vectors recomputed, the held mover (where ``is_grasped``: the one nearest
+    the TCP) carried rigidly (its pose and its mover-to-goal vector). Returns the copies'
+    observations ``(copies*N, D)``, the index of the step each copies (``(copies*N,)``) and the
+    joint offsets ``(copies*N, len(joints))``."""
     n = len(obs)
     index = np.tile(np.arange(n), copies)
     offset = rng.normal(0.0, sigma, (len(index), len(joints)))
@@ -112,19 +109,20 @@ def corrective_copies(
     tcp = kin.tcp_world(new[:, q], base[index])
     new[:, slices["tcp_pose"]] = tcp
     movers = new[:, slices["mover_pose"]].reshape(len(index), -1, POSE)
-    grasped = new[:, slices["is_grasped"]][:, 0] > 0.5
-    if grasped.any():  # the hand's motion carries the first mover
+    mask = new[:, slices["mover_mask"]] > 0.5
+    grasped = np.flatnonzero(new[:, slices["is_grasped"]][:, 0] > 0.5)
+    if len(grasped):  # the hand's motion carries the held mover: the one nearest the TCP
+        reach = np.linalg.norm(movers[grasped, :, :3] - old_tcp[grasped, None, :3], axis=2)
+        held = np.where(mask[grasped], reach, np.inf).argmin(1)
         turn = quat_mul(tcp[grasped, 3:], conj(old_tcp[grasped, 3:]))
-        first = movers[grasped, 0]
-        moved_p = tcp[grasped, :3] + quat_rotate(turn, first[:, :3] - old_tcp[grasped, :3])
-        shift = moved_p - first[:, :3]
-        movers[grasped, 0, :3] = moved_p
-        movers[grasped, 0, 3:] = quat_mul(turn, first[:, 3:])
+        was = movers[grasped, held]
+        moved_p = tcp[grasped, :3] + quat_rotate(turn, was[:, :3] - old_tcp[grasped, :3])
+        movers[grasped, held, :3] = moved_p
+        movers[grasped, held, 3:] = quat_mul(turn, was[:, 3:])
         to_goal = new[:, slices["mover_to_goal_pos"]].reshape(len(index), -1, 3)
-        to_goal[grasped, 0] -= shift  # the goal stays: goal - mover
+        to_goal[grasped, held] -= moved_p - was[:, :3]  # the goal stays: goal - mover
         new[:, slices["mover_to_goal_pos"]] = to_goal.reshape(len(index), -1)
         new[:, slices["mover_pose"]] = movers.reshape(len(index), -1)
-    mask = new[:, slices["mover_mask"]] > 0.5
     to_mover = (movers[:, :, :3] - tcp[:, None, :3]) * mask[:, :, None]
     new[:, slices["tcp_to_mover_pos"]] = to_mover.reshape(len(index), -1)
     return new.astype(np.float32), index, offset.astype(np.float32)
