@@ -56,6 +56,10 @@ def check_constraints(layout, limits: PlacementLimits | None = None):
         [(rx + c * a - s * b, ry + s * a + c * b) for a in (-half, half) for b in (-half, half)]
     ).convex_hull
     feet = {"robot": robot_sq}
+    destinations = {}
+    shift = layout.task.shift()  # a move's destination from each mover's start, robot frame
+    if shift is not None:
+        dx, dy = c * shift[0] - s * shift[1], s * shift[0] + c * shift[1]
     for node in layout.object_nodes():
         if node == layout.context:
             continue
@@ -69,6 +73,15 @@ def check_constraints(layout, limits: PlacementLimits | None = None):
             if foot.distance(f) < lim.clearance - 1e-6:
                 bad.append(f"{node} overlaps {other}")
         feet[node] = foot
+        if shift is not None and node in layout.task.objects:  # where the move takes it
+            there = MultiPoint((pts[:, :2] + [dx, dy]).tolist()).convex_hull
+            if not inner.buffer(1e-6).contains(there):
+                bad.append(f"{node}'s destination leaves the shrunk table top")
+            ox, oy = np.asarray(layout.position[node][:2]) + [dx, dy]
+            d = math.hypot(ox - rx, oy - ry)
+            if not lim.reach_min < d < lim.reach_max:
+                bad.append(f"{node}'s destination at {d:.3f} m from the robot")
+            destinations[node] = there
         if node in layout.manipulated_objs:
             ox, oy = layout.position[node][:2]
             d = math.hypot(ox - rx, oy - ry)
@@ -80,6 +93,13 @@ def check_constraints(layout, limits: PlacementLimits | None = None):
             ang = min(ang, 360 - ang)
             if ang > lim.max_heading_deg + 1e-6:
                 bad.append(f"{node} at {ang:.1f} deg off the robot heading")
+    for node, there in destinations.items():  # a move's destination is free
+        for other, f in feet.items():
+            if other != node and there.distance(f) < lim.clearance - 1e-6:
+                bad.append(f"{node}'s destination overlaps {other}")
+        for other, f in destinations.items():
+            if other < node and there.distance(f) < lim.clearance - 1e-6:
+                bad.append(f"{node}'s destination overlaps {other}'s")
     return bad
 
 

@@ -63,6 +63,7 @@ class _Placer:
         self.tree = support_tree(layout, limits)
         self.poses: dict[str, LayoutPose] = {}
         self.obstacles: list[np.ndarray] = []  # world footprints: robot base, then the items
+        self.destinations: dict[int, np.ndarray] = {}  # a move's movers' there, by obstacle
         # each node's asset resolved once per call (file lookups are the slow part)
         self.foot = {n: key_footprint(k) for n, k in self.tree.keys.items()}
         self.foot_normals = {n: inward_normals(f) for n, f in self.foot.items()}
@@ -120,7 +121,8 @@ class _Placer:
                 np.array([robot.p[:2]]), np.array([robot.yaw]),
                 (lim.reach_min, lim.reach_max), lim.max_heading_deg,
             )  # fmt: skip
-        placed = self.placed([self.obstacles[i] for i in it.avoid])
+        placed = self.placed([self.obstacles[i] for i in it.avoid]
+                             + [self.destinations[i] for i in it.avoid_destinations])  # fmt: skip
         rules = ["inside", "in_band", "facing"] if reach else ["inside"]
         shift = it.shift if reach else None
         fails = dict.fromkeys(rules + (["destination"] if shift else []) + ["clear"], 0)
@@ -134,13 +136,16 @@ class _Placer:
                 "clear": "no overlap with placed footprints",
                 "in_band": f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base",
                 "facing": f"within {lim.max_heading_deg:g} deg of the robot heading",
-                "destination": "its move's destination on the top and within reach",
+                "destination": "its move's destination on the top, within reach and clear",
             }
             named = {names[k]: v for k, v in fails.items()}
             worst = max(named, key=named.get)
             raise PlacementError(it.node, worst, lim.max_attempts,
                                  f"rejections per constraint: {named}")  # fmt: skip
         (x, y, yaw), foot = found
+        if shift is not None:  # the footprint where the move takes it, kept clear by the rest
+            offset = rotate(np.asarray([shift]), reach[1])[0]
+            self.destinations[len(self.obstacles)] = foot + offset
         self.obstacles.append(foot)
         return LayoutPose.from_xyz_yaw([x, y, surface.z - it.min_z], yaw)
 

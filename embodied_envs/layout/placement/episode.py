@@ -138,9 +138,16 @@ class EpisodeSampler:
         self.items = tree.items  # item j's footprint is shape 1 + j (0: the robot base)
         robot_square = square(np.zeros(2), limits.robot_footprint, 0.0)  # in its own frame
         self.shapes = Shapes.of([robot_square, *(it.footprint for it in self.items)], a)
-        self.avoid = [a.index(it.avoid) for it in self.items]  # shapes each keeps clear of
-        self.tops = [a(it.top.shrunk) if it.supports else None for it in self.items]
         n = len(self.items)
+        # the footprints each keeps clear of: shape i (0: the robot base, 1 + j: item j) and,
+        # where a move task's movers are, n + i: where the move takes shape i (``rules``)
+        self.moves = [None if it.shift is None else a(np.asarray([it.shift])) for it in self.items]
+        self.slots = n + 1 + (n if any(m is not None for m in self.moves) else 0)
+        self.avoid = [a.index(it.avoid + tuple(n + i for i in it.avoid_destinations))
+                      for it in self.items]  # fmt: skip
+        radii = self.shapes.radii
+        self.radii = radii if self.slots == n + 1 else a.xp.concatenate([radii, radii[1:]])
+        self.tops = [a(it.top.shrunk) if it.supports else None for it in self.items]
         if n > MANY_OBJECTS:
             warnings.warn(
                 f"{base.source or '<layout>'}: {n} objects are placed on the table every "
@@ -348,8 +355,8 @@ class EpisodeSampler:
         # placed footprints (shape i: robot base, then the items): world polygons, their
         # normals, origins
         shapes = self.shapes
-        polys = a.zeros((b, n + 1, *shapes.vertices.shape[1:]))
-        poly_normals, origins = a.zeros(polys.shape), a.zeros((b, n + 1, 2))
+        polys = a.zeros((b, self.slots, *shapes.vertices.shape[1:]))
+        poly_normals, origins = a.zeros(polys.shape), a.zeros((b, self.slots, 2))
         polys[:, 0], poly_normals[:, 0] = r.robot_foot, r.robot_foot_normals
         origins[:, 0] = robot_xy
         placed = (polys, poly_normals, origins)
@@ -368,6 +375,11 @@ class EpisodeSampler:
                 polys[:, shape] = rotate(shapes.vertices[shape], yaw) + xy[:, None]
                 poly_normals[:, shape] = rotate(shapes.normals[shape], yaw)
                 origins[:, shape] = xy
+                if self.moves[j] is not None:  # where the move takes it: kept clear too
+                    offset = rotate(self.moves[j], robot_yaw)  # (b, 1, 2)
+                    polys[:, n + shape] = polys[:, shape] + offset
+                    poly_normals[:, n + shape] = poly_normals[:, shape]
+                    origins[:, n + shape] = xy + offset[:, 0]
             if self.tops[j] is not None:
                 top = rotate(self.tops[j], yaw) + xy[:, None]
                 regions[it.node] = Region.of(top, z + it.top.z)
@@ -404,7 +416,7 @@ class EpisodeSampler:
         polys, poly_normals, origins = placed
         avoid = self.avoid[j]
         keep_clear = (polys[:, avoid], poly_normals[:, avoid], origins[:, avoid],
-                      shapes.radii[avoid])  # fmt: skip
+                      self.radii[avoid])  # fmt: skip
         reach = None
         if it.manipulated:
             band = (lim.reach_min, lim.reach_max)

@@ -5,8 +5,10 @@
   base's square included), by the separating-axis test;
 - **within reach**: a manipulated object's centre within the robot's distance band and heading
   cone (goals use the same rule with the band shrunk by ``GoalRegion.inset``);
-- **its destination too**: a ``move`` task's mover also has its footprint inside the top and
-  its centre within reach where the task takes it (``Task.shift``, in the robot's frame).
+- **its destination too**: a ``move`` task's mover also has its footprint inside the top, its
+  centre within reach and its footprint clear of the placed footprints where the task takes it
+  (``Task.shift``, in the robot's frame); the objects placed after it keep clear of that
+  destination footprint as of its start (``tree.Standing.avoid_destinations``).
 
 Both placements use these functions: per configuration (``configuration.place``, numpy,
 float64) and per episode (``episode.EpisodeSampler``, numpy on the CPU, torch on a GPU).
@@ -191,13 +193,14 @@ def candidates_fit(
             manipulated object (:func:`within_reach`).
         shift: None, or ``(dx, dy)`` in the robot's frame: where a move task takes the object
             from each candidate (needs ``reach``); the footprint there must be inside the
-            region and its centre within reach.
+            region, its centre within reach and the footprint clear of ``placed``.
 
     Returns:
         ``dict`` of ``(b, c)`` bool masks: ``inside`` (with a region) and, with ``reach``,
         ``in_band`` and ``facing`` for every candidate, with ``shift`` ``destination``;
         ``clear`` for those meeting the others (True where they do not: the separating-axis
-        test runs only there, and only where bounding circles meet).
+        test runs only there, and only where bounding circles meet; the destination's
+        clearance likewise, in ``destination``).
     """
     xp = array_module(xy)
     poly = rotate(foot, yaw) + xy[..., None, :]  # (b, c, m, 2)
@@ -226,13 +229,28 @@ def candidates_fit(
                                        region[1][:, None])  # fmt: skip
             masks["destination"] = there
             ok = ok & there
+    masks["clear"] = _clear(xy, yaw, poly, foot_normals, radius, placed, clearance, ok)
+    if shift is not None:  # the destination's footprint, where every other rule holds
+        there = masks["clear"] & ok
+        masks["destination"] = masks["destination"] & _clear(
+            xy + offset, yaw, poly + offset[..., None, :], foot_normals, radius, placed,
+            clearance, there,
+        )  # fmt: skip
+    return masks
+
+
+def _clear(xy, yaw, poly, foot_normals, radius, placed, clearance: float, where=None):
+    """``(b, c)``: whether each candidate footprint ``poly (b, c, m, 2)`` centred at ``xy`` is
+    no closer than ``clearance`` to every ``placed`` footprint; tested only ``where`` (True
+    elsewhere), and only against footprints whose bounding circles it meets."""
+    xp = array_module(xy)
     polys, normals, origins, radii = placed
     rel = xy[:, :, None] - origins[:, None]  # (b, c, o, 2)
     near = xp.hypot(rel[..., 0], rel[..., 1]) < radius + radii + clearance
-    e, c, o = nonzero(near if ok is None else near & ok[..., None])
-    masks["clear"] = clear = all_true(yaw)
+    e, c, o = nonzero(near if where is None else near & where[..., None])
+    clear = all_true(yaw)
     if len(e):
         pair_normals = rotate(foot_normals, yaw[e, c])
         hit = overlap(poly[e, c], polys[e, o], clearance, pair_normals, normals[e, o])
         clear[e[hit], c[hit]] = False
-    return masks
+    return clear

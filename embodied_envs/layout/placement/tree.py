@@ -47,6 +47,8 @@ class Standing:
         avoid: the obstacles it keeps clear of, as indices into ``[robot base, items...]``:
             the robot base (0) and the objects placed before it (``1 + their index``), less
             those it stands on (its parent's chain down to the context).
+        avoid_destinations: the movers of a ``move`` task among ``avoid`` (the same indices):
+            it keeps clear of their destination footprints too (``rules``).
     """
 
     node: str
@@ -59,6 +61,7 @@ class Standing:
     manipulated: bool
     avoid: tuple[int, ...]
     shift: tuple[float, float] | None = None
+    avoid_destinations: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -118,6 +121,7 @@ def support_tree(layout: LayoutInfo, limits: PlacementLimits) -> SupportTree:
     for node, parent in order:
         ancestors[node] = ancestors[parent] | {node}
         avoid = tuple(i for i, o in enumerate(obstacles) if o not in ancestors[parent])
+        moving = tuple(i for i in avoid if i and items[i - 1].shift is not None)
         obstacles.append(node)
         items.append(
             Standing(
@@ -131,6 +135,7 @@ def support_tree(layout: LayoutInfo, limits: PlacementLimits) -> SupportTree:
                 manipulated=node in layout.reach_nodes,
                 avoid=avoid,
                 shift=layout.task.shift() if node in layout.task.objects else None,
+                avoid_destinations=moving,
             )
         )
     first_child = {ctx: layout.robot}  # the first to stand on each support
