@@ -1,5 +1,6 @@
 """Joint-target actions (``pd_joint_pos``) as another joint controller's: for an arm with one
-controller, and ``pd_joint_vel`` and ``pd_joint_delta_pos`` for any arm.
+controller, and ``pd_joint_vel`` and ``pd_joint_delta_pos`` for any arm; and ``pd_joint_delta_pos``
+actions as ``pd_joint_pos`` (:func:`joint_delta_to_pos`).
 
 ManiSkill 3.0.1's converter (``mani_skill.trajectory.utils.actions.conversion
 .from_pd_joint_pos``) reads an agent whose controller is combined from an ``arm`` and a
@@ -171,4 +172,48 @@ def follow_recorded(
         if bool(torch.as_tensor(info["success"]).all()):
             break
         follow(ori_actions[-1])
+    return info
+
+
+def joint_delta_to_pos(
+    output_mode: str,
+    ori_actions,
+    ori_env,
+    env,
+    render: bool = False,
+    pbar=None,
+    verbose: bool = False,
+) -> dict:
+    """Replay ``pd_joint_delta_pos`` actions in ``env``'s ``pd_joint_pos``: each step's targets
+    are what the delta controller sets, the arm's joints now plus the scaled, clipped delta
+    (ManiSkill's ``PDJointPosController`` with ``use_delta``), read from ``env`` itself, so the
+    converted run drives the same targets as the recorded one; the gripper gets the recorded
+    action. The signature is ManiSkill's ``from_pd_joint_delta_pos``, which ManiSkill 3.0.1
+    cannot run on the CPU (it hands a numpy action to ``torch.clip``); for an arm with one
+    controller (the SO-100, the Koch) every joint is the arm.
+
+    Returns:
+        The last step's info.
+    """
+    if output_mode != "pd_joint_pos":
+        raise NotImplementedError(f"converting pd_joint_delta_pos to {output_mode}")
+    controller, arm = env.unwrapped.agent.controller, _arm(env)
+    ori_controller = ori_env.unwrapped.agent.controller
+    combined = hasattr(controller, "to_action_dict")
+    cfg = _arm(ori_env).config
+    low, high = (torch.as_tensor(np.asarray(b, np.float32)) for b in (cfg.lower, cfg.upper))
+    device = env.unwrapped.device
+    info: dict = {}
+    if pbar is not None:
+        pbar.reset(total=len(ori_actions))
+    for action in ori_actions:
+        if pbar is not None:
+            pbar.update()
+        parts = ori_controller.to_action_dict(action) if combined else {"arm": action}
+        delta = gym_utils.clip_and_scale_action(torch.as_tensor(parts["arm"]), low, high)
+        parts = common.to_tensor({**parts, "arm": arm.qpos.cpu()[0] + delta}, device=device)
+        step = controller.from_action_dict(parts) if combined else parts["arm"]
+        _, _, _, _, info = env.step(step)
+        if render:
+            env.render_human()
     return info

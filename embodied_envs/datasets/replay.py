@@ -105,14 +105,24 @@ CONVERTED_FROM = ("pd_joint_pos", "pd_joint_delta_pos")
 
 def check_conversion(traj_path: str | Path, target: str | None) -> None:
     """Refuse a conversion ManiSkill's ``replay_trajectory`` cannot make, before it starts: from
-    a mode other than ``CONVERTED_FROM`` (a dataset ``collect --control-mode`` recorded in it).
+    a mode other than ``CONVERTED_FROM`` (a dataset ``collect --control-mode`` recorded in it),
+    or from ``pd_joint_delta_pos`` to another mode than ``pd_joint_pos``.
 
     Raises:
         DatasetError: names the dataset's mode, the target and the fix.
     """
     meta_path = Path(traj_path).with_suffix(".json")
     mode = json.loads(meta_path.read_text())["env_info"]["env_kwargs"].get("control_mode")
-    if target is None or mode is None or target == mode or mode in CONVERTED_FROM:
+    if target is None or mode is None or target == mode:
+        return
+    if mode == "pd_joint_delta_pos" and target != "pd_joint_pos":
+        raise DatasetError(
+            f"{meta_path}: its actions are {mode} (env_info.env_kwargs.control_mode); -c {target} "
+            f"converts from pd_joint_pos, and {mode} converts to pd_joint_pos only. Fix: convert "
+            f"to pd_joint_pos first and {target} from that, or collect the demos in {target} "
+            f"(embodied-envs collect --control-mode {target})"
+        )
+    if mode in CONVERTED_FROM:
         return
     raise DatasetError(
         f"{meta_path}: its actions are {mode} (env_info.env_kwargs.control_mode); -c {target} "
@@ -134,16 +144,19 @@ def root_frame_conversion():
 
     # ours import ManiSkill's conversion module too: only when a replay runs
     from embodied_envs.datasets.ee_actions import joint_pos_to_ee
-    from embodied_envs.datasets.joint_actions import joint_pos_to_joint
+    from embodied_envs.datasets.joint_actions import joint_delta_to_pos, joint_pos_to_joint
 
     to_ee, to_joint = conversion.from_pd_joint_pos_to_ee, conversion.from_pd_joint_pos
+    from_delta = conversion.from_pd_joint_delta_pos
     conversion.from_pd_joint_pos_to_ee = joint_pos_to_ee
     conversion.from_pd_joint_pos = functools.partial(joint_pos_to_joint, combined=to_joint)
+    conversion.from_pd_joint_delta_pos = joint_delta_to_pos
     try:
         yield
     finally:
         conversion.from_pd_joint_pos_to_ee = to_ee
         conversion.from_pd_joint_pos = to_joint
+        conversion.from_pd_joint_delta_pos = from_delta
 
 
 def replay(options) -> None:
