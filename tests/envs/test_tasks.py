@@ -464,3 +464,29 @@ def test_rule_results_become_the_tensors_torch_makes_of_them():
         assert got.dtype == want.dtype and torch.equal(got, want)
     shared = np.array([1.0, 2.0], np.float32)
     assert np.shares_memory(as_tensor(shared, cpu).numpy(), shared)
+
+
+def test_a_state_set_before_the_first_step_is_where_a_move_starts():
+    """ManiSkill's `replay_trajectory --use-first-env-state` resets with the episode's seed, then
+    sets the recorded first state: the move's start (its success measures the shift from it) is
+    read from that state, not from the seed's draw; a state set after a step keeps the start."""
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(DATA / "layouts" / "move_left.json"))
+    try:
+        u = env.unwrapped
+        env.reset(seed=1)
+        first, start = u.get_state_dict(), np.array(u.task_reader.start)
+        goal = u.goal_site.pose.p.clone()
+        env.reset(seed=2)
+        assert np.abs(np.array(u.task_reader.start) - start).max() > 0.05  # another draw
+        u.set_state_dict(first)
+        np.testing.assert_allclose(np.array(u.task_reader.start), start, atol=1e-5)
+        np.testing.assert_allclose(np.array(u.task_reader.dest)[:, 0], goal.numpy(), atol=1e-5)
+        env.step(np.zeros(env.action_space.shape, np.float32))
+        moved = u.get_state_dict()
+        env.reset(seed=2)
+        drawn = np.array(u.task_reader.start)
+        env.step(np.zeros(env.action_space.shape, np.float32))
+        u.set_state_dict(moved)  # mid-episode: the episode's start stays the seed's
+        np.testing.assert_allclose(np.array(u.task_reader.start), drawn, atol=1e-6)
+    finally:
+        env.close()
