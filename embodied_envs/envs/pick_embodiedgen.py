@@ -266,18 +266,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         self.task_reader.before_step()  # the arm's speeds: its displacement over each step
 
     def set_state_dict(self, state: dict, env_idx=None):
-        """ManiSkill's; a state set in an env before its episode's first step is where that
-        episode starts (``replay_trajectory --use-first-env-state``): the movers' starts and
-        destinations are read from it, as a reset reads them from the drawn poses (a move's
-        success is measured from its start; the goal marker, an actor, comes with the state)."""
-        super().set_state_dict(state, env_idx)
-        reader = self.task_reader
-        reader.step_start = None  # a state set from outside: nothing moved it yet
-        rows = torch.as_tensor(reader.fresh).nonzero()[:, 0].to(self.device)
-        if env_idx is not None:
-            rows = rows[torch.isin(rows, torch.as_tensor(env_idx, device=self.device))]
-        if len(rows):
-            reader.begin_episode(rows, self.goal_site.pose.p[rows])
+        super().set_state_dict(state, env_idx)  # set before a first step: where movers start
+        self.task_reader.state_set(env_idx, self.goal_site.pose.p)  # (--use-first-env-state)
 
     def get_state_dict(self):
         """ManiSkill's, read in one pass on the CPU simulation (``envs/fast_reads.py``)."""

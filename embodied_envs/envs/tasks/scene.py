@@ -327,6 +327,19 @@ class TaskReader:
             self.step_start = px_articulations(robot)[0].qpos[None]
         self.fresh[:] = False
 
+    def state_set(self, env_idx, goal: torch.Tensor) -> None:
+        """A state was set from outside (``set_state_dict``; ``env_idx`` None: every env): nothing
+        moved it yet; in the envs not stepped since their reset it is where the episode starts,
+        and the movers' starts and destinations are read from it (``goal (n, 3)``: the goal
+        markers now, which the state set)."""
+        self.step_start = None
+        device = self.env.device
+        rows = torch.as_tensor(self.fresh).nonzero()[:, 0].to(device)
+        if env_idx is not None:
+            rows = rows[torch.isin(rows, torch.as_tensor(env_idx, device=device))]
+        if len(rows):
+            self.begin_episode(rows, goal[rows])
+
     def begin_episode(self, env_idx: torch.Tensor, goal) -> torch.Tensor:
         """Record the envs' mover starts and destinations after their poses were set
         (``goal (b, 3)``: those envs' pick goals); returns the destinations ``(b, m, 3)``."""
