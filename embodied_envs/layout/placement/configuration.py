@@ -30,6 +30,7 @@ from embodied_envs.layout.placement.rules import (
     candidates_fit,
     half_planes,
     inward_normals,
+    move_offset,
     pad_polygons,
     rotate,
 )
@@ -144,8 +145,7 @@ class _Placer:
                                  f"rejections per constraint: {named}")  # fmt: skip
         (x, y, yaw), foot = found
         if shift is not None:  # the footprint where the move takes it, kept clear by the rest
-            offset = rotate(np.asarray([shift]), reach[1])[0]
-            self.destinations[len(self.obstacles)] = foot + offset
+            self.destinations[len(self.obstacles)] = foot + move_offset(shift, reach[1])[0]
         self.obstacles.append(foot)
         return LayoutPose.from_xyz_yaw([x, y, surface.z - it.min_z], yaw)
 

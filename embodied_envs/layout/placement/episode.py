@@ -47,7 +47,13 @@ from embodied_envs.layout.placement.batch import (
 )
 from embodied_envs.layout.placement.geometry import local_top, square
 from embodied_envs.layout.placement.limits import GoalRegion, PlacementLimits
-from embodied_envs.layout.placement.rules import candidates_fit, first_true, rotate, within_reach
+from embodied_envs.layout.placement.rules import (
+    candidates_fit,
+    first_true,
+    move_offset,
+    rotate,
+    within_reach,
+)
 from embodied_envs.layout.placement.tree import support_tree
 from embodied_envs.layout.schema import LayoutInfo
 
@@ -141,8 +147,7 @@ class EpisodeSampler:
         n = len(self.items)
         # the footprints each keeps clear of: shape i (0: the robot base, 1 + j: item j) and,
         # where a move task's movers are, n + i: where the move takes shape i (``rules``)
-        self.moves = [None if it.shift is None else a(np.asarray([it.shift])) for it in self.items]
-        self.slots = n + 1 + (n if any(m is not None for m in self.moves) else 0)
+        self.slots = n + 1 + (n if any(it.shift is not None for it in self.items) else 0)
         self.avoid = [a.index(it.avoid + tuple(n + i for i in it.avoid_destinations))
                       for it in self.items]  # fmt: skip
         radii = self.shapes.radii
@@ -375,8 +380,8 @@ class EpisodeSampler:
                 polys[:, shape] = rotate(shapes.vertices[shape], yaw) + xy[:, None]
                 poly_normals[:, shape] = rotate(shapes.normals[shape], yaw)
                 origins[:, shape] = xy
-                if self.moves[j] is not None:  # where the move takes it: kept clear too
-                    offset = rotate(self.moves[j], robot_yaw)  # (b, 1, 2)
+                if it.shift is not None:  # where the move takes it: kept clear too
+                    offset = move_offset(it.shift, robot_yaw)  # (b, 1, 2)
                     polys[:, n + shape] = polys[:, shape] + offset
                     poly_normals[:, n + shape] = poly_normals[:, shape]
                     origins[:, n + shape] = xy + offset[:, 0]

@@ -202,7 +202,6 @@ def candidates_fit(
         test runs only there, and only where bounding circles meet; the destination's
         clearance likewise, in ``destination``).
     """
-    xp = array_module(xy)
     poly = rotate(foot, yaw) + xy[..., None, :]  # (b, c, m, 2)
     masks = {}
     ok = None  # every rule so far (None: no rule yet)
@@ -216,9 +215,7 @@ def candidates_fit(
         reached = masks["in_band"] & masks["facing"]
         ok = reached if ok is None else ok & reached
         if shift is not None:
-            vec = (np.asarray([shift], dtype=xy.dtype) if xp is np else
-                   xp.as_tensor([shift], dtype=xy.dtype, device=xy.device))  # fmt: skip
-            offset = rotate(vec, robot_yaw)  # (b, 1, 2)
+            offset = move_offset(shift, robot_yaw)
             dest = xy + offset
             band_ok, facing_ok = within_reach(
                 dest, robot_xy[:, None], robot_yaw[:, None], band, heading
@@ -237,6 +234,15 @@ def candidates_fit(
             clearance, there,
         )  # fmt: skip
     return masks
+
+
+def move_offset(shift, robot_yaw):
+    """``(b, 1, 2)``: where a move task takes an object from its start, in the world, for the
+    robot yaws ``(b,)`` (``shift``: ``(dx, dy)`` in the robot's frame, ``Task.shift``)."""
+    xp = array_module(robot_yaw)
+    vec = (np.asarray([shift], dtype=robot_yaw.dtype) if xp is np else
+           xp.as_tensor([shift], dtype=robot_yaw.dtype, device=robot_yaw.device))  # fmt: skip
+    return rotate(vec, robot_yaw)
 
 
 def _clear(xy, yaw, poly, foot_normals, radius, placed, clearance: float, where=None):
