@@ -10,15 +10,12 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from embodied_envs.layout.affordance import read_annotation
+from embodied_envs.solvers.grasp_types import GraspConfig, Grasps
 from embodied_envs.solvers.gripper import GripperModel, point_clearance, to_tcp
-
-if TYPE_CHECKING:
-    from embodied_envs.solvers.grasps import GraspConfig, Grasps
 
 
 def with_annotations(

@@ -10,7 +10,6 @@ tries them. ``GraspChoice`` is a mixin of
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
 
 import numpy as np
 import sapien
@@ -33,13 +32,11 @@ from embodied_envs.solvers.grasps import (
     widest_height,
 )
 from embodied_envs.solvers.planar import lowest_centre, off_reach, planar_grasps, table_gap
+from embodied_envs.solvers.solver_config import SolverConfig
 
 # rad: ``SolverConfig.fixed_hand`` takes a synthesised grasp this close to straight down and to
 # the hand's closing direction
 FIXED_SLACK = np.deg2rad(15.0)
-
-if TYPE_CHECKING:
-    from embodied_envs.solvers.pick_place import SolverConfig
 
 
 def asset_spec(layout, node: str) -> AssetSpec:

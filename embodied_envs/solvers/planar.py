@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from embodied_envs.solvers.grasps import GraspConfig, Grasps, posed_clearance
+from embodied_envs.solvers.grasp_types import GraspConfig, Grasps
+from embodied_envs.solvers.grasps import posed_clearance
 from embodied_envs.solvers.gripper import GripperModel, box_clearance, box_corners, tcp_axes
 from embodied_envs.solvers.screw import SCREW_END_TOLERANCE
 
