@@ -13,14 +13,20 @@ several nodes is refused, never resolved to the first one.
 from __future__ import annotations
 
 import re
+import unicodedata
 from dataclasses import dataclass
 
 ARTICLES = frozenset(
     "the a an this that these those its their his her my your our one's".split()
 )
-QUANTIFIERS = frozenset("all both every each".split())  # every node the noun names
-# that many: all the nodes the noun names, or refused
-NUMBERS = {"two": 2, "three": 3, "four": 4, "five": 5, "six": 6}
+QUANTIFIERS = frozenset("all both every each".split())  # every node the noun names ("both": 2)
+# number words, joined as written ("twenty one", "a hundred"): a count that must be the number
+# of nodes the noun names, or refused
+ONES = ("zero one two three four five six seven eight nine ten eleven twelve thirteen fourteen "
+         "fifteen sixteen seventeen eighteen nineteen").split()  # fmt: skip
+TENS = "twenty thirty forty fifty sixty seventy eighty ninety".split()
+NUMBERS = {w: k for k, w in enumerate(ONES)} | {w: 10 * k for k, w in enumerate(TENS, 2)}
+SCALES = {"hundred": 100, "thousand": 1000, "million": 10**6, "billion": 10**9, "dozen": 12}
 # a part of what the noun names, not which: refused ("some apples", "a few cans")
 VAGUE = frozenset("some several few many most half couple any other another remaining".split())
 PRONOUNS = frozenset("it them they itself themselves".split())
@@ -57,9 +63,59 @@ class Unread(Exception):
 
 
 def words(text: str) -> list[str]:
-    """Lower-case words in any script; apostrophes inside a word kept ("rubik's"), other
-    punctuation and underscores separate words."""
-    return re.findall(r"[^\W_]+(?:'[^\W_]+)*", text.lower().replace("\u2019", "'"))
+    """Lower-case words in any script, Unicode-normalised (NFC: "café" typed either way is one
+    word); apostrophes inside a word kept ("rubik's"), other punctuation and underscores
+    separate words."""
+    text = unicodedata.normalize("NFC", text).lower().replace("\u2019", "'")
+    return re.findall(r"[^\W_]+(?:'[^\W_]+)*", text)
+
+
+def number(w: str) -> int | None:
+    """A number written in digits of any script ("3", "٣", "②"), else None.
+
+    Raises:
+        Unread: a number that is no count ("½", "2.5").
+    """
+    if not any(c.isnumeric() for c in w) or any(c.isalpha() and not c.isnumeric() for c in w):
+        return None
+    if all(unicodedata.decimal(c, None) is not None for c in w):
+        return int("".join(str(unicodedata.decimal(c)) for c in w))
+    v = unicodedata.numeric(w, None) if len(w) == 1 else None
+    if v is None or v != int(v):
+        raise Unread(f'"{w}" is not a count of objects')
+    return int(v)
+
+
+def counts(ws: list[str], names: set[str] = frozenset()) -> tuple[list[int], list[str]]:
+    """The counts a phrase's words state ("both": 2, "twenty one", "٣"), and its other words
+    (a number word of a node's name is the name's; digits are a count where not joined to a
+    name, ``joined``)."""
+    out, rest, run = [], [], None  # run: (total, current) of the number words being read
+    for w in ws:
+        word = w not in names and (w in NUMBERS or w in SCALES)
+        if word:
+            total, cur = run or (0, 0)
+            if w in NUMBERS:
+                cur += NUMBERS[w]
+            elif w == "hundred" or w == "dozen":
+                cur = max(cur, 1) * SCALES[w]
+            else:
+                total, cur = total + max(cur, 1) * SCALES[w], 0
+            run = (total, cur)
+            continue
+        if run:
+            out.append(sum(run))
+            run = None
+        if w == "both" and w not in names:
+            out.append(2)
+            rest.append(w)
+        elif (n := number(w)) is not None:
+            out.append(n)
+        else:
+            rest.append(w)
+    if run:
+        out.append(sum(run))
+    return out, rest
 
 
 def joined(ws: list[str]) -> list[str]:
@@ -155,9 +211,11 @@ class Nodes:
         if vague := [w for w in ws if w in VAGUE and w not in self.name_words]:
             raise Unread(f'{said} says "{vague[0]}": name the objects, or all of them')
         ws = joined(ws)  # "apple 1": apple1; "2 apples" stays a count
-        counts = [NUMBERS.get(w) or int(w) for w in ws if w in NUMBERS or w.isdigit()]
-        plural = bool(counts) or any(w in QUANTIFIERS for w in ws)
-        ws = [w for w in ws if w not in QUANTIFIERS and w not in NUMBERS and not w.isdigit()]
+        count, ws = counts(ws, self.name_words)
+        plural = bool(count) or any(w in QUANTIFIERS for w in ws)
+        if len(set(count)) > 1:
+            raise Unread(f"{said} states two counts ({', '.join(map(str, count))})")
+        ws = [w for w in ws if w not in QUANTIFIERS]
         if "of" in ws:  # "the box of tools": the box; "one of the pens": refused by its noun
             k = ws.index("of")
             ws, tail = ws[:k], ws[k + 1 :]
@@ -211,7 +269,7 @@ class Nodes:
                 f"{said} names {len(cands)} objects ({self.shown(cands)}): say which, with a "
                 "word of its objs_desc"
             )
-        if counts and counts[0] != len(cands):
-            raise Unread(f"{said} counts {counts[0]}, and it names {len(cands)} "
+        if count and count[0] != len(cands):
+            raise Unread(f"{said} counts {count[0]}, and it names {len(cands)} "
                          f"({self.shown(cands)})")  # fmt: skip
         return cands, plural

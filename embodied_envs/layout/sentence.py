@@ -36,8 +36,10 @@ from embodied_envs.layout.vocabulary import (
     DIRECTION_WORDS,
     DIRECTIONAL,
     FORMS,
+    FRAMES,
     HOLD,
     INTO,
+    LEAVE,
     MOVE,
     PARTICLES,
     PICK,
@@ -47,7 +49,9 @@ from embodied_envs.layout.vocabulary import (
     RELATIVE,
     ROBOT_WORDS,
     SOURCES,
+    SPEAKER,
     VERBS,
+    VIEW,
     check_words,
     tokens,
 )
@@ -113,6 +117,7 @@ class Reader:
                 or w in ("and", "then", ",", "to", "at", "with", "away", "toward", "towards",
                          "closer", "nearer", "farther", "further", "back")
                 or (w in ADVERBS and w not in self.nodes.name_words)
+                or (w in POSES and w not in self.nodes.all_words)
                 or (w.endswith("ly") and w not in self.nodes.name_words))  # fmt: skip
 
     def phrase(self) -> Phrase:
@@ -151,6 +156,8 @@ class Reader:
             while self.peek() in ("and", ","):
                 self.k += 1
             out.append(self.phrase())
+        if len(out) > 1 and out[0].words[:1] == ("both",):  # "both the pen and the apple"
+            out[0] = Phrase(out[0].words[1:], out[0].with_words)
         return [p for p in out if p.words]
 
     def place(self, prep: str) -> tuple[str, str, Phrase]:
@@ -171,12 +178,18 @@ class Reader:
             raise Unread(f'"{prep}" is followed by no object')
         return prep, rel, p
 
+    def frame(self, said: str, ws) -> None:
+        """A side or direction in the speaker's, a person's or an object's frame ("to our
+        left", "towards me", "to its left"): refused, only the robot's is known."""
+        if whose := [w for w in ws if w in SPEAKER or w in FRAMES]:
+            raise Unread(f'"{said}" is relative to "{whose[0]}" (the speaker, a person or an '
+                         "object), unknown here: say left, right, forward or backward (the "
+                         "robot's)")  # fmt: skip
+
     def direction_to(self) -> str | None:
         """After "to": the direction it states, or None for "to the goal"."""
         said = self.phrase().words
-        if "my" in said:
-            raise Unread('"to my ..." is the speaker\'s side, unknown here: say left, right, '
-                         "forward or backward (the robot's)")  # fmt: skip
+        self.frame(" ".join(("to", *said, *self.t[self.k : self.k + 1])), said)
         ws = [w for w in said if w not in ARTICLES]
         if ws and ws[-1] == "goal":
             return None
@@ -192,12 +205,17 @@ class Reader:
     def direction(self, w: str, prefix=()) -> str:
         """A direction word, refused where it is relative to an object ("to the left of X"),
         "to the left side of the table" (the context) kept."""
-        if any(p not in ("side", "edge", "end", "part", "your", "robot's") for p in prefix):
+        if any(p not in ("side", "edge", "end", "part", "robot's") for p in prefix):
             raise Unread(f'"to {" ".join(prefix)} {w}" is not a direction it grades')
+        if self.peek() == "hand" and self.peek(1) == "side":
+            self.k += 1  # "the left-hand side"
         part = self.peek() in ("side", "edge", "end", "part") and self.peek(1) == "of"
+        if not part and self.peek() == "side" and self.peek(1) not in self.nodes.all_words:
+            self.k += 1  # "to the left side"
         if self.peek() == "of" or part:
             self.k += 2 if part else 1
             of = self.phrase()
+            self.frame(f"{w} of {of.text()}", of.words)
             where, _ = self.nodes.resolve(of)
             if not part or where != [self.nodes.context]:
                 raise Unread(
@@ -209,13 +227,15 @@ class Reader:
     def relative(self, w: str) -> str:
         """"towards the robot" (backward), "away (from the robot)" (forward); relative to
         anything else, refused."""
+        said = w
         if w in ("closer", "nearer", "farther", "further") and self.peek() in ("to", "from"):
-            self.k += 1
+            said, self.k = f"{w} {self.peek()}", self.k + 1
         elif w == "away" and self.peek() != "from":
             return "forward"
         elif w == "away":
-            self.k += 1
+            said, self.k = f"{w} from", self.k + 1
         whom = self.phrase()
+        self.frame(f"{said} {whom.text()}", whom.words)
         toward = w in ("toward", "towards", "closer", "nearer")
         if toward and not set(whom.words) - ARTICLES and self.peek() in DIRECTION_WORDS:
             self.k += 1  # "towards the left"
@@ -257,8 +277,14 @@ class Reader:
                     )
                 raise Unread(f'"{nxt}" is not a verb it knows')
             self.k += 1
+            if w in POSES and c.kind == MOVE and w in ("diagonally", "sideways"):
+                raise Unread(f'"{w}" is not a direction it grades (left, right, forward, '
+                             "backward)")  # fmt: skip
             if w in POSES:
-                raise Unread(f'"{w}" asks for a pose: only where the object ends is graded')
+                said = "upside down" if w == "upside" else w
+                raise Unread(f'"{said}" asks for a pose: only where the object ends is graded')
+            if w == "by" and self.peek() == "a" and self.peek(1) in ("bit", "little"):
+                continue  # "left by a bit"
             ahead = {self.peek(), self.peek(1)}  # "to left", "to the left"
             if c.kind != MOVE and (w in DIRECTION_WORDS or w in RELATIVE or (
                     w == "to" and DIRECTION_WORDS.keys() & ahead)):  # fmt: skip
@@ -274,7 +300,10 @@ class Reader:
             if w in SOURCES:
                 if w == "out" and self.peek() == "of" or w == "off" and self.peek() == "of":
                     self.k += 1
-                self.phrase()  # where it is taken from: read over
+                src = self.phrase()  # where it is taken from: read over
+                if set(src.words) & (VIEW | SPEAKER | {"my", "our", "your"}):
+                    raise Unread(f'"{w} {src.text()}" is a point of view: only the robot\'s '
+                                 "left, right, forward and backward are graded")  # fmt: skip
             elif w in INTO:
                 c.places.append(self.place(w))
             elif w == "to":
@@ -374,8 +403,11 @@ def _located(c: Clause, nodes: Nodes, movers: list[str], parents: dict[str, str]
     held object is placed nowhere: refused."""
     around = _above(movers, parents) | {nodes.context}
     for prep, _, p in c.places:
+        if c.kind == HOLD:
+            raise Unread(f'"{c.verb} ... {prep} {p.text()}" asks to leave it there (or holds it '
+                         "there), which moves nothing to grade: say put ... in/on, or pick up")
         where, _ = nodes.resolve(_region(prep, p))
-        if c.kind == HOLD and not set(where) <= around or prep in DIRECTIONAL:
+        if prep in DIRECTIONAL:
             raise Unread(f'"{c.verb} ... {prep} {p.text()}": a held object is not placed; say '
                          "put")  # fmt: skip
         if not set(where) <= around:
@@ -407,13 +439,17 @@ def read_sentence(sentence: str, layout) -> Task:
     Raises:
         Unread: what it could not read, and why.
     """
-    if len(sentence) > MAX_SENTENCE:
-        raise Unread(f"it is {len(sentence)} characters long, over the {MAX_SENTENCE} read")
+    said = " ".join(sentence.split())  # its words: spaces and line breaks around them not read
+    if len(said) > MAX_SENTENCE:
+        raise Unread(f"it is {len(said)} characters long, over the {MAX_SENTENCE} read")
     nodes = Nodes(layout)
     manipulated = list(layout.relation["manipulated_objs"])
     toks = tokens(sentence, str(layout.relation.get("robot", "")))
     check_words(toks, nodes.name_words)
     clauses = Reader(toks, nodes).clauses()
+    if leave := next((c for c in clauses if c.kind == LEAVE), None):
+        raise Unread(f'"{leave.verb}" asks to leave the objects as they are, which moves nothing '
+                     "to grade: say put, pick up or move")  # fmt: skip
     first = clauses[0]
     if not first.objects or any(p.pronoun() for p in first.objects):
         raise Unread(f'"{first.verb}" names no object')

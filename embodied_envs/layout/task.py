@@ -111,6 +111,12 @@ def _structured(key: str, spec, layout, f: str) -> Task:
     return Task(kind, tuple(objects), receptacle, relation, direction)
 
 
+def _short(value) -> str:
+    """``value`` as a refusal quotes it: one line, at most ``QUOTE`` characters."""
+    said = " ".join(repr(value).split())
+    return said if len(said) <= QUOTE else said[:QUOTE] + "..."
+
+
 def resolve_task(layout, f: str) -> Task:
     """``layout``'s task (a ``LayoutInfo`` or anything with its ``relation``, ``objs_mapping``,
     ``objs_desc`` and ``tree``), checked against the layout; ``f`` names the file in errors.
@@ -119,6 +125,13 @@ def resolve_task(layout, f: str) -> Task:
         LayoutError: a task that cannot be graded, or one already done as the file places it.
     """
     rel = layout.relation
+    desc = rel.get("task_desc")
+    if desc is not None and not isinstance(desc, str):
+        raise LayoutError(
+            f'{f}: relation["task_desc"] is {type(desc).__name__} {_short(desc)}: it must be the '
+            f'task sentence, a string. Fix: write it as one string ("Put the pen in the mug"), '
+            f'or remove it.'
+        )
     spec = structured_spec(rel, f)
     said = ""  # where the task was read from, as a refusal quotes it
     if spec is not None:
