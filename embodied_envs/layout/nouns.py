@@ -62,6 +62,10 @@ class Unread(Exception):
         self.none = none
 
 
+class Miscount(Unread):
+    """A count ("both", "three", "٣") that is not the number of nodes the phrase names."""
+
+
 def words(text: str) -> list[str]:
     """Lower-case words in any script, Unicode-normalised (NFC: "café" typed either way is one
     word); apostrophes inside a word kept ("rubik's"), other punctuation and underscores
@@ -270,6 +274,6 @@ class Nodes:
                 "word of its objs_desc"
             )
         if count and count[0] != len(cands):
-            raise Unread(f"{said} counts {count[0]}, and it names {len(cands)} "
+            raise Miscount(f"{said} counts {count[0]}, and it names {len(cands)} "
                          f"({self.shown(cands)})")  # fmt: skip
         return cands, plural

@@ -104,11 +104,13 @@ class LayoutInfo:
 
     @property
     def reach_nodes(self) -> list[str]:
-        """The objects placed within the robot's reach: the manipulated ones, and the task's
-        receptacle when it is an object (the movers go there)."""
+        """The objects placed within the robot's reach: the manipulated ones, the task's movers
+        (a plural may name a distractor too: "the apples") and its receptacle when it is an
+        object (the movers go there)."""
         rec = self.task.receptacle
-        extra = [rec] if rec is not None and rec != self.context else []
-        return self.manipulated_objs + [n for n in extra if n not in self.manipulated_objs]
+        extra = [*self.task.objects, *([rec] if rec is not None and rec != self.context else [])]
+        return self.manipulated_objs + [n for n in dict.fromkeys(extra)
+                                        if n not in self.manipulated_objs]  # fmt: skip
 
     @property
     def target_node(self) -> str:

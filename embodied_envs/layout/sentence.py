@@ -23,12 +23,15 @@ from dataclasses import dataclass, field, replace
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.nouns import (
     ARTICLES,
+    EVERYTHING,
     PRONOUNS,
     QUANTIFIERS,
+    Miscount,
     Nodes,
     Phrase,
     Unread,
     is_participle,
+    stem,
 )
 from embodied_envs.layout.task_model import EXPLICIT, Task
 from embodied_envs.layout.vocabulary import (
@@ -345,12 +348,24 @@ class Reader:
 
 
 def _movers(c: Clause, nodes: Nodes, manipulated: list[str]) -> list[str]:
-    """The nodes the clause's objects name, each among the layout's movers (never another
-    object in its place)."""
+    """The nodes the clause's objects name: a plural ("the apples", "both apples", "all the
+    fruit") naming a mover names every node of its noun, wherever the layout lists it
+    (``manipulated_objs`` a hint, no filter); a singular phrase, "everything", or a plural
+    naming no mover, among the layout's movers (never another object in its place)."""
     found: list[str] = []
+    objects = [n for n in nodes.names if n != nodes.context]
     for p in c.objects:
+        ws = [w for w in p.words if w not in ARTICLES]
+        try:  # a plural that names a mover names every node of its noun, wherever listed
+            got, plural = nodes.resolve(p, objects)
+            if not plural or ws and stem(ws[-1]) in EVERYTHING or not set(got) & set(manipulated):
+                got = None  # a singular or "everything": among the movers (below)
+        except Miscount:
+            raise
+        except Unread:
+            got = None
         try:
-            got, _ = nodes.resolve(p, manipulated)
+            got = got or nodes.resolve(p, manipulated)[0]
         except Unread as e:
             if not e.none:
                 raise

@@ -6,6 +6,7 @@ Scenes are relations in EmbodiedGen's exact form (its layout designer's keys; ev
 the context, as its hierarchy prompt places them). Each class holds the issue's own sentences and
 new ones the rules were not written from."""
 
+import json
 import unicodedata
 from types import SimpleNamespace
 
@@ -192,3 +193,49 @@ def test_only_an_absent_task_desc_takes_the_default():
     scene = eg_scene("x", **MARKER)
     del scene.relation["task_desc"]
     assert resolve_task(scene, F).describe() == "pick [marker]"
+
+
+# --- 1. every object the sentence names is a mover, wherever the layout lists it ------------
+MIXED = S(["apple1"], ["apple2", "plate"],
+          desc={"apple1": "a red apple", "apple2": "a green apple"})
+MIXED3 = S(["apple1", "apple2"], ["apple3", "plate"])
+MOVERS = [
+    ("Put the apples on the plate", MIXED, "place [apple1, apple2] on plate"),
+    ("Put all the fruit on the plate", MIXED, "place [apple1, apple2] on plate"),
+    ("Put both apples on the plate", MIXED, "place [apple1, apple2] on plate"),
+    ("Put the two apples on the plate", MIXED, "place [apple1, apple2] on plate"),
+    ("Push the apples to the left", MIXED, "move [apple1, apple2] left"),
+    ("Pick up the apples and put them on the plate.", MIXED, "place [apple1, apple2] on plate"),
+    ("Put the apples on the plate", MIXED3, "place [apple1, apple2, apple3] on plate"),
+    ("Put both apples on the plate", MIXED3, R + '"both apples" counts 2, and it names 3'),
+    ("Put the three apples on the plate", MIXED, R + "counts 3, and it names 2"),
+    ("Put the apple on the plate", MIXED, "place [apple1] on plate"),  # the hint: the mover
+    ("Put the red apple on the plate", MIXED, "place [apple1] on plate"),
+    ("Put everything on the plate", MIXED3, "place [apple1, apple2] on plate"),  # the movers
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("sentence, scene, expected", MOVERS, ids=[c[0] for c in MOVERS])
+def test_a_plural_names_every_object_of_its_noun_wherever_listed(sentence, scene, expected):
+    check(sentence, scene, expected)
+
+
+def test_a_named_distractor_is_graded_placed_within_reach_and_in_the_instruction():
+    """place_two with can2 listed as a distractor: "the cans" still moves both; both are
+    placed within the robot's reach (``reach_nodes``), the instruction is the sentence graded."""
+    from conftest import DATA
+
+    from embodied_envs.layout import LayoutInfo
+    from embodied_envs.layout.placement import place
+
+    path = DATA / "layouts" / "place_two.json"
+    data = json.loads(path.read_text())
+    data["relation"]["manipulated_objs"] = ["can1"]
+    data["relation"]["distractor_objs"] = ["can2", "tray", "mug"]
+    data["objs_mapping"]["can2"] = "distractor_objs"
+    layout = LayoutInfo.from_dict(data, source=path)
+    assert layout.task.describe() == "place [can1, can2] on tray"
+    assert layout.instruction == "Put the cans on the tray."
+    assert {"can1", "can2", "tray"} <= set(layout.reach_nodes)
+    placed = place(layout, 0)
+    assert set(placed.task.objects) == {"can1", "can2"}
