@@ -23,7 +23,7 @@ from embodied_envs.layout.assets import AssetSpec, parse_urdf, urdf_path_for
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.folders import resolve_path
 from embodied_envs.layout.pose import QUAT_NORM_TOLERANCE, LayoutPose
-from embodied_envs.layout.task import Task, resolve_task, structured_spec
+from embodied_envs.layout.task import MAX_MOVERS, Task, resolve_task, structured_spec
 from embodied_envs.paths import atomic_output
 from embodied_envs.robots import ROBOT_NAMES, SUPPORTED_ROBOTS
 
@@ -100,7 +100,7 @@ class LayoutInfo:
     def task(self) -> Task:
         """The task graded in this layout (``layout/task.py``: ``relation.task_spec``, else the
         sentence ``relation.task_desc``, else picking the first manipulated object)."""
-        return resolve_task(self, label(self.source))
+        return resolve_task(self, label(self.source), MAX_MOVERS)
 
     @property
     def reach_nodes(self) -> list[str]:

@@ -29,6 +29,7 @@ from embodied_envs.layout.task_model import (
     EXPLICIT,
     KINDS,
     LEGACY_FIELD,
+    MAX_MOVERS,
     MOVE_SHIFT,
     RELATIONS,
     TASK_FIELD,
@@ -36,8 +37,15 @@ from embodied_envs.layout.task_model import (
     Task,
 )
 
+# the keys each kind takes (TASK_KEYS: all of them); a key of another kind is refused
+KIND_KEYS = {"pick": ("kind", "objects"), "place": ("kind", "objects", "receptacle", "relation"),
+             "move": ("kind", "objects", "direction")}  # fmt: skip
+EXAMPLES = {"pick": '{"kind": "pick", "objects": ["can"]}',
+            "place": '{"kind": "place", "objects": ["pen"], "receptacle": "mug", "relation": "in"}',
+            "move": '{"kind": "move", "objects": ["lamp"], "direction": "left"}'}  # fmt: skip
+
 __all__ = [
-    "DIRECTIONS", "DIRECTION_XY", "KINDS", "LEGACY_FIELD", "MOVE_SHIFT", "RELATIONS",
+    "DIRECTIONS", "DIRECTION_XY", "KINDS", "LEGACY_FIELD", "MAX_MOVERS", "MOVE_SHIFT", "RELATIONS",
     "TASK_FIELD", "Task", "parse_task", "resolve_task", "structured_spec",
 ]  # fmt: skip
 
@@ -74,6 +82,15 @@ def _names(value, field: str, f: str, what: str) -> list[str]:
     return value
 
 
+def _missing(spec: dict, kind: str, keys, field: str, f: str) -> None:
+    """Refuses a key of ``keys`` that ``kind`` takes and ``spec`` lacks."""
+    if missing := [k for k in KIND_KEYS[kind] if k in keys and k not in spec]:
+        raise LayoutError(
+            f'{f}: {field} is a {kind} task without "{missing[0]}". Fix: add it ({kind} takes '
+            f"{list(KIND_KEYS[kind])}), e.g. {EXAMPLES[kind]}."
+        )
+
+
 def _structured(key: str, spec, layout, f: str) -> Task:
     field = f'relation["{key}"]'
     if not isinstance(spec, dict):
@@ -84,22 +101,33 @@ def _structured(key: str, spec, layout, f: str) -> Task:
     kind = spec.get("kind")
     if not isinstance(kind, str) or kind not in KINDS:
         raise LayoutError(f'{f}: {field}["kind"] is {kind!r}, expected one of {list(KINDS)}.')
+    if other := [k for k in TASK_KEYS if k in spec and k not in KIND_KEYS[kind]]:
+        owner = {"receptacle": "place", "relation": "place", "direction": "move"}[other[0]]
+        raise LayoutError(
+            f'{f}: {field} is a {kind} task, and "{other[0]}" is a {owner} task\'s key: it would '
+            f'not be graded. Fix: remove "{other[0]}", or make "kind" "{owner}".'
+        )
+    _missing(spec, kind, ("objects", "direction"), field, f)
     manipulated = layout.relation["manipulated_objs"]
     movers = f'each must be a node of relation["manipulated_objs"] {manipulated}'
-    objects = _names(spec.get("objects", list(manipulated[:1])), f'{field}["objects"]', f, movers)
+    objects = _names(spec["objects"], f'{field}["objects"]', f, movers)
     nodes = [n for n in layout.objs_mapping if layout.objs_mapping[n] != "background"]
     if not objects or not all(o in manipulated for o in objects):
         raise LayoutError(f'{f}: {field}["objects"] is {objects!r}: {movers}. Fix: name them.')
+    if twice := sorted({o for o in objects if objects.count(o) > 1}):
+        raise LayoutError(f'{f}: {field}["objects"] names "{twice[0]}" twice: {objects!r}. Fix: '
+                          "name each object once.")  # fmt: skip
     if kind == "pick" and len(objects) != 1:
         raise LayoutError(f'{f}: {field}: a pick task takes one object, got {objects}.')
     receptacle = relation = direction = None
     if kind == "place":
-        receptacle, relation = spec.get("receptacle"), spec.get("relation", "on")
+        receptacle, relation = spec.get("receptacle"), spec.get("relation")
         if not isinstance(receptacle, str) or receptacle not in nodes or receptacle in objects:
             raise LayoutError(
                 f'{f}: {field}["receptacle"] is {receptacle!r}: it must be an object node of the'
                 f" layout other than the movers ({nodes}). Fix: name it."
             )
+        _missing(spec, kind, ("relation",), field, f)  # after the receptacle's type
         if not isinstance(relation, str) or relation not in RELATIONS:
             raise LayoutError(f'{f}: {field}["relation"] is {relation!r}, expected "in" or "on".')
     if kind == "move":
@@ -117,9 +145,11 @@ def _short(value) -> str:
     return said if len(said) <= QUOTE else said[:QUOTE] + "..."
 
 
-def resolve_task(layout, f: str) -> Task:
+def resolve_task(layout, f: str, max_movers: int | None = None) -> Task:
     """``layout``'s task (a ``LayoutInfo`` or anything with its ``relation``, ``objs_mapping``,
     ``objs_desc`` and ``tree``), checked against the layout; ``f`` names the file in errors.
+    ``max_movers``: the most movers the env observes (``MAX_MOVERS``, as ``LayoutInfo.task``
+    reads it: the loader, so ``layout validate`` and ``gym.make`` alike); None: any number.
 
     Raises:
         LayoutError: a task that cannot be graded, or one already done as the file places it.
@@ -141,6 +171,14 @@ def resolve_task(layout, f: str) -> Task:
         said = f' read from relation["task_desc"] "{" ".join(rel["task_desc"].split())[:QUOTE]}"'
     else:
         task = Task("pick", (rel["manipulated_objs"][0],))
+    if max_movers is not None and len(task.objects) > max_movers:
+        field = spec[0] if spec else TASK_FIELD
+        where = (f"name at most {max_movers} objects in the sentence, {EXPLICIT}" if said
+                 else f'name at most {max_movers} in relation["{field}"]["objects"]')  # fmt: skip
+        raise LayoutError(
+            f"{f}: the task{said} moves {len(task.objects)} objects {list(task.objects)}; the "
+            f"env observes at most MAX_MOVERS={max_movers} (envs/observation.py). Fix: {where}."
+        )
     if task.kind == "place" and task.receptacle == rel["context"]:
         on_table = [n for n in task.objects if [n, "ON"] in [list(x) for x in
                     layout.tree.get(rel["context"], [])]]  # fmt: skip

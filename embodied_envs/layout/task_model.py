@@ -23,6 +23,9 @@ TASK_KEYS = ("kind", "objects", "receptacle", "relation", "direction")
 DIRECTION_XY = {"forward": (1.0, 0.0), "backward": (-1.0, 0.0), "left": (0.0, 1.0),
                 "right": (0.0, -1.0)}  # fmt: skip
 MOVE_SHIFT = 0.15  # m
+# the most movers a task may name: the state observation's mover slots (envs/observation.py's
+# MAX_MOVERS, the same number); a layout naming more is refused at load, so `layout validate` too
+MAX_MOVERS = 3
 EXAMPLE = '{"kind": "place", "objects": ["pen"], "receptacle": "mug", "relation": "in"}'
 EXPLICIT = f'or state it in relation["{TASK_FIELD}"], e.g. {EXAMPLE}'
 

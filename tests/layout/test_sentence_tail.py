@@ -239,3 +239,78 @@ def test_a_named_distractor_is_graded_placed_within_reach_and_in_the_instruction
     assert {"can1", "can2", "tray"} <= set(layout.reach_nodes)
     placed = place(layout, 0)
     assert set(placed.task.objects) == {"can1", "can2"}
+
+
+# --- 7. the structured task, checked as strictly as a sentence ------------------------------
+PEN = S(["pen", "apple"], ["mug", "tray"])
+
+
+@pytest.mark.parametrize("spec, message", [
+    ({"kind": "place", "objects": ["pen"], "receptacle": "mug"},
+     'relation["task_spec"] is a place task without "relation". Fix: add it'),
+    ({"kind": "place", "objects": ["pen"], "receptacle": "mug", "relation": "in",
+      "direction": "left"}, 'a place task, and "direction" is a move task\'s key'),
+    ({"kind": "move", "objects": ["pen"], "direction": "left", "receptacle": "mug"},
+     'a move task, and "receptacle" is a place task\'s key'),
+    ({"kind": "pick", "objects": ["pen"], "relation": "in"},
+     'a pick task, and "relation" is a place task\'s key'),
+    ({"kind": "place", "objects": ["pen", "pen"], "receptacle": "mug", "relation": "in"},
+     'relation["task_spec"]["objects"] names "pen" twice'),
+    ({"kind": "pick"}, 'a pick task without "objects"'),
+    ({"kind": "move", "objects": ["pen"]}, 'a move task without "direction"'),
+    ({"kind": "place", "objects": ["pen", "apple", "mug", "tray"], "receptacle": "table",
+      "relation": "on"}, 'each must be a node of relation["manipulated_objs"]'),
+])  # fmt: skip
+def test_a_structured_task_missing_or_mixing_fields_is_refused_in_one_line(spec, message):
+    scene = eg_scene("Put the pen in the mug", **PEN)
+    scene.relation["task_spec"] = spec
+    with pytest.raises(LayoutError) as e:
+        resolve_task(scene, F)
+    msg = str(e.value)
+    assert len(e.value.problems) == 1 and "\n" not in msg and msg.startswith(F + ": ")
+    assert message in msg, msg
+
+
+def test_a_structured_task_as_written_is_read():
+    scene = eg_scene("Put the pen in the mug", **PEN)
+    scene.relation["task_spec"] = {"kind": "place", "objects": ["pen", "apple"],
+                                   "receptacle": "tray", "relation": "on"}  # fmt: skip
+    assert resolve_task(scene, F).describe() == "place [pen, apple] on tray"
+
+
+# --- 6. what gym.make refuses, layout validate and the loader refuse ------------------------
+def test_more_movers_than_the_observation_holds_is_refused_at_load_and_by_validate(tmp_path):
+    """"Put everything on the tray" with four movers: refused where the layout is read (so
+    ``layout validate`` and ``gym.make`` alike), with a fix naming the sentence."""
+    from conftest import DATA, write_layout
+
+    from embodied_envs.cli.layout_cmds import validate_problems
+    from embodied_envs.envs import observation
+    from embodied_envs.layout import LayoutInfo
+    from embodied_envs.layout.task_model import MAX_MOVERS
+
+    assert MAX_MOVERS == observation.MAX_MOVERS
+    path = DATA / "layouts" / "place_two.json"
+    data = json.loads(path.read_text())
+    data["assets"] = {n: str((path.parent / a).resolve()) for n, a in data["assets"].items()}
+    for k, (dx, dy) in ((3, (0.05, -0.15)), (4, (-0.08, -0.1))):
+        node = f"can{k}"
+        data["assets"][node] = data["assets"]["can1"]
+        data["objs_mapping"][node] = "manipulated_objs"
+        data["relation"]["manipulated_objs"].append(node)
+        data["tree"]["table"].append([node, "ON"])
+        x, y, *rest = data["position"]["can1"]
+        data["position"][node] = [x + dx, y + dy, *rest]
+    data["relation"]["task_desc"] = "Put everything on the tray."
+    out = write_layout(tmp_path, data)
+    want = (f'{out}: the task read from relation["task_desc"] "Put everything on the tray." moves '
+            "4 objects ['can1', 'can2', 'can3', 'can4']; the env observes at most MAX_MOVERS=3 "
+            "(envs/observation.py). Fix: name at most 3 objects in the sentence, or state it in "
+            'relation["task_spec"]')  # fmt: skip
+    problems = validate_problems(out, check_placement=False)
+    assert len(problems) == 1 and problems[0].startswith(want), problems
+    with pytest.raises(LayoutError, match="moves 4 objects"):
+        LayoutInfo.from_dict(data, source=out)
+    data["relation"]["task_desc"] = "Put the can1, the can2 and the can3 on the tray."
+    assert LayoutInfo.from_dict(data, source=out).task.describe() == (
+        "place [can1, can2, can3] on tray")
