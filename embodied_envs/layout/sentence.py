@@ -367,13 +367,11 @@ def _movers(c: Clause, nodes: Nodes, manipulated: list[str]) -> list[str]:
         try:
             got = got or nodes.resolve(p, manipulated)[0]
         except Unread as e:
-            if not e.none:
-                raise
             try:
                 others, _ = nodes.resolve(p)
             except Unread as e2:
-                if not e2.none:
-                    raise
+                if not e.none or not e2.none:
+                    raise e from None
                 raise Unread(f'"{p.text()}" names no object of the layout '
                              f"(movers: {', '.join(manipulated)})") from None  # fmt: skip
             raise Unread(f'"{p.text()}" is {", ".join(others)}, not among the objects this '

@@ -211,6 +211,7 @@ MOVERS = [
     ("Put the three apples on the plate", MIXED, R + "counts 3, and it names 2"),
     ("Put the apple on the plate", MIXED, "place [apple1] on plate"),  # the hint: the mover
     ("Put the red apple on the plate", MIXED, "place [apple1] on plate"),
+    ("Put the green apple on the plate", MIXED, R + '"the green apple" is apple2, not among the'),
     ("Put everything on the plate", MIXED3, "place [apple1, apple2] on plate"),  # the movers
 ]  # fmt: skip
 
