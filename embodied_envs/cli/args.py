@@ -192,3 +192,84 @@ def env_config(paths: list[Path] | None, owned: dict[str, str]) -> dict:
             "remove it from the config file"
         )
     return config
+
+
+CAMERA_OBS_MODES = ("rgb", "rgbd", "depth", "pointcloud", "rgb+depth+segmentation", "sensor_data")
+CAMERA_SIZE = 64  # px, the sensor camera's side for camera observations (the visual recipe's)
+ROBOT_VISUAL_FACES = 500  # triangles per robot visual mesh part for camera observations
+# env keywords the camera flags set: a --config file may not set them
+CAMERA_KEYS = {
+    "hybrid_obs": "--hybrid-obs",
+    "rooms": "--rooms",
+    "sensor_configs": "--camera-size",
+    "robot_visual_faces": "--robot-visual-faces",
+}
+
+
+def add_camera_arguments(parser: argparse.ArgumentParser) -> None:
+    """The flags of what a policy's camera sees: ``--hybrid-obs``, ``--rooms``,
+    ``--camera-size``, ``--robot-visual-faces`` (the same in ``collect`` and ``eval``, so a
+    visual policy is evaluated on the frames it was trained on)."""
+    parser.add_argument("--hybrid-obs", action="store_true", help="sensor RGB over the splat room")
+    parser.add_argument(
+        "--rooms",
+        nargs="+",
+        default=None,
+        help="with --hybrid-obs: the room pool each episode draws its splat background from, "
+        "by its seed: 'shipped' (the layout's own room and the three of data/rooms), room "
+        "folders (each with a gs_model.ply), a folder of them or a glob (default: the "
+        "layout's own room)",
+    )
+    parser.add_argument(
+        "--camera-size",
+        type=image_side,
+        default=CAMERA_SIZE,
+        help=f"with a camera --obs-mode: the sensor camera's width and height in px (default "
+        f"{CAMERA_SIZE}; ManiSkill's is 128)",
+    )
+    parser.add_argument(
+        "--robot-visual-faces",
+        type=int,
+        default=ROBOT_VISUAL_FACES,
+        help="with a camera --obs-mode: the robot's visual mesh parts decimated to at most this "
+        "many triangles (CPU rendering's cost follows the triangles; 0: as shipped; default "
+        f"{ROBOT_VISUAL_FACES})",
+    )
+
+
+def camera_env_kwargs(args) -> dict:
+    """The env keywords of the camera flags (none for observations without a camera, where
+    only ``--hybrid-obs`` would matter and is refused)."""
+    if args.obs_mode not in CAMERA_OBS_MODES:
+        if args.hybrid_obs or args.rooms:
+            raise SystemExit(
+                f"error: --hybrid-obs and --rooms composite camera frames; --obs-mode "
+                f"{args.obs_mode} has none. Fix: --obs-mode rgb (or another camera mode)"
+            )
+        return {}
+    if args.rooms and not args.hybrid_obs:
+        raise SystemExit(
+            "error: --rooms are splat backgrounds for --hybrid-obs. Fix: add --hybrid-obs"
+        )
+    kwargs: dict = dict(sensor_configs=dict(width=args.camera_size, height=args.camera_size))
+    if args.robot_visual_faces:
+        kwargs["robot_visual_faces"] = args.robot_visual_faces
+    if args.hybrid_obs:
+        kwargs["hybrid_obs"] = True
+    if args.rooms:
+        # the shipped pool by name (portable datasets); folders and globs as absolute paths
+        kwargs["rooms"] = [r if r == "shipped" else str(Path(r).resolve()) for r in args.rooms]
+        check_rooms(kwargs["rooms"])
+    return kwargs
+
+
+def check_rooms(rooms: list[str]) -> None:
+    """Every room of the pool a readable 3DGS PLY, before any worker starts; else one line."""
+    from embodied_envs.layout.rooms import ROOM_FILE, RoomError, resolve_rooms
+    from embodied_envs.splat import SplatFileError, check_ply
+
+    try:
+        for room in resolve_rooms(rooms):
+            check_ply(room / ROOM_FILE)
+    except (RoomError, SplatFileError) as e:
+        raise SystemExit(f"error: --rooms: {e}") from None

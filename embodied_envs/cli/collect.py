@@ -5,10 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from embodied_envs.cli.args import (
+    CAMERA_KEYS,
     LAYOUT_HELP,
     EpisodeBar,
+    add_camera_arguments,
     add_config_argument,
     add_ray_argument,
+    camera_env_kwargs,
     check_seed_span,
     checked_layouts,
     env_config,
@@ -27,11 +30,11 @@ from embodied_envs.robots import EXPERT_MODES
 OWNED_KEYS = {
     "layout_file": "--layout",
     "obs_mode": "--obs-mode",
-    "hybrid_obs": "--hybrid-obs",
     "render_mode": "--video",
     "control_mode": "--control-mode",
     "num_envs": "--workers: one env per process",
     "sim_backend": "one CPU env per process",
+    **CAMERA_KEYS,
 }
 
 
@@ -58,7 +61,7 @@ def add_parser(sub) -> None:
         default="none",
         help="recorded observations (none: replay re-renders them, as ManiSkill's demos)",
     )
-    p.add_argument("--hybrid-obs", action="store_true", help="sensor RGB over the splat room")
+    add_camera_arguments(p)
     p.add_argument("--only-success", action="store_true", help="keep successful episodes only")
     p.add_argument(
         "--max-attempts",
@@ -102,7 +105,7 @@ def cmd_collect(args) -> int:
     # the pipeline imports the simulator: only when the command runs, not for --help
     from embodied_envs.pipelines.collect import CollectError, CollectPlan, owned_output
 
-    config = env_config(args.config, OWNED_KEYS)
+    config = env_config(args.config, OWNED_KEYS) | camera_env_kwargs(args)
     layouts = checked_layouts(args.layout)
     # the seeds every worker will use (the same for every layout) are valid seeds
     blocks = CollectPlan(
@@ -138,7 +141,7 @@ def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
         num=args.num,
         seed=args.seed,
         obs_mode=args.obs_mode,
-        hybrid_obs=args.hybrid_obs,
+        hybrid_obs=bool(config.get("hybrid_obs", False)),
         only_success=args.only_success,
         max_attempts=args.max_attempts,
         workers=workers,

@@ -6,11 +6,14 @@ import os
 from pathlib import Path
 
 from embodied_envs.cli.args import (
+    CAMERA_KEYS,
     DEBUG_ENV,
     LAYOUT_HELP,
     EpisodeBar,
+    add_camera_arguments,
     add_config_argument,
     add_ray_argument,
+    camera_env_kwargs,
     check_seed_span,
     checked_layouts,
     env_config,
@@ -35,6 +38,7 @@ OWNED_KEYS = {
     "num_envs": "--workers: one env per process",
     "sim_backend": "one CPU env per process",
     "max_episode_steps": "--max-episode-steps",
+    **CAMERA_KEYS,
 }
 OBS_MODES = (
     "state", "state_dict", "rgb", "depth", "rgbd", "pointcloud", "rgb+depth+segmentation",
@@ -64,6 +68,7 @@ def add_parser(sub) -> None:
     p.add_argument("--out", type=Path, default=Path("outputs/eval"))
     p.add_argument("--obs-mode", choices=OBS_MODES, default="state")
     p.add_argument("--control-mode", default=None, help="default: the env's (expert: pd_joint_pos)")
+    add_camera_arguments(p)
     p.add_argument(
         "--max-episode-steps",
         type=positive_int,
@@ -99,7 +104,7 @@ def cmd_eval(args) -> int:
     workers = args.workers or (0 if args.ray else 1)  # 0: the Ray cluster's CPUs
     # Ray comes up (its workers importing the episodes' module) while the inputs are checked
     start(args.ray, workers, "embodied_envs.pipelines.evaluate")
-    config = env_config(args.config, OWNED_KEYS)
+    config = env_config(args.config, OWNED_KEYS) | camera_env_kwargs(args)
     layouts = checked_layouts(args.layout)
     if args.policy == "expert" and args.control_mode not in (None, "pd_joint_pos"):
         raise SystemExit(

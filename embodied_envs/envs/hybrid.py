@@ -151,6 +151,18 @@ class HybridRenderer:
             cam.valid[:] = False
         self._prerender_due = True
 
+    def set_rooms(self, envs: list[int], rooms: list[Path]) -> None:
+        """Put env ``envs[k]`` in room ``rooms[k]`` (one of the renderer's rooms); its cached
+        backgrounds go stale where its room changed, and the human cameras' are rendered
+        again at the next :meth:`prerender`."""
+        changed = [e for e, room in zip(envs, rooms, strict=True) if self.rooms[e] != Path(room)]
+        for e, room in zip(envs, rooms, strict=True):
+            self.rooms[e] = Path(room)
+        if changed:
+            for cam in self._cameras.values():
+                cam.valid[changed] = False
+            self._prerender_due = True
+
     # --- backgrounds ---------------------------------------------------------------------
     def render_backgrounds(
         self, cameras: list[PinholeCamera], poses: list[LayoutPose], rooms: list[Path]

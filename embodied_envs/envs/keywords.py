@@ -22,6 +22,7 @@ from embodied_envs.envs.arguments import check_quaternion, dataclass_arg
 from embodied_envs.layout import GoalRegion, LayoutError, PlacementLimits
 from embodied_envs.layout.errors import check_number
 from embodied_envs.layout.placement import place
+from embodied_envs.layout.rooms import resolve_rooms
 from embodied_envs.layout.sets import LayoutSet
 from embodied_envs.scene.layout_scene import scene_slots
 
@@ -30,6 +31,9 @@ NUMBER_RANGES = {  # numeric keywords: (low, high)
     "objs_z_offset": (0.0, 0.1),  # m, objects start this far above their rest
     "robot_z_offset": (0.0, 0.1),  # m, the robot base stands this far above its spot
 }
+
+
+VISUAL_FACES_RANGE = (50, 10_000_000)  # robot_visual_faces: triangles per visual mesh part
 
 
 def check_value(name: str, value) -> None:
@@ -50,6 +54,10 @@ def check_value(name: str, value) -> None:
         check_quaternion(name, value)
     elif name == "robot_init_qpos" and value is not None:
         joint_values(value)
+    elif name == "robot_visual_faces" and value is not None:
+        check_number(name, value, *VISUAL_FACES_RANGE, integer=True)
+    elif name == "rooms":
+        resolve_rooms(value)
 
 
 REST_HELP = (

@@ -45,13 +45,11 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     are obstacles; a ground at the layout's floor level catches a knocked-off object.
 
     **Randomizations** (docs/layouts.md, "Placement"; ``replace_objs=False``: the file's poses):
-    - per configuration (construction, ``reconfiguration_freq``, ``reconfigure=True``): each
-      env's layout and pooled assets from a layout set (``env.unwrapped.layouts``,
-      ``env.unwrapped.instructions``), then its table yaw, robot spot and background yaw
+    - per configuration: each env's layout and pooled assets from a layout set
+      (``env.unwrapped.layouts``), then its table yaw, robot spot and background yaw
     - per episode (the reset envs): every object on the table, within the placement limits;
-      the goal, uniform over the table top within the robot's reach (``goal_region``); the arm
-      joints, ``robot_init_qpos`` (default: the robot entry's ``rest_qpos``; with two arms
-      it sets the first's) plus N(0, ``robot_init_qpos_noise``) on its ``noise_joints``
+      the goal within the robot's reach (``goal_region``); the arm joints,
+      ``robot_init_qpos`` plus N(0, ``robot_init_qpos_noise``); with ``rooms``, the splat room
 
     **Success Conditions:** by the env's task kind, ``envs/tasks/<kind>.py``. **Fail
     Conditions:** a mover, or a receptacle object, off the table: more than ``fail_drop`` below
@@ -61,9 +59,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
     ``goal_pos`` (the pick goal, or the first mover's destination), ``task_kind`` (one-hot);
     state modes add every mover and the receptacle in fixed, masked slots, one shape over any
     layout set (``envs/observation.py``; docs/tasks.md, "Observations"); visual modes the
-    128x128 ``base_camera``. **Action Space:** the robot controller's (default
+    ``base_camera`` (128x128; ``sensor_configs``). **Action Space:** the robot controller's (default
     ``pd_joint_delta_pos``). **Rewards:** :meth:`compute_dense_reward`; normalised to [0, 1].
-
     **Episode End:** ``terminated`` on ``success`` or ``fail``; truncated after
     ``MAX_EPISODE_STEPS`` (500) control steps, 10 s.
 
@@ -108,6 +105,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         hybrid_obs: bool = False,  # sensor RGB over the splat, whatever render_mode is
         hybrid_depth_test: bool = True,  # simulated pixels behind the splat surface are hidden
         splat_backend: str = "auto",  # or "torch", "gsplat"
+        rooms: str | os.PathLike | list | None = None,  # a room pool: each episode draws one
+        robot_visual_faces: int | None = None,  # the robot's visual mesh parts decimated to this
         placement_limits: dict | PlacementLimits | None = None,
         goal_region: dict | GoalRegion | None = None,
         render_mode: str | None = None,
@@ -138,7 +137,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
             robot_init_qpos_noise=robot_init_qpos_noise, objs_z_offset=objs_z_offset,
             robot_z_offset=robot_z_offset, replace_objs=replace_objs, enable_grasp=enable_grasp,
             hybrid_obs=hybrid_obs, hybrid_depth_test=hybrid_depth_test,
-            init_3dgs_quat=init_3dgs_quat,
+            init_3dgs_quat=init_3dgs_quat, robot_visual_faces=robot_visual_faces, rooms=rooms,
         ).items():  # fmt: skip
             self.check_keyword(name, value)  # as a config file's values are checked
         init_3dgs_quat = check_quaternion("init_3dgs_quat", init_3dgs_quat)
@@ -150,7 +149,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         self.objs_z_offset, self.robot_z_offset = float(objs_z_offset), float(robot_z_offset)
         render_mode = self._set_up_hybrid(  # a hybrid env is an rgb_array env to ManiSkill
             render_mode, hybrid_obs, hybrid_depth_test, splat_backend, init_3dgs_quat,
-            self.layout_set.layouts,
+            self.layout_set.layouts, rooms, robot_visual_faces,
         )  # fmt: skip
         self._num_configurations = 0
         super().__init__(*args, robot_uids=robot, render_mode=render_mode, **kwargs)
@@ -247,6 +246,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
             self.goal_site.set_pose(Pose.create_from_pq(goal))
         if not self.gpu_sim_enabled:  # bodies settle as in a new scene, whatever ran before
             fast_reads.restart_sleep_timers(self.scene)
+        self.draw_rooms(env_idx)  # after the episode's placement draws: they stay as they were
 
     def task_rules(self):
         """The task state now and each present kind's rule results (``envs/tasks``)."""

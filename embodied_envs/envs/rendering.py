@@ -16,6 +16,8 @@ from mani_skill.utils import sapien_utils
 
 from embodied_envs.config import CameraSpec
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
+from embodied_envs.layout.rooms import ROOM_FILE, RoomError, draw_rooms, resolve_rooms
+from embodied_envs.scene.visual_detail import simplify_visuals
 
 
 def base_camera(agent, eye, target, mount: str) -> CameraConfig:
@@ -53,25 +55,49 @@ class HybridRendering:
     ``BaseEnv.__init__``."""
 
     hybrid: HybridRenderer | None = None
+    room_pool: list | None = None  # the splats each episode draws its room from (``rooms``)
+    robot_visual_faces: int | None = None  # the robot's visual mesh parts decimated to this
 
     def _set_up_hybrid(
-        self, render_mode, hybrid_obs, depth_test, backend, init_3dgs_quat, layouts
-    ) -> str | None:
-        """Sets ``hybrid_obs``, ``render_hybrid`` and ``hybrid`` (the renderer, or None when
-        neither is asked for); returns the render mode to give ManiSkill: a hybrid env is an
-        ``rgb_array`` env to every wrapper, and its ``render()`` composites."""
+        self, render_mode, hybrid_obs, depth_test, backend, init_3dgs_quat, layouts,
+        rooms=None, robot_visual_faces=None,
+    ) -> str | None:  # fmt: skip
+        """Sets ``hybrid_obs``, ``render_hybrid``, ``room_pool``, ``robot_visual_faces`` and
+        ``hybrid`` (the renderer, or None when neither is asked for); returns the render mode
+        to give ManiSkill: a hybrid env is an ``rgb_array`` env to every wrapper, and its
+        ``render()`` composites.
+
+        Raises:
+            RoomError: ``rooms`` names no room, or it is given without hybrid rendering.
+        """
         self.hybrid_obs = bool(hybrid_obs)
         self.render_hybrid = render_mode == "hybrid"
+        self.robot_visual_faces = robot_visual_faces
+        pool = resolve_rooms(rooms)
+        self.room_pool = None if pool is None else [room / ROOM_FILE for room in pool]
         self.hybrid = None
+        if self.room_pool is not None and not (self.render_hybrid or self.hybrid_obs):
+            raise RoomError(
+                f"rooms={rooms!r}: rooms are splat backgrounds and nothing is composited over "
+                'them. Fix: hybrid_obs=True (collect/eval --hybrid-obs) or render_mode="hybrid"'
+            )
         if self.render_hybrid or self.hybrid_obs:  # moves to the sim's device when known
-            rooms = {x.gs_model_path(): x.source for x in reversed(layouts)}
+            rooms_used = {x.gs_model_path(): x.source for x in reversed(layouts)}
+            rooms_used |= {path: f"rooms={rooms!r}" for path in self.room_pool or []}
             self.hybrid = HybridRenderer(
-                rooms,
+                rooms_used,
                 tuple(float(v) for v in init_3dgs_quat),
                 depth_test=bool(depth_test),
                 backend=backend,
             )
         return "rgb_array" if self.render_hybrid else render_mode
+
+    def _load_agent(self, options: dict, *args, **kwargs):
+        super()._load_agent(options, *args, **kwargs)
+        if self.robot_visual_faces is not None:  # what every camera sees of the robot
+            for agent in getattr(self.agent, "agents", [self.agent]):
+                entities = [obj.entity for link in agent.robot.links for obj in link._objs]
+                simplify_visuals(entities, self.robot_visual_faces)
 
     def _after_reconfigure(self, options: dict):
         super()._after_reconfigure(options)
@@ -86,6 +112,15 @@ class HybridRendering:
                 background_poses=[x.pose(x.background) for x in self.layouts],
                 rooms=[x.gs_model_path() for x in self.layouts],
             )
+
+    def draw_rooms(self, env_idx) -> None:
+        """With a room pool, each env of ``env_idx`` draws its episode's room (uniform, from
+        its episode RNG: seeded resets give the same rooms); without one, nothing."""
+        if self.room_pool is None or self.hybrid is None:
+            return
+        envs = [int(e) for e in np.asarray(env_idx.cpu() if hasattr(env_idx, "cpu") else env_idx)]
+        picks = draw_rooms(self._batched_episode_rng[envs], len(self.room_pool))
+        self.hybrid.set_rooms(envs, [self.room_pool[k] for k in picks])
 
     def reset(self, seed: int | list[int] | None = None, options: dict | None = None):
         result = super().reset(seed=seed, options=options)

@@ -161,13 +161,15 @@ def make_env(plan: CollectPlan):
     """The env a worker collects ``plan`` in (one CPU env, not yet recorded)."""
     return gym.make(
         ENV_ID,
-        **plan.env_kwargs,
-        layout_file=plan.env_layout,
-        obs_mode=plan.obs_mode,
-        hybrid_obs=plan.hybrid_obs,
-        control_mode=plan.control_mode,
-        render_mode=film_mode(plan.files) if plan.video else None,
-        sim_backend="physx_cpu",
+        **plan.env_kwargs
+        | dict(
+            layout_file=plan.env_layout,
+            obs_mode=plan.obs_mode,
+            hybrid_obs=plan.hybrid_obs,
+            control_mode=plan.control_mode,
+            render_mode=film_mode(plan.files) if plan.video else None,
+            sim_backend="physx_cpu",
+        ),
     )
 
 

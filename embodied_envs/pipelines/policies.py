@@ -11,7 +11,8 @@ episode start: a policy with state per env, e.g. temporal ensembling, clears it)
 receives the env's observation as ManiSkill returns it (torch tensors with a leading batch of 1,
 as from ``ManiSkillVectorEnv``) and returns an action of shape ``(A,)`` or ``(1, A)``.
 
-A policy's action that is not a finite array of that shape, or a policy that raises, stops the
+A policy's action that is not a finite array of that shape, or a policy that raises (or calls
+``sys.exit``: on Ray that would end the worker process, retried as a lost worker), stops the
 evaluation with one :class:`EvalError` line naming the policy, the step, the episode's seed and
 the expected shape; nothing is clipped or replaced.
 """
@@ -109,7 +110,7 @@ def load_policy(spec: str, env) -> Policy | None:
         takes_env = False
     try:
         made = factory(env) if takes_env else factory()
-    except Exception as e:
+    except (Exception, SystemExit) as e:  # sys.exit too: a Ray task's would lose its worker
         raise EvalError(f"--policy {spec}: the factory raised {type(e).__name__}: {e}") from None
     import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
 
@@ -148,8 +149,13 @@ def _torchscript_policy(spec: str) -> Policy:
         ) from None
 
     reset = getattr(module, "reset", None)  # a scripted module's exported reset(), if any
+    camera = getattr(module, "camera", None)  # a visual policy (train_policy.py on frames)
+    inputs = _visual_inputs(spec, module) if camera is not None else None
 
     def run(obs):
+        if inputs is not None:
+            with torch.no_grad():
+                return module(*inputs(obs))
         if not isinstance(obs, torch.Tensor):
             raise TypeError(
                 f"a TorchScript policy takes a tensor observation, got {type(obs).__name__}: "
@@ -159,6 +165,35 @@ def _torchscript_policy(spec: str) -> Policy:
             return module(obs.float())
 
     return Policy(run, None if reset is None else lambda seed: reset())
+
+
+def _visual_inputs(spec: str, module) -> Callable:
+    """For a visual TorchScript policy (its ``camera``, ``obs_keys`` and ``image_hw``), the
+    function from the env's observation to its ``(image, state)``; an observation without that
+    camera's frames, or frames of another size, is one line naming the flag that fixes it."""
+    import torch  # in the process that runs episodes
+
+    camera, keys = str(module.camera), [str(k) for k in module.obs_keys]
+    hw = tuple(int(v) for v in module.image_hw)
+
+    def inputs(obs):
+        if not isinstance(obs, dict) or camera not in obs.get("sensor_data", {}):
+            raise TypeError(
+                f"{spec} is a visual policy (trained on {camera} frames of {hw[0]}x{hw[1]}); "
+                "this observation has none: evaluate it with --obs-mode rgb (and --hybrid-obs "
+                "if it was trained on hybrid frames)"
+            )
+        image = obs["sensor_data"][camera]["rgb"]
+        if tuple(image.shape[1:3]) != hw:
+            raise TypeError(
+                f"{spec} was trained on {hw[0]}x{hw[1]} frames; the env gives "
+                f"{image.shape[1]}x{image.shape[2]}: evaluate it with --camera-size {hw[0]}"
+            )
+        state = [obs[group][name].float().reshape(image.shape[0], -1)
+                 for group, name in (key.split("/", 1) for key in keys)]  # fmt: skip
+        return image, torch.cat(state, 1)
+
+    return inputs
 
 
 def at_step(step: int, seed: int, layout: str) -> str:
@@ -213,13 +248,13 @@ def policy_driver(policy: Policy, spec: str):
         shape = tuple(env.action_space.shape)
         try:
             policy.reset(seed)
-        except Exception as e:  # the user's code: one line, naming the call
+        except (Exception, SystemExit) as e:  # the user's code (sys.exit too): one line
             raise policy_raised(spec, "reset(seed)", e, at_step(0, seed, drawn)) from e
         limit = env.spec.max_episode_steps if env.spec is not None else None
         while limit is None or tally.steps < limit:
             try:
                 raw = policy.act(obs)
-            except Exception as e:  # the user's code: one line, naming the step
+            except (Exception, SystemExit) as e:  # the user's code: one line, its step
                 raise policy_raised(spec, "the policy", e, at_step(tally.steps, seed, drawn)) from e
             action = checked_action(raw, shape, spec, tally.steps, seed, drawn)
             obs, _, terminated, truncated, _ = tally.step(action)

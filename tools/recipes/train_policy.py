@@ -41,6 +41,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -54,10 +55,13 @@ from embodied_envs.paths import atomic_output
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import perturb  # noqa: E402
+import visual  # noqa: E402
+from ensemble import TemporalEnsemble  # noqa: E402
 
 # one thread: on the shared 2-core machine (load 20) a training step took 3x longer with two
 # (7.8 against 2.5 steps/s, a 256x256 MLP), whose threads wait for each other
 TORCH_THREADS = 1
+VISUAL_THREADS = os.cpu_count() or 1  # a visual policy's convolutions use every core
 MIN_STD = 1e-3  # a dimension varying less than this over the dataset is not rescaled
 LOG_EVERY_S = 30.0  # seconds between progress lines
 ARTICULATION_POSE_VEL = 13  # an articulation's recorded state: root pose (7), velocities (6), ...
@@ -77,8 +81,7 @@ class ChunkPolicy(nn.Module):
         coef, joint = frame  # target_frame: per action, its joint's observed position's weight
         for name, value in dict(
             obs_mean=obs_mean, obs_std=obs_std, obs_keep=obs_keep, act_mean=act_mean,
-            act_std=act_std, act_low=act_low, act_high=act_high,
-            weights=np.exp(-decay * np.arange(chunk)), coef=coef,
+            act_std=act_std, act_low=act_low, act_high=act_high, coef=coef,
         ).items():  # fmt: skip
             self.register_buffer(name, torch.as_tensor(np.asarray(value), dtype=torch.float32))
         self.register_buffer("joint", torch.as_tensor(np.asarray(joint), dtype=torch.long))
@@ -89,9 +92,7 @@ class ChunkPolicy(nn.Module):
             size = width
         layers.append(nn.Linear(size, chunk * act_dim))
         self.net = nn.Sequential(*layers)
-        # the running sums of each env's predictions for its next `chunk` steps, and their weights
-        self.pending = torch.zeros(0, chunk, act_dim)
-        self.pending_weight = torch.zeros(0, chunk)
+        self.ensemble = TemporalEnsemble(chunk, act_dim, decay)
 
     def normalise(self, obs: torch.Tensor) -> torch.Tensor:
         return (obs - self.obs_mean) / self.obs_std * self.obs_keep
@@ -118,20 +119,11 @@ class ChunkPolicy(nn.Module):
     @torch.jit.export
     def reset(self) -> None:
         """Forget every env's pending predictions (an episode starts)."""
-        self.pending = torch.zeros(0, self.chunk, self.act_dim)
-        self.pending_weight = torch.zeros(0, self.chunk)
+        self.ensemble.reset()
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        chunk = self.targets(obs)
-        batch = chunk.shape[0]
-        if self.pending.shape[0] != batch:  # the first step after reset(), or a new batch
-            self.pending = torch.zeros_like(chunk)
-            self.pending_weight = torch.zeros(batch, self.chunk, device=chunk.device)
-        pending = self.pending + chunk * self.weights[None, :, None]
-        weight = self.pending_weight + self.weights[None, :]
-        action = pending[:, 0] / weight[:, :1] - self.anchor(obs)
-        self.pending = torch.cat([pending[:, 1:], torch.zeros_like(pending[:, :1])], 1)
-        self.pending_weight = torch.cat([weight[:, 1:], torch.zeros_like(weight[:, :1])], 1)
+        anchor = self.anchor(obs)
+        action = self.ensemble(self.raw(obs) + anchor[:, None], anchor)
         return torch.clamp(action, self.act_low, self.act_high)
 
 
@@ -290,6 +282,8 @@ def keep_mask(drop: list[str], path: Path, obs_dim: int) -> np.ndarray:
 
 
 def train(args: argparse.Namespace) -> dict:
+    if visual.is_visual(args.demos):
+        return train_visual(args)
     torch.set_num_threads(TORCH_THREADS)
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
@@ -380,11 +374,92 @@ def train(args: argparse.Namespace) -> dict:
     return info
 
 
+def train_visual(args: argparse.Namespace) -> dict:
+    """A visuomotor policy (``visual.py``) from a dataset with camera frames."""
+    torch.set_num_threads(args.threads or VISUAL_THREADS)
+    torch.manual_seed(args.seed)
+    rng = np.random.default_rng(args.seed)
+    generator = torch.Generator().manual_seed(args.seed)
+    meta = json.loads(args.demos.with_suffix(".json").read_text())
+    episodes = meta["episodes"][: args.num_demos if args.num_demos > 0 else None]
+    if not episodes:
+        sys.exit(f"{args.demos}: no episodes")
+    frames, states, actions = visual.load_visual_episodes(args.demos, episodes)
+    env_info = meta["env_info"]
+    act_dim = actions[0].shape[1]
+    frame = (np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64))
+    if args.frame == "target":
+        env = dataset_env(env_info, args.layout, args.demos)
+        try:
+            frame = target_frame(env, states[0].shape[1], act_dim)
+        finally:
+            env.close()
+    anchors = [st[:, frame[1]] * frame[0] for st in states]
+    targets, valid = chunk_targets(actions, args.chunk, args.hold, anchors)
+    state = np.concatenate([st[: len(a)] for st, a in zip(states, actions, strict=True)])
+    images = torch.from_numpy(
+        np.concatenate([f[: len(a)] for f, a in zip(frames, actions, strict=True)])
+    )  # (N, H, W, 3) uint8
+    state_std, act_std = state.std(0), targets.std(0)
+    policy = visual.VisualChunkPolicy(
+        tuple(images.shape[1:3]), state.mean(0), np.where(state_std < MIN_STD, 1.0, state_std),
+        targets.mean(0), np.where(act_std < MIN_STD, 1.0, act_std), targets[:, 0].min(0),
+        targets[:, 0].max(0), args.chunk, args.hidden, args.decay, frame, list(visual.STATE_KEYS),
+    )  # fmt: skip
+    x = (torch.from_numpy(state) - policy.state_mean) / policy.state_std
+    y = (torch.from_numpy(targets) - policy.act_mean) / policy.act_std
+    mask = torch.from_numpy(valid).float()[:, :, None]
+    optim = torch.optim.AdamW(policy.parameters(), lr=args.lr, weight_decay=args.weight_decay)
+    budget = args.minutes * 60.0
+    start = last_log = time.perf_counter()
+    iters, loss = 0, torch.tensor(float("nan"))
+    while (elapsed := time.perf_counter() - start) < budget:
+        for group in optim.param_groups:  # cosine decay over the time budget
+            group["lr"] = args.lr * 0.5 * (1.0 + math.cos(math.pi * elapsed / budget))
+        batch = torch.from_numpy(rng.integers(0, len(x), args.batch_size))
+        image = visual.augment(images[batch].permute(0, 3, 1, 2).float() / 255.0, generator)
+        noise = torch.randn(len(batch), x.shape[1], generator=generator)
+        inputs = x[batch] + args.obs_noise * noise
+        err = (policy.raw_normalised(image, inputs) - y[batch]).abs() * mask[batch]
+        loss = err.sum() / (mask[batch].sum() * y.shape[2])
+        optim.zero_grad()
+        loss.backward()
+        optim.step()
+        iters += 1
+        if time.perf_counter() - last_log > LOG_EVERY_S:
+            last_log = time.perf_counter()
+            print(f"{elapsed / 60:5.1f} min, iteration {iters}: loss {loss.item():.4f}", flush=True)
+    seconds = time.perf_counter() - start
+    args.out.mkdir(parents=True, exist_ok=True)
+    with atomic_output(args.out / "policy.pt") as tmp:
+        torch.jit.save(torch.jit.script(policy.eval()), str(tmp))
+    kwargs = env_info.get("env_kwargs", {})
+    info = {
+        "demos": str(args.demos), "episodes": len(actions), "env_id": env_info.get("env_id"),
+        "kind": "visual", "obs_mode": kwargs.get("obs_mode"),
+        "control_mode": kwargs.get("control_mode"), "layout_file": kwargs.get("layout_file"),
+        "camera": visual.CAMERA, "image_hw": list(images.shape[1:3]),
+        "state_keys": list(visual.STATE_KEYS), "hybrid_obs": kwargs.get("hybrid_obs", False),
+        "rooms": kwargs.get("rooms"), "robot_visual_faces": kwargs.get("robot_visual_faces"),
+        "pairs": len(x), "act_dim": act_dim, "chunk": args.chunk, "frame": args.frame,
+        "decay": args.decay, "hidden": args.hidden, "hold": args.hold,
+        "obs_noise": args.obs_noise, "batch_size": args.batch_size, "lr": args.lr,
+        "weight_decay": args.weight_decay, "seed": args.seed, "minutes": args.minutes,
+        "threads": torch.get_num_threads(), "iterations": iters,
+        "final_loss": float(loss.item()), "train_seconds": round(seconds, 1),
+    }  # fmt: skip
+    with atomic_output(args.out / "train.json") as tmp:
+        tmp.write_text(json.dumps(info, indent=2) + "\n")
+    return info
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--demos", type=Path, required=True, help="a state dataset (.h5)")
+    ap.add_argument("--demos", type=Path, required=True,
+                    help="a dataset (.h5): state observations train a state policy, camera "
+                    "frames (--obs-mode rgb) a visual one")
     ap.add_argument("--out", type=Path, required=True, help="folder for policy.pt, train.json")
     ap.add_argument("--minutes", type=float, default=20.0, help="training time (wall clock)")
     ap.add_argument("--layout", type=Path, default=None,
@@ -417,6 +492,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--weight-decay", type=float, default=1e-4)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=None,
+                    help=f"torch threads (default: {TORCH_THREADS} for a state policy, "
+                    f"{VISUAL_THREADS} for a visual one)")
     args = ap.parse_args(argv)
     if not args.demos.is_file() or not args.demos.with_suffix(".json").is_file():
         ap.error(f"{args.demos}: no such dataset (an .h5 with its .json beside it)")

@@ -1,0 +1,173 @@
+"""The visuomotor half of ``train_policy.py``: a policy from camera frames, the robot's joints
+and the task's goal (no object poses), trained by behaviour cloning with action chunking and
+run with the state recipe's temporal ensembling (``ensemble.TemporalEnsemble``).
+
+The encoder is a small convolutional net over the ``base_camera``'s RGB frame ending in a
+spatial soft-argmax (each of ``KEYPOINTS`` feature maps gives its expected image position, as
+robomimic's and diffusion policy's image encoders do: positions are what a grasp needs) and the
+maps' means; its features, with the normalised proprioception (``agent/qpos``,
+``extra/tcp_pose``) and goal (``extra/goal_pos``), feed an MLP that predicts the next ``chunk``
+actions. Training augments each frame with a random shift of up to ``SHIFT_PX`` pixels (DrQ's
+augmentation) and colour jitter (brightness, contrast, per-channel gain); rooms differ between
+episodes when the dataset was collected with ``--rooms``.
+
+The exported module takes ``(image, state)``: ``image`` the camera's ``(B, H, W, 3)`` uint8
+frame, ``state`` the concatenation of the groups named by its ``obs_keys``; ``embodied-envs
+eval`` reads its ``camera``, ``obs_keys`` and ``image_hw`` attributes to build them from the
+env's observation.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from ensemble import TemporalEnsemble  # noqa: E402
+
+CAMERA = "base_camera"  # the env's sensor camera
+STATE_KEYS = ("agent/qpos", "extra/tcp_pose", "extra/goal_pos")  # what the policy reads
+KEYPOINTS = 32  # spatial soft-argmax keypoints
+CHANNELS = (16, 32, 32)  # the conv layers' widths (wider: 4x the training time on 2 cores)
+SHIFT_PX = 4  # random shift augmentation, pixels each way
+BRIGHTNESS, CONTRAST, GAIN = 0.2, 0.2, 0.1  # colour jitter: relative ranges
+
+
+def is_visual(path: Path) -> bool:
+    """Whether the dataset's observations hold camera frames (``sensor_data/.../rgb``)."""
+    with h5py.File(path, "r") as f:
+        names = [k for k in f.keys() if k.startswith("traj_")]
+        if not names:
+            return False
+        obs = f[names[0]].get("obs")
+        return isinstance(obs, h5py.Group) and f"sensor_data/{CAMERA}/rgb" in obs
+
+
+def load_visual_episodes(path: Path, episodes: list[dict]) -> tuple[list, list, list]:
+    """Per episode its frames ``(T+1, H, W, 3)`` uint8, states ``(T+1, D)`` (``STATE_KEYS``)
+    and actions ``(T, A)``; exits with one line naming what a dataset lacks."""
+    frames, states, actions = [], [], []
+    with h5py.File(path, "r") as f:
+        for ep in episodes:
+            traj = f[f"traj_{ep['episode_id']}"]
+            obs = traj["obs"]
+            missing = [k for k in (f"sensor_data/{CAMERA}/rgb", *STATE_KEYS) if k not in obs]
+            if missing:
+                sys.exit(
+                    f"{path}: traj_{ep['episode_id']} has no obs/{missing[0]}. Fix: collect "
+                    "with --obs-mode rgb (a visual policy needs the camera frames, the joints "
+                    "and the goal)"
+                )
+            frames.append(np.asarray(obs[f"sensor_data/{CAMERA}/rgb"], np.uint8))
+            states.append(np.concatenate(
+                [np.asarray(obs[k], np.float32).reshape(len(frames[-1]), -1) for k in STATE_KEYS],
+                1))  # fmt: skip
+            actions.append(np.asarray(traj["actions"], np.float32))
+    return frames, states, actions
+
+
+class SpatialSoftArgmax(nn.Module):
+    """``(B, C, H, W)`` feature maps -> ``(B, 2C)``: each map's expected (x, y) in [-1, 1]."""
+
+    def __init__(self, height: int, width: int):
+        super().__init__()
+        ys, xs = torch.meshgrid(
+            torch.linspace(-1, 1, height), torch.linspace(-1, 1, width), indexing="ij"
+        )
+        self.register_buffer("xs", xs.reshape(-1))
+        self.register_buffer("ys", ys.reshape(-1))
+
+    def forward(self, maps: torch.Tensor) -> torch.Tensor:
+        b, c = maps.shape[0], maps.shape[1]
+        weights = torch.softmax(maps.reshape(b, c, -1), -1)
+        return torch.cat([(weights * self.xs).sum(-1), (weights * self.ys).sum(-1)], 1)
+
+
+class VisualChunkPolicy(nn.Module):
+    """``(image, state)`` -> the temporally ensembled action of this step, per env."""
+
+    def __init__(
+        self, image_hw: tuple[int, int], state_mean, state_std, act_mean, act_std, act_low,
+        act_high, chunk: int, hidden: list[int], decay: float, frame, obs_keys: list[str],
+    ):  # fmt: skip
+        super().__init__()
+        act_dim = len(act_low)
+        self.chunk, self.act_dim = chunk, act_dim
+        self.camera = CAMERA
+        self.obs_keys = list(obs_keys)
+        self.image_hw = [int(image_hw[0]), int(image_hw[1])]
+        coef, joint = frame
+        for name, value in dict(
+            state_mean=state_mean, state_std=state_std, act_mean=act_mean, act_std=act_std,
+            act_low=act_low, act_high=act_high, coef=coef,
+        ).items():  # fmt: skip
+            self.register_buffer(name, torch.as_tensor(np.asarray(value), dtype=torch.float32))
+        self.register_buffer("joint", torch.as_tensor(np.asarray(joint), dtype=torch.long))
+        layers: list[nn.Module] = []
+        size = 3
+        for k, width in enumerate(CHANNELS):
+            layers += [nn.Conv2d(size, width, 3, stride=2 if k < 2 else 1, padding=1), nn.ReLU()]
+            size = width
+        self.conv = nn.Sequential(*layers)
+        self.keypoints = nn.Conv2d(size, KEYPOINTS, 1)
+        self.soft_argmax = SpatialSoftArgmax(image_hw[0] // 4, image_hw[1] // 4)
+        mlp: list[nn.Module] = []
+        width_in = 2 * KEYPOINTS + size + len(state_mean)
+        for width in hidden:
+            mlp += [nn.Linear(width_in, width), nn.ReLU()]
+            width_in = width
+        mlp.append(nn.Linear(width_in, chunk * act_dim))
+        self.head = nn.Sequential(*mlp)
+        self.ensemble = TemporalEnsemble(chunk, act_dim, decay)
+
+    def features(self, image: torch.Tensor) -> torch.Tensor:
+        """``(B, 3, H, W)`` float images in [0, 1] -> the encoder's features."""
+        maps = self.conv(image - 0.5)
+        return torch.cat([self.soft_argmax(self.keypoints(maps)), maps.mean((2, 3))], 1)
+
+    def raw_normalised(self, image: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        """Float images ``(B, 3, H, W)`` and normalised states -> normalised chunks."""
+        x = torch.cat([self.features(image), state], 1)
+        return self.head(x).view(-1, self.chunk, self.act_dim)
+
+    def anchor(self, state: torch.Tensor) -> torch.Tensor:
+        return state[:, self.joint] * self.coef
+
+    @torch.jit.export
+    def reset(self) -> None:
+        self.ensemble.reset()
+
+    def forward(self, image: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        x = image.permute(0, 3, 1, 2).float() / 255.0
+        normalised = (state - self.state_mean) / self.state_std
+        chunk = self.raw_normalised(x, normalised) * self.act_std + self.act_mean
+        anchor = self.anchor(state)
+        action = self.ensemble(chunk + anchor[:, None], anchor)
+        return torch.clamp(action, self.act_low, self.act_high)
+
+
+def augment(images: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """``(B, 3, H, W)`` float images, each shifted by up to ``SHIFT_PX`` pixels (edges
+    replicated) and colour-jittered."""
+    b, _, h, w = images.shape
+    padded = F.pad(images, (SHIFT_PX,) * 4, mode="replicate")
+    dx = torch.randint(0, 2 * SHIFT_PX + 1, (b,), generator=generator)
+    dy = torch.randint(0, 2 * SHIFT_PX + 1, (b,), generator=generator)
+    rows = (dy[:, None] + torch.arange(h)[None])[:, None, :, None].expand(b, 3, h, w + 2 * SHIFT_PX)
+    shifted = padded.gather(2, rows)
+    cols = (dx[:, None] + torch.arange(w)[None])[:, None, None, :].expand(b, 3, h, w)
+    shifted = shifted.gather(3, cols)
+
+    def uniform(size, spread):
+        return 1.0 + spread * (2 * torch.rand(size, generator=generator) - 1)
+
+    mean = shifted.mean((1, 2, 3), keepdim=True)
+    out = (shifted - mean) * uniform((b, 1, 1, 1), CONTRAST) + mean
+    out = out * uniform((b, 1, 1, 1), BRIGHTNESS) * uniform((b, 3, 1, 1), GAIN)
+    return out.clamp(0.0, 1.0)
