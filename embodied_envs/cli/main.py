@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
+from pathlib import Path
 
 from embodied_envs.cli import (
     collect,
@@ -55,6 +57,9 @@ def main(argv: list[str] | None = None) -> int:
     ) as e:  # fmt: skip
         print(f"error: {e}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: what was kept and the command that resumes, one line
+        print(interrupted_line(args, argv), file=sys.stderr)
+        return 130
     except OSError as e:  # a full disk, a read-only folder, a vanished file: one line
         where = f"{e.filename}: " if e.filename else ""
         print(f"error: {where}{e.strerror or e}. Fix: free space or choose a writable --out.",
@@ -62,6 +67,23 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     finally:
         started()
+
+
+def interrupted_line(args, argv: list[str]) -> str:
+    """The line an interrupted command prints: the episodes a ``--ray`` run received, kept in
+    its ``--out`` (``OUT/.resume-<name>/``, docs/scaling.md), and the command that resumes
+    them; else that nothing is kept to resume."""
+    from embodied_envs.pipelines.on_ray import RESUME_PREFIX  # only when interrupted
+
+    out = getattr(args, "out", None)
+    stores = sorted(Path(out).glob(f"{RESUME_PREFIX}*")) if out is not None else []
+    kept = {str(s): sum(1 for p in s.iterdir() if p.is_dir() and not p.name.startswith("."))
+            for s in stores if s.is_dir()}  # fmt: skip
+    command = shlex.join(["embodied-envs", *argv])
+    if not any(kept.values()):
+        return f"interrupted: nothing kept to resume; to start again: {command}"
+    where = ", ".join(f"{n} in {s}" for s, n in kept.items() if n)
+    return f"interrupted: kept the episodes received ({where}); to resume them: {command}"
 
 
 if __name__ == "__main__":

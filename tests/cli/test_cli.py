@@ -209,3 +209,26 @@ def test_unwritable_out_is_one_line(tmp_path, capsys):
         main(["layout", "generate", str(DEFAULT_LAYOUT), "--num", "1", "--out", str(blocker)])
     assert "is a file, not a folder" in str(e.value.code)
     assert blocker.read_text() == "x"
+
+
+def test_ctrl_c_prints_what_was_kept_and_the_command_that_resumes(tmp_path, monkeypatch, capsys):
+    from embodied_envs.cli import collect
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(collect, "cmd_collect", interrupted)
+    argv = ["collect", "--num", "4", "--out", str(tmp_path), "--ray", "auto"]
+    assert main(argv) == 130
+    command = f"embodied-envs {' '.join(argv)}"
+    assert (
+        capsys.readouterr().err
+        == f"interrupted: nothing kept to resume; to start again: {command}\n"
+    )
+    for seed in ("000700", "000701", ".000702.tmp"):  # a folder being written is not kept
+        (tmp_path / ".resume-default" / seed).mkdir(parents=True)
+    assert main(argv) == 130
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert f"(2 in {tmp_path / '.resume-default'})" in err
+    assert err.endswith(f"to resume them: {command}\n")

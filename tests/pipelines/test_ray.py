@@ -259,3 +259,46 @@ def test_tasks_queue_ahead_only_where_the_cluster_would_not_run_them(monkeypatch
 
     monkeypatch.setattr(on_ray, "cluster_cpus", lambda: cpus)
     assert on_ray.in_flight(SimpleNamespace(workers=workers)) == expected
+
+
+@pytest.mark.parametrize("how", ["--ray", "RAY_ADDRESS"])
+def test_a_dead_address_is_one_line_within_30_s(tmp_path, how):
+    dead = "127.0.0.1:1"  # nothing listens on port 1
+    args = collect_args(tmp_path, 1, "--ray", *([dead] if how == "--ray" else []))
+    env = dict(os.environ, MS_SKIP_ASSET_DOWNLOAD_PROMPT="1")
+    env.pop("RAY_ADDRESS", None)
+    if how == "RAY_ADDRESS":
+        env["RAY_ADDRESS"] = dead
+    t0 = time.monotonic()
+    res = subprocess.run(CLI + args, cwd=tmp_path, env=env, capture_output=True, text=True,
+                         timeout=60)  # fmt: skip
+    assert time.monotonic() - t0 < 30
+    assert res.returncode == 1
+    named = f"--ray {dead}" if how == "--ray" else f"RAY_ADDRESS={dead}"
+    assert res.stderr.startswith(f"error: {named}: no Ray cluster reachable at {dead}")
+    assert res.stderr.count("\n") == 1, res.stderr
+
+
+EXITING = """
+import sys
+def make(env):
+    def act(obs):
+        sys.exit("no weights here")
+    return act
+"""
+
+
+def test_a_policy_calling_sys_exit_on_a_worker_is_its_one_line_error(cluster, tmp_path):
+    """Not a worker lost and retried: the policy's call, as the local run names it."""
+    (tmp_path / "quits.py").write_text(EXITING)
+    args = ["eval", "--policy", "quits.py:make", "--episodes", "1", "--max-episode-steps", "5"]
+    local = cli([*args, "--out", "local"], tmp_path)
+    res = cli([*args, "--ray", "auto", "--out", "ray"], tmp_path, cluster)
+    assert local.returncode == res.returncode == 1
+    line = [ln for ln in local.stdout.splitlines() if ln.startswith("error:")]
+    assert line == [
+        "error: --policy quits.py:make: the policy raised SystemExit: no weights here at step 0 "
+        "of episode seed 0 (default.json)"
+    ]
+    assert [ln for ln in res.stdout.splitlines() if ln.startswith("error:")] == line
+    assert "lost" not in res.stdout + res.stderr
