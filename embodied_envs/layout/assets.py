@@ -24,6 +24,7 @@ from scipy.spatial import ConvexHull, QhullError
 from embodied_envs.layout.collision import (
     MIN_COLLISION_THICKNESS,
     convex_collision,
+    load_mesh,
     obj_objects,
     thickness,
 )
@@ -40,6 +41,18 @@ DEFAULT_DENSITY = 1000.0  # kg/m^3, when the URDF gives no mass
 MASS_RANGE = (1e-3, 1e3)  # kg: a graspable or supporting object (a paper clip to a table)
 HEAVY_COLLISION_FACES = 50_000  # a collision mesh with more faces is warned about (cost)
 MAX_IMAGE_SIDE = 8192  # pixels a side of any image rendered or read: larger ones are refused
+MAX_OBJECT_SIZE = 10.0  # m: a collision mesh larger than this across is refused (a mesh in
+# millimetres reads 1000x too large: a 10 cm can is 100 m)
+# the first bytes of files that are not meshes, and what they are (a mesh named as the URDF
+# says but holding other bytes is named as what it holds, not as an empty mesh)
+NOT_MESH_SIGNATURES = {
+    b"\x89PNG\r\n\x1a\n": "a PNG image",
+    b"\xff\xd8\xff": "a JPEG image",
+    b"GIF8": "a GIF image",
+    b"PK\x03\x04": "a zip archive",
+    b"%PDF": "a PDF document",
+    b"\x1f\x8b": "gzip-compressed data",
+}
 
 
 def node_stem(node: str) -> str:
@@ -290,8 +303,14 @@ def _load_parts_checked(mesh: MeshRef, collision: bool = True):
     # trimesh (0.4 s to import) only where a mesh is read: `embodied-envs --help` starts without
     import trimesh
 
+    other = _not_a_mesh(mesh.path)
+    if other is not None:
+        raise LayoutError(
+            f"{mesh.path}: not a mesh file: its bytes are {other}. Fix: name the mesh file "
+            "in the URDF's <mesh filename>, or re-export the mesh."
+        )
     try:
-        loaded = trimesh.load(mesh.path, force="mesh", process=False, skip_materials=True)
+        loaded = load_mesh(mesh.path)
     except Exception as e:  # trimesh raises many types for unreadable files
         raise LayoutError(f"{mesh.path}: not a readable mesh ({e}). Fix: re-export it.") from e
     if (
@@ -323,6 +342,19 @@ def _load_parts_checked(mesh: MeshRef, collision: bool = True):
 
 
 _WARNED_HEAVY: set = set()
+
+
+def _not_a_mesh(path: Path) -> str | None:
+    """What the file at ``path`` holds when its first bytes show it is no mesh (an image, an
+    archive; for an OBJ, a text format, any binary data), else None."""
+    with open(path, "rb") as fh:
+        head = fh.read(4096)
+    for signature, kind in NOT_MESH_SIGNATURES.items():
+        if head.startswith(signature):
+            return kind
+    if path.suffix.lower() == ".obj" and b"\0" in head:
+        return "binary data, not text"
+    return None
 
 
 @dataclass(frozen=True)
@@ -398,6 +430,14 @@ def _geometry(collision: MeshRef) -> AssetGeometry:
         )
     vertices = np.concatenate(parts)
     extent = vertices.max(0) - vertices.min(0)
+    if extent.max() > MAX_OBJECT_SIZE:
+        raise LayoutError(
+            f"{collision.path}: the collision mesh is {' x '.join(f'{e:.4g}' for e in extent)} m"
+            f" across x, y, z (with the URDF's scale {list(collision.scale)}), over "
+            f"{MAX_OBJECT_SIZE:g} m: no object to grasp or set on a table; it reads as a mesh "
+            "written in millimetres (or centimetres). Fix: export it in metres, or give its "
+            '<mesh> scale="0.001 0.001 0.001" (centimetres: 0.01) in the URDF.'
+        )
     thin = thickness(vertices)
     if thin < MIN_COLLISION_THICKNESS:
         raise LayoutError(

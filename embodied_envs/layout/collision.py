@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import io
 import json
 import os
 import sys
@@ -69,7 +70,8 @@ COACD_PARAMS = dict(
     mcts_iterations=60,
     seed=0,
 )
-METHOD = 2  # in the cache key: a decomposition made by an earlier method is not reused
+METHOD = 3  # in the cache key: a decomposition made by an earlier method is not reused (3:
+# faces written twice read once, inside-out closed pieces turned out)
 OPT_OUT_ENV = "EMBODIED_ENVS_DECOMPOSE"  # "0": keep one-object concave meshes (warned once)
 CACHE_ENV = "EMBODIED_ENVS_CACHE"
 KEPT = "# kept as written: "  # second line of a cache file recording a refused decomposition
@@ -96,6 +98,48 @@ def obj_objects(path: Path) -> list[np.ndarray]:
                     groups[-1].append(i - 1 if i > 0 else len(vertices) + i)
     table = np.asarray(vertices, dtype=np.float64)
     return [table[np.unique(g)] for g in groups if g]
+
+
+OBJ_COUNTED = (b"v", b"vt", b"vn")  # what an OBJ face's index, texture index, normal index count
+
+
+def absolute_indices(data: bytes) -> bytes:
+    """An OBJ file's text with every negative (relative) index of its faces, lines and points
+    made absolute: ``-1`` is the last vertex (texture coordinate, normal) written *before* that
+    line, as the OBJ format reads it (trimesh counts from the file's last one)."""
+    counts = dict.fromkeys(OBJ_COUNTED, 0)
+    out = []
+    for line in data.splitlines():
+        words = line.split()
+        head = words[0] if words else b""
+        if head in counts:
+            counts[head] += 1
+        elif head in (b"f", b"l", b"p") and b"-" in line:
+            tokens = [head]
+            for word in words[1:]:
+                parts = word.split(b"/")
+                for k, key in enumerate(OBJ_COUNTED[: len(parts)]):
+                    if parts[k].startswith(b"-"):
+                        parts[k] = str(counts[key] + int(parts[k]) + 1).encode()
+                tokens.append(b"/".join(parts))
+            line = b" ".join(tokens)
+        out.append(line)
+    return b"\n".join(out) + b"\n"
+
+
+def load_mesh(path: Path):
+    """trimesh's reading of the mesh file at ``path`` (one mesh, no vertex merged, no
+    materials), an OBJ's negative face indices read as the OBJ format reads them
+    (:func:`absolute_indices`)."""
+    import trimesh  # only where a mesh is read
+
+    options = dict(force="mesh", process=False, skip_materials=True)
+    if path.suffix.lower() == ".obj":
+        data = path.read_bytes()
+        if any(w.startswith(b"-") for ln in data.splitlines() if ln.startswith((b"f ", b"l "))
+               for w in ln.split()[1:]):  # fmt: skip
+            return trimesh.load(io.BytesIO(absolute_indices(data)), file_type="obj", **options)
+    return trimesh.load(path, **options)
 
 
 def thickness(vertices: np.ndarray) -> float:
@@ -132,13 +176,13 @@ def _read(path: Path):
     try:
         if path.suffix.lower() == ".obj" and len(obj_objects(path)) > 1:
             return None  # one convex hull per object: EmbodiedGen's own export
-        mesh = trimesh.load(path, force="mesh", process=False, skip_materials=True)
+        mesh = load_mesh(path)
     except Exception:  # unreadable: refused with its reason where the mesh is checked
         return None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         return None
     # the shape alone: normals and texture coordinates would keep equal positions apart
-    mesh = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    mesh = once_each(trimesh.Trimesh(mesh.vertices, mesh.faces, process=False))
     mesh.remove_unreferenced_vertices()
     if not np.isfinite(mesh.vertices).all():
         return None
@@ -154,12 +198,27 @@ def pieces(mesh) -> list[Piece]:
     found = mesh.split(only_watertight=False)
     if not all(p.is_watertight for p in found):
         merged = trimesh.Trimesh(mesh.vertices, mesh.faces, process=True)  # equal positions
-        found = merged.split(only_watertight=False)
+        found = once_each(merged).split(only_watertight=False)
     out = []
     for p in found:
+        if p.is_watertight and p.is_winding_consistent and p.volume < 0:
+            p = p.copy()  # closed, written inside out (every face turned inward)
+            p.invert()
         measurable = p.is_volume and p.volume > 0
         out.append(Piece(p, p.convex_hull.volume / p.volume if measurable else None))
     return out
+
+
+def once_each(mesh):
+    """``mesh`` with each face written more than once (the same three vertices, either way
+    round) kept once: a face written twice joins no neighbour, and splits a closed surface
+    into pieces of a face each."""
+    import trimesh  # only where a mesh is read
+
+    _, first = np.unique(np.sort(mesh.faces, axis=1), axis=0, return_index=True)
+    if len(first) == len(mesh.faces):
+        return mesh
+    return trimesh.Trimesh(mesh.vertices, mesh.faces[np.sort(first)], process=False)
 
 
 def open_concave(piece: Piece) -> bool:

@@ -1,4 +1,5 @@
 import pytest
+import trimesh
 from conftest import DATA
 
 from embodied_envs.layout import LayoutError, asset_geometry, parse_urdf
@@ -116,3 +117,22 @@ def test_a_collision_mesh_off_the_visual_one_is_warned_about_once(tmp_path):
         # the shipped assets' collision meshes stand where their visual ones do
         for urdf in sorted((DATA / "assets").glob("*/*.urdf")):
             check_visual_mesh(parse_urdf(urdf))
+
+
+def test_png_bytes_named_obj_are_named_as_what_they_are(tmp_path):
+    png = b"\x89PNG\r\n\x1a\n" + bytes(64)
+    spec = parse_urdf(make_asset(tmp_path, mesh_text=""))
+    spec.collision.path.write_bytes(png)
+    with pytest.raises(LayoutError, match="not a mesh file: its bytes are a PNG image") as e:
+        asset_geometry(spec)
+    assert "empty" not in str(e.value)
+
+
+def test_a_mesh_in_millimetres_is_refused_saying_so(tmp_path):
+    box = trimesh.creation.box((66.0, 100.0, 66.0))  # a can's box in millimetres, stored Y-up
+    lines = [f"v {x} {y} {z}" for x, y, z in box.vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in box.faces]
+    spec = parse_urdf(make_asset(tmp_path, mesh_text="\n".join(lines) + "\n"))
+    with pytest.raises(LayoutError, match=r"66 x 66 x 100 m .*millimetres.*0\.001") as e:
+        asset_geometry(spec)
+    assert str(spec.collision.path) in str(e.value)

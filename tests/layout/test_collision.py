@@ -375,3 +375,49 @@ def test_open_convex_pieces_are_not_warned_about(fresh, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert col.convex_collision(path) == path
+
+
+def torus() -> trimesh.Trimesh:
+    t = trimesh.creation.torus(0.05, 0.015)  # closed, concave: its hull is 1.6x its volume
+    return t.apply_translation(-t.bounds.mean(0))
+
+
+def one_object_asset(tmp_path, collision: trimesh.Trimesh) -> Path:
+    urdf = write_asset(tmp_path, "ring", [torus()], [collision])
+    return urdf.parent / "mesh" / "ring_collision.obj"
+
+
+def test_obj_faces_with_negative_indices_count_back_from_their_line(tmp_path):
+    """A triangle soup whose faces each name the three vertices written just before them
+    (``f -3 -2 -1``), as the OBJ format reads relative indices (trimesh alone counts them from
+    the file's end: every face the last three vertices, and the torus was refused)."""
+    t = torus()
+    path = one_object_asset(tmp_path, t)
+    lines = ["o ring"]
+    for face in t.faces:
+        lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in t.vertices[face]]
+        lines.append("f -3 -2 -1")
+    path.write_text("\n".join(lines) + "\n")
+    read = col.load_mesh(path)
+    assert np.allclose(read.vertices[read.faces], t.vertices[t.faces], atol=1e-6)
+    assert col.concavity(path) == "one concave object (its convex hull is 1.6x its volume)"
+    assert col.absolute_indices(b"v 0 0 0\nv 1 0 0\nvt 0 0\nf -2/-1 -1/-1 1/1\n").endswith(
+        b"f 1/1 2/1 1/1\n"
+    )
+
+
+def test_a_closed_mesh_written_inside_out_is_closed_and_concave(tmp_path):
+    t = torus()
+    path = one_object_asset(tmp_path, trimesh.Trimesh(t.vertices, t.faces[:, ::-1]))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        reason = col.concavity(path)
+    assert reason == "one concave object (its convex hull is 1.6x its volume)"
+    assert not [w for w in caught if "not closed" in str(w.message)]
+
+
+def test_faces_written_twice_are_one_surface_not_a_piece_per_face(tmp_path):
+    t = torus()
+    twice = trimesh.Trimesh(t.vertices, np.concatenate([t.faces, t.faces[:, ::-1]]))
+    path = one_object_asset(tmp_path, twice)
+    assert col.concavity(path) == "one concave object (its convex hull is 1.6x its volume)"
