@@ -31,7 +31,6 @@ import os
 import pickle
 import re
 import shutil
-import socket
 import tempfile
 import threading
 import zipfile
@@ -51,8 +50,6 @@ MAX_BUNDLE_BYTES = 128 * 2**20  # the job's files, zipped: held once per node in
 BUNDLE_FOLDER = "embodied_envs-ray"  # per node, under the temporary folder: unpacked bundles
 EARLY_POLL_SECONDS = 0.05  # how often a session looks whether start_early's Ray is up
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # every zip member's date: a bundle's bytes follow its files
-CONNECT_SECONDS = 10.0  # a cluster address's TCP connection, tried before Ray's (which retries
-# an address where nothing listens for minutes, printing warnings)
 
 
 class ClusterError(RuntimeError):
@@ -164,7 +161,6 @@ def _init(address: str | None, cpus: int | None) -> None:
                       _system_config={"worker_niceness": WORKER_NICENESS})  # fmt: skip
     else:  # other machines get the driver's code with the job
         kwargs["runtime_env"] = {"py_modules": [package]}
-        _check_reachable(address)
     try:
         # this machine's workers import the driver's package from where it is (no runtime
         # environment: one held each worker's start ~10 s, and Ray's idle workers go unused)
@@ -176,38 +172,6 @@ def _init(address: str | None, cpus: int | None) -> None:
             f"--ray {where}: no running Ray cluster there ({' '.join(str(e).split())}). Fix: "
             "start one (ray start --head), give its address, or give --ray without a value for "
             "a Ray of this machine alone"
-        ) from None
-
-
-def _check_reachable(address: str | None) -> None:
-    """Raises :class:`ClusterError` in one line, within :data:`CONNECT_SECONDS`, when nothing
-    accepts a TCP connection at the cluster address ``address`` (None: ``RAY_ADDRESS``'s;
-    ``auto``: the cluster this machine last started, as Ray finds it). An address that is not
-    ``host:port`` (``ray://`` taken off) is left to Ray."""
-    target = address if address is not None else os.environ["RAY_ADDRESS"]
-    named = f"--ray {target}" if address is not None else f"RAY_ADDRESS={target}"
-    if target == "auto" and os.environ.get("RAY_ADDRESS"):
-        named += f" (RAY_ADDRESS={os.environ['RAY_ADDRESS']})"
-    if target == "auto":
-        try:  # Ray's own reading of "auto" (RAY_ADDRESS, else the last cluster started here)
-            from ray._private.services import canonicalize_bootstrap_address
-
-            target = canonicalize_bootstrap_address("auto")
-        except Exception:  # none found, or another Ray: ray.init says why
-            return
-    host, sep, port = str(target).removeprefix("ray://").rpartition(":")
-    if not sep or not host or not port.isdigit():
-        return
-    try:
-        socket.create_connection((host.strip("[]"), int(port)), CONNECT_SECONDS).close()
-    except OSError as e:
-        why = (f"no answer within {CONNECT_SECONDS:.0f} s" if isinstance(e, TimeoutError)
-               else (e.strerror or str(e)).lower())  # fmt: skip
-        alone = "--ray without a value" if address is not None else "unset RAY_ADDRESS"
-        raise ClusterError(
-            f"{named}: no Ray cluster reachable at {host}:{port} ({why}). Fix: start one "
-            f"there (ray start --head), name a running one, or give {alone} for a Ray of this "
-            "machine alone"
         ) from None
 
 

@@ -19,12 +19,14 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import socket
 from dataclasses import asdict
 from pathlib import Path
 
 from embodied_envs.cluster import (
     RAY_LOCAL,
     Bundle,
+    ClusterError,
     ResumeStore,
     cluster_cpus,
     ray_session,
@@ -40,6 +42,8 @@ RESUME_PREFIX = ".resume-"  # in --out: what an interrupted --ray run received
 TASKS_AHEAD = 2  # tasks queued per worker: a worker starts its next episode at once, not after
 # the driver has received and stored its last (one at a time cost ~0.2 s an episode of 0.6)
 RUN_KEYS = ("workers", "ray")  # plan fields that do not change the episodes (not in resume)
+CONNECT_SECONDS = 10.0  # a cluster address's TCP connection, tried before Ray's (which retries
+# an address where nothing listens for minutes, printing its warnings)
 
 
 @contextlib.contextmanager
@@ -56,6 +60,8 @@ def session(address: str | None, workers: int):
     if ray.is_initialized() and not starting(*args):
         yield
         return
+    if not starting(*args):
+        check_address(args[0])
     with ray_session(*args):
         started()
         yield
@@ -66,7 +72,37 @@ def start(address: str | None, workers: int, warm: str) -> None:
     checks its inputs, its workers importing the module ``warm`` whose episodes they will
     run (``cluster.start_early``)."""
     if address is not None:
-        start_early(*_session_args(address, workers), warm=(warm,))
+        args = _session_args(address, workers)
+        check_address(args[0])
+        start_early(*args, warm=(warm,))
+
+
+def check_address(address: str | None) -> None:
+    """Raises :class:`ClusterError` in one line, within :data:`CONNECT_SECONDS`, when nothing
+    accepts a TCP connection at the cluster ``address`` names (None, or ``auto``:
+    ``RAY_ADDRESS``'s, if set). An address that is not ``host:port`` (``ray://`` taken off:
+    Ray's client) is left to Ray."""
+    env = os.environ.get("RAY_ADDRESS")
+    from_env = address in (None, "auto")
+    target = env if from_env else address
+    if not target:
+        return
+    named = f"--ray {address}" if address is not None else "--ray"
+    named += f" (RAY_ADDRESS={env})" if from_env else ""
+    host, sep, port = target.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), CONNECT_SECONDS).close()
+    except OSError as e:
+        why = (f"no answer within {CONNECT_SECONDS:.0f} s" if isinstance(e, TimeoutError)
+               else (e.strerror or str(e)).lower())  # fmt: skip
+        alone = "unset RAY_ADDRESS and give" if from_env else "give"
+        raise ClusterError(
+            f"{named}: no Ray cluster reachable at {host}:{port} ({why}). Fix: start one "
+            f"there (ray start --head), name a running one, or {alone} --ray without a value "
+            "for a Ray of this machine alone"
+        ) from None
 
 
 def _session_args(address: str, workers: int) -> tuple[str | None, int | None]:
@@ -116,5 +152,3 @@ def episode_of(folder: Path) -> Episode:
 
 def save_episode(store: ResumeStore, key: str, episode: Episode, **files: bytes) -> None:
     store.save(key, {"episode.json": json.dumps(asdict(episode)).encode(), **files})
-
-

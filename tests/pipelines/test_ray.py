@@ -274,7 +274,7 @@ def test_a_dead_address_is_one_line_within_30_s(tmp_path, how):
                          timeout=60)  # fmt: skip
     assert time.monotonic() - t0 < 30
     assert res.returncode == 1
-    named = f"--ray {dead}" if how == "--ray" else f"RAY_ADDRESS={dead}"
+    named = f"--ray {dead}" if how == "--ray" else f"--ray (RAY_ADDRESS={dead})"
     assert res.stderr.startswith(f"error: {named}: no Ray cluster reachable at {dead}")
     assert res.stderr.count("\n") == 1, res.stderr
 
