@@ -265,6 +265,7 @@ def camera_env_kwargs(args) -> dict:
 
 def check_rooms(rooms: list[str]) -> None:
     """Every room of the pool a readable 3DGS PLY, before any worker starts; else one line."""
+    # read when the command runs: `--help` stays without the splat and room modules
     from embodied_envs.layout.rooms import ROOM_FILE, RoomError, resolve_rooms
     from embodied_envs.splat import SplatFileError, check_ply
 

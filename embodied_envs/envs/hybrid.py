@@ -36,6 +36,7 @@ CAMERA_TOLERANCE = 1e-6  # camera matrices closer than this reuse the cached bac
 # at most 2^24 (the projection holds a (cameras, Gaussians, 3) tensor: 200 MB at float32)
 MAX_CAMERAS_PER_CALL = 64
 MAX_CAMERA_GAUSSIANS_PER_CALL = 1 << 24
+MAX_CACHED_VIEWS = 64  # (room, camera) backgrounds kept for rooms drawn again (~1 MB at 256x256)
 DEPTH_MM_MAX = 32767  # ManiSkill's depth and position textures are int16 millimetres
 
 
@@ -99,6 +100,7 @@ class HybridRenderer:
         self.rooms: list[Path] = []  # per env, its splat file
         self._lut: dict[str, torch.Tensor] = {}  # "sensor" / "human" -> (n, max id + 1) bool
         self._cameras: dict[str, CameraBackgrounds] = {}
+        self._views: dict[tuple, tuple[torch.Tensor, torch.Tensor]] = {}  # (room, camera) views
         # sensor camera -> (n, H, W) bool: pixels of its last composite showing splat points
         self.splat_points: dict[str, torch.Tensor] = {}
         self._prerender_due = False  # set by configure, cleared by prerender
@@ -114,6 +116,7 @@ class HybridRenderer:
             self.splats = {k: v.to(device) for k, v in self.splats.items()}
             self._lut = {k: v.to(device) for k, v in self._lut.items()}
             self._cameras.clear()
+            self._views.clear()
         return self
 
     def configure(
@@ -173,9 +176,12 @@ class HybridRenderer:
         batched rasterizer calls (``MAX_CAMERAS_PER_CALL``, ``MAX_CAMERA_GAUSSIANS_PER_CALL``)."""
         start = time.perf_counter()
         moved = [cam.in_frame(pose.matrix()) for cam, pose in zip(cameras, poses, strict=True)]
+        keys = [(room, cam.key()) for room, cam in zip(rooms, moved, strict=True)]
+        if all(k in self._views for k in keys):  # each view seen before (a room drawn again)
+            rgb = torch.stack([self._views[k][0] for k in keys])
+            return rgb, torch.stack([self._views[k][1] for k in keys])
         views: dict[tuple, int] = {}  # (room, camera) -> row of the unique views
-        rows = [views.setdefault((room, cam.key()), len(views)) for room, cam in zip(
-            rooms, moved, strict=True)]  # fmt: skip
+        rows = [views.setdefault(k, len(views)) for k in keys]
         unique = [next(moved[k] for k, r in enumerate(rows) if r == v) for v in range(len(views))]
         rgb = torch.zeros((len(views), moved[0].height, moved[0].width, 3), dtype=torch.uint8,
                           device=self.device)  # fmt: skip
@@ -193,6 +199,10 @@ class HybridRenderer:
                 depth[part] = image.surface_depth(SPLAT_SURFACE_ALPHA).to(self.device)
         self.renders += len(views)
         self.render_seconds += time.perf_counter() - start
+        for key, row in views.items():  # kept for the next draw of the same room and camera
+            if len(self._views) >= MAX_CACHED_VIEWS:
+                self._views.pop(next(iter(self._views)))
+            self._views[key] = (rgb[row].clone(), depth[row].clone())
         return rgb[rows], depth[rows]
 
     def render_one(

@@ -16,6 +16,7 @@ from mani_skill.utils import sapien_utils
 
 from embodied_envs.config import CameraSpec
 from embodied_envs.envs.hybrid import HybridRenderer, stacked_ids
+from embodied_envs.internals import link_components
 from embodied_envs.layout.rooms import ROOM_FILE, RoomError, draw_rooms, resolve_rooms
 from embodied_envs.scene.visual_detail import simplify_visuals
 
@@ -96,7 +97,7 @@ class HybridRendering:
         super()._load_agent(options, *args, **kwargs)
         if self.robot_visual_faces is not None:  # what every camera sees of the robot
             for agent in getattr(self.agent, "agents", [self.agent]):
-                entities = [obj.entity for link in agent.robot.links for obj in link._objs]
+                entities = [c.entity for link in agent.robot.links for c in link_components(link)]
                 simplify_visuals(entities, self.robot_visual_faces)
 
     def _after_reconfigure(self, options: dict):
@@ -124,7 +125,7 @@ class HybridRendering:
 
     def reset(self, seed: int | list[int] | None = None, options: dict | None = None):
         result = super().reset(seed=seed, options=options)
-        if self.hybrid is not None:
+        if self.hybrid is not None and self.render_hybrid:  # render()'s backgrounds, now
             self.hybrid.prerender(self.scene)  # after a (re)configuration: the new backgrounds
         return result
 

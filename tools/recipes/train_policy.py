@@ -122,8 +122,7 @@ class ChunkPolicy(nn.Module):
         self.ensemble.reset()
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        anchor = self.anchor(obs)
-        action = self.ensemble(self.raw(obs) + anchor[:, None], anchor)
+        action = self.ensemble(self.targets(obs), self.anchor(obs))
         return torch.clamp(action, self.act_low, self.act_high)
 
 

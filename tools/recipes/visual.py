@@ -171,3 +171,34 @@ def augment(images: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
     out = (shifted - mean) * uniform((b, 1, 1, 1), CONTRAST) + mean
     out = out * uniform((b, 1, 1, 1), BRIGHTNESS) * uniform((b, 3, 1, 1), GAIN)
     return out.clamp(0.0, 1.0)
+
+
+def contact_sheet(path: Path, out: Path, episodes: int = 8, scale: int = 2) -> Path:
+    """A PNG of what the policy sees: per column an episode of the dataset (rooms differ when
+    it was collected with ``--rooms``), its first frame above and its middle frame below, each
+    enlarged ``scale`` times."""
+    import imageio.v2 as imageio
+
+    from embodied_envs.paths import atomic_output
+
+    columns = []
+    with h5py.File(path, "r") as f:
+        names = sorted((k for k in f if k.startswith("traj_")), key=lambda k: int(k[5:]))
+        for name in names[:episodes]:
+            rgb = f[f"{name}/obs/sensor_data/{CAMERA}/rgb"]
+            columns.append(np.concatenate([rgb[0], rgb[len(rgb) // 2]], 0))
+    sheet = np.concatenate(columns, 1).repeat(scale, 0).repeat(scale, 1)
+    with atomic_output(out) as tmp:
+        imageio.imwrite(tmp, sheet)
+    return out
+
+
+if __name__ == "__main__":
+    import argparse
+
+    ap = argparse.ArgumentParser(description="a contact sheet of an rgb dataset's frames")
+    ap.add_argument("--demos", type=Path, required=True, help="an rgb dataset (.h5)")
+    ap.add_argument("--out", type=Path, required=True, help="the PNG to write")
+    ap.add_argument("--episodes", type=int, default=8)
+    cli = ap.parse_args()
+    print(f"wrote {contact_sheet(cli.demos, cli.out, cli.episodes)}")
