@@ -68,6 +68,13 @@ class MeshRef:
     xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
     scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    source: Path | None = None  # the file the URDF names, when ``path`` is made from it (its
+    # convex parts, in the cache folder: layout/collision.py): what messages name
+
+    @property
+    def named(self) -> Path:
+        """The file the user wrote: what a message about this mesh names."""
+        return self.path if self.source is None else self.source
 
     def to_link_frame(self, vertices: np.ndarray) -> np.ndarray:
         """Map mesh vertices into the link (actor) frame: scale, rotate, translate."""
@@ -210,7 +217,9 @@ def parse_urdf(urdf: Path | str) -> AssetSpec:
     visual = _mesh(link, "visual", urdf)
     collision = _mesh(link, "collision", urdf)
     # a one-object concave mesh the simulator would fill in: its convex parts (layout/collision.py)
-    collision = dataclasses.replace(collision, path=convex_collision(collision.path))
+    parts = convex_collision(collision.path)
+    if parts != collision.path:
+        collision = dataclasses.replace(collision, path=parts, source=collision.path)
     mu1 = _float_text(link.find("collision/gazebo/mu1"), urdf, "collision/gazebo/mu1")
     mu2 = _float_text(link.find("collision/gazebo/mu2"), urdf, "collision/gazebo/mu2")
     mass = _float_text(link.find("inertial/mass"), urdf, "inertial/mass")
@@ -329,13 +338,14 @@ def _load_parts_checked(mesh: MeshRef, collision: bool = True):
             f"{int(np.flatnonzero(~np.isfinite(vertices).all(1))[0])}). Fix: re-export the mesh."
         )
     heavy = collision and len(loaded.faces) > HEAVY_COLLISION_FACES
-    if heavy and mesh.path not in _WARNED_HEAVY:
-        _WARNED_HEAVY.add(mesh.path)
+    if heavy and mesh.named not in _WARNED_HEAVY:
+        _WARNED_HEAVY.add(mesh.named)
+        made = "" if mesh.source is None else f"its convex parts, made on load ({mesh.path}), have "
         warnings.warn(
-            f"{mesh.path}: {len(loaded.faces):,} faces. Collision meshes of EmbodiedGen assets are"
-            f" convex parts of a few hundred faces; over {HEAVY_COLLISION_FACES:,} faces make"
-            " building the env slow (about 37 s and 2.3 GB at 655k faces). Fix: simplify it"
-            " (e.g. trimesh's simplify_quadric_decimation, or a convex decomposition).",
+            f"{mesh.named}: {made}{len(loaded.faces):,} faces. Collision meshes of EmbodiedGen"
+            f" assets are convex parts of a few hundred faces; over {HEAVY_COLLISION_FACES:,}"
+            " faces make building the env slow (about 37 s and 2.3 GB at 655k faces). Fix:"
+            " simplify it (e.g. trimesh's simplify_quadric_decimation, or a convex decomposition).",
             stacklevel=2,
         )
     return loaded
@@ -425,14 +435,14 @@ def _geometry(collision: MeshRef) -> AssetGeometry:
             pass
     if not parts:
         raise LayoutError(
-            f"{collision.path}: no convex part with at least 4 vertices."
+            f"{collision.named}: no convex part with at least 4 vertices."
             " Fix: export a closed collision mesh."
         )
     vertices = np.concatenate(parts)
     extent = vertices.max(0) - vertices.min(0)
     if extent.max() > MAX_OBJECT_SIZE:
         raise LayoutError(
-            f"{collision.path}: the collision mesh is {' x '.join(f'{e:.4g}' for e in extent)} m"
+            f"{collision.named}: the collision mesh is {' x '.join(f'{e:.4g}' for e in extent)} m"
             f" across x, y, z (with the URDF's scale {list(collision.scale)}), over "
             f"{MAX_OBJECT_SIZE:g} m: no object to grasp or set on a table; it reads as a mesh "
             "written in millimetres (or centimetres). Fix: export it in metres, or give its "
@@ -441,7 +451,7 @@ def _geometry(collision: MeshRef) -> AssetGeometry:
     thin = thickness(vertices)
     if thin < MIN_COLLISION_THICKNESS:
         raise LayoutError(
-            f"{collision.path}: the collision mesh is flat ({extent.round(4).tolist()} m across"
+            f"{collision.named}: the collision mesh is flat ({extent.round(4).tolist()} m across"
             f" x, y, z; {thin:.4f} m at its thinnest, under {MIN_COLLISION_THICKNESS} m): the"
             " object would sink through its support. Fix: export a closed collision mesh with"
             " volume."

@@ -70,6 +70,7 @@ COACD_PARAMS = dict(
     mcts_iterations=60,
     seed=0,
 )
+SLOW_FACES = 10_000  # a concave piece over this many faces: the progress line says to wait
 METHOD = 3  # in the cache key: a decomposition made by an earlier method is not reused (3:
 # faces written twice read once, inside-out closed pieces turned out)
 OPT_OUT_ENV = "EMBODIED_ENVS_DECOMPOSE"  # "0": keep one-object concave meshes (warned once)
@@ -346,9 +347,12 @@ def _decompose(path: Path, out: Path, reason: str, found: list[Piece]) -> str:
     (the parts, or why the mesh is kept as written: ``KEPT``); the outcome."""
     concave = sum(p.concave for p in found)
     how = f"CoACD (seed {COACD_PARAMS['seed']}) on {concave} concave, " if concave else ""
+    faces = sum(len(p.mesh.faces) for p in found if p.concave)
+    # CoACD takes seconds on a few thousand faces, most of a minute on 100,000 (on one core)
+    wait = f"; it may take a minute ({faces:,} faces)" if faces > SLOW_FACES else ""
     print(
         f"{path}: {reason}; making convex parts ({how}one hull per convex piece), once, "
-        f"cached in {out.parent} ...",
+        f"cached in {out.parent}{wait} ...",
         file=sys.stderr,
         flush=True,
     )

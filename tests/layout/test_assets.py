@@ -100,25 +100,6 @@ def test_heavy_collision_mesh_is_warned_about_once_with_its_cost(tmp_path):
         asset_geometry(spec)  # cached: no second warning
 
 
-def test_a_collision_mesh_off_the_visual_one_is_warned_about_once(tmp_path):
-    import warnings
-
-    from embodied_envs.layout.visual import check_visual_mesh
-
-    spec = parse_urdf(make_asset(tmp_path))  # the collision mesh's origin 0.1 m higher
-    with pytest.warns(UserWarning) as caught:
-        check_visual_mesh(spec)
-    text = str(caught[0].message)
-    assert text.startswith(f"{spec.urdf_path}: its collision mesh's top is +100.0 mm and its")
-    assert "bottom +100.0 mm" in text and "float" in text and "Fix:" in text
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        check_visual_mesh(spec)  # once per asset
-        # the shipped assets' collision meshes stand where their visual ones do
-        for urdf in sorted((DATA / "assets").glob("*/*.urdf")):
-            check_visual_mesh(parse_urdf(urdf))
-
-
 def test_png_bytes_named_obj_are_named_as_what_they_are(tmp_path):
     png = b"\x89PNG\r\n\x1a\n" + bytes(64)
     spec = parse_urdf(make_asset(tmp_path, mesh_text=""))
@@ -136,3 +117,30 @@ def test_a_mesh_in_millimetres_is_refused_saying_so(tmp_path):
     with pytest.raises(LayoutError, match=r"66 x 66 x 100 m .*millimetres.*0\.001") as e:
         asset_geometry(spec)
     assert str(spec.collision.path) in str(e.value)
+
+
+def test_a_heavy_decomposition_is_warned_about_naming_the_users_mesh(monkeypatch, tmp_path):
+    """Three fine spheres written as one object become three hulls of 20,480 faces each, made
+    on load into the cache folder: the warning names the user's file, not the cache file."""
+    import numpy as np
+    from shapes import write_asset
+
+    from embodied_envs.layout import collision as col
+
+    monkeypatch.setenv(col.CACHE_ENV, str(tmp_path / "cache"))
+    col._convex_collision.cache_clear()
+    spheres = [
+        trimesh.creation.icosphere(subdivisions=5, radius=0.02).apply_translation([x, 0, 0.02])
+        for x in (-0.05, 0, 0.05)
+    ]
+    spec = parse_urdf(write_asset(tmp_path / "assets", "beads", spheres))
+    original = spec.urdf_path.parent / "mesh" / "beads_collision.obj"
+    assert spec.collision.source == original and spec.collision.named == original
+    assert spec.collision.path.is_relative_to(tmp_path / "cache")
+    with pytest.warns(UserWarning) as caught:
+        asset_geometry(spec)
+    [text] = [str(w.message) for w in caught if "faces" in str(w.message)]
+    assert text.startswith(f"{original}: its convex parts, made on load ({spec.collision.path})")
+    assert "61,440 faces" in text and "Fix: simplify it" in text
+    assert len(asset_geometry(spec).parts) == 3 and np.isfinite(asset_geometry(spec).volume)
+    col._convex_collision.cache_clear()

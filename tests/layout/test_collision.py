@@ -37,9 +37,11 @@ CUP_FLOOR = 0.006  # m: the revolved cup's inside floor over its bottom
 
 
 def cup_asset(folder: Path) -> Path:
-    """The zoo's handled cup folder with the revolved cup as its collision mesh; its URDF."""
+    """The zoo's handled cup folder with the revolved cup as its collision and visual mesh (a
+    collision mesh stands where its visual mesh does: layout/visual.py); its URDF."""
     shutil.copytree(ZOO / "assets" / "handled_cup", folder / "handled_cup")
-    revolved_cup().export(folder / "handled_cup" / "mesh" / "handled_cup_collision.obj")
+    for name in ("handled_cup_collision.obj", "handled_cup.obj"):
+        revolved_cup().export(folder / "handled_cup" / "mesh" / name)
     return folder / "handled_cup" / "handled_cup.urdf"
 
 
@@ -421,3 +423,27 @@ def test_faces_written_twice_are_one_surface_not_a_piece_per_face(tmp_path):
     twice = trimesh.Trimesh(t.vertices, np.concatenate([t.faces, t.faces[:, ::-1]]))
     path = one_object_asset(tmp_path, twice)
     assert col.concavity(path) == "one concave object (its convex hull is 1.6x its volume)"
+
+
+def test_a_slow_decomposition_says_so_before_it_starts(fresh, monkeypatch, tmp_path, capsys):
+    """One line, before CoACD runs, names the mesh and that it may take a minute (a 100,000
+    face mesh takes most of one); a quick one does not say so."""
+    path = cup_asset(tmp_path / "assets").parent / "mesh" / "handled_cup_collision.obj"
+    faces = len(trimesh.load(path, force="mesh").faces)
+    monkeypatch.setattr(col, "SLOW_FACES", faces - 1)
+    import coacd
+
+    def stop(*a, **k):
+        raise KeyboardInterrupt  # the line came before the decomposition
+
+    monkeypatch.setattr(coacd, "run_coacd", stop)
+    with pytest.raises(KeyboardInterrupt):
+        col.convex_collision(path)
+    [line] = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"{path}: one concave object")
+    assert line.endswith(f"; it may take a minute ({faces:,} faces) ...")
+    monkeypatch.setattr(col, "SLOW_FACES", faces)
+    col._convex_collision.cache_clear()
+    with pytest.raises(KeyboardInterrupt):
+        col.convex_collision(path)
+    assert "minute" not in capsys.readouterr().err
