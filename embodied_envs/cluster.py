@@ -1,5 +1,5 @@
 """Episodes on a Ray cluster (``collect --ray``, ``eval --ray``): connecting, the files a job
-sends with it, tasks with retries, and the driver's resumable store.
+sends with it, and tasks with retries.
 
 - :func:`ray_session`: Ray for one command. No address: a local Ray is started for the command
   (or the cluster ``RAY_ADDRESS`` names); ``auto`` or ``host:port`` connects to a running
@@ -12,12 +12,11 @@ sends with it, tasks with retries, and the driver's resumable store.
   folder; no shared filesystem is assumed. Paths in a task's arguments are mapped onto the
   node's copy, and paths in its results and error messages back onto the driver's
   (:class:`Paths`).
-- :func:`run_tasks`: one Ray task per episode, at most ``in_flight`` at once, results handed to
-  the driver as they arrive. A task whose worker process dies (killed, out of memory, its node
-  lost) runs again, up to :data:`TASK_RETRIES` times; an exception a task raises comes back as
-  it was raised (its message naming the driver's files), not as Ray's traceback.
-- :class:`ResumeStore`: what a driver has received, kept in its output folder, so that a run
-  interrupted and started again with the same output and plan keeps it and does the rest.
+- :func:`remote_task`: a task as Ray runs it, on the node's copy of the files. A task whose
+  worker process dies (killed, out of memory, its node lost) runs again, up to
+  :data:`TASK_RETRIES` times; an exception a task raises comes back as it was raised (its
+  message naming the driver's files; :class:`CarriedError`), not as Ray's traceback. The
+  episode executor's Ray backend (``pipelines/on_ray.py``) submits them.
 """
 
 from __future__ import annotations
@@ -26,7 +25,6 @@ import dataclasses
 import hashlib
 import importlib
 import io
-import json
 import os
 import pickle
 import re
@@ -40,7 +38,6 @@ from pathlib import Path
 from typing import Any
 
 import embodied_envs
-from embodied_envs.paths import atomic_output
 
 RAY_LOCAL = "local"  # --ray without an address: a Ray of this machine, started for the command
 WORKER_NICENESS = 0  # a local Ray's worker processes: the command's priority (Ray's default 15)
@@ -319,20 +316,6 @@ def _mapped(value, table: dict[str, str]):
 
 
 # --- tasks ---------------------------------------------------------------------------------
-_CACHED: dict[str, tuple[Any, Any]] = {}  # per worker process: kind -> (key, object)
-
-
-def cached(kind: str, key: Any, make: Callable[[], Any], close: Callable[[Any], None]) -> Any:
-    """In a worker process: the object of ``kind`` made for ``key`` (an env, a runner), made on
-    first use and kept for the next tasks; one for another key replaces it (``close``)."""
-    if kind in _CACHED and _CACHED[kind][0] == key:
-        return _CACHED[kind][1]
-    if kind in _CACHED:
-        close(_CACHED.pop(kind)[1])
-    _CACHED[kind] = (key, make())
-    return _CACHED[kind][1]
-
-
 def _task(fn: Callable, bundle: Bundle, args: tuple):
     """A Ray task: ``fn(*args)`` on this node's copy of the files; the result (paths back on
     the driver's), this node's id and this process's id."""
@@ -376,118 +359,10 @@ class CarriedError(Exception):
         return e
 
 
-@dataclasses.dataclass
-class Ran:
-    """Where a job's tasks ran: the (node, process) pairs."""
-
-    places: set = dataclasses.field(default_factory=set)
-
-    @property
-    def workers(self) -> int:
-        return len(self.places)
-
-    @property
-    def nodes(self) -> int:
-        return len({node for node, _ in self.places})
-
-
-def run_tasks(
-    fn: Callable,
-    bundle: Bundle,
-    tasks: Iterable[tuple],
-    in_flight: int,
-    on_result: Callable[[tuple, Any], bool],
-    ran: Ran,
-) -> None:
-    """``fn(*task)`` as Ray tasks on the cluster, for ``tasks`` taken in order as they are
-    needed, at most ``in_flight`` at once; ``on_result(task, result)`` in the driver as each
-    ends, and returning True stops the job (the tasks still running are cancelled). ``ran``
-    gathers where they ran.
-
-    Raises:
-        Exception: what a task raised, as it raised it.
-        ClusterError: a task's worker process died more than ``TASK_RETRIES`` times.
-    """
+def remote_task():
+    """The Ray remote function of a task (:func:`_task`: ``fn(*args)`` on the node's copy of a
+    bundle's files), one CPU each, run again up to :data:`TASK_RETRIES` times when its worker
+    process dies."""
     import ray  # only where a command runs on Ray
-    from ray.exceptions import RayError, RayTaskError  # as ray, above
 
-    remote = ray.remote(num_cpus=1, max_retries=TASK_RETRIES)(_task)
-    pending: dict[Any, tuple] = {}
-    source = iter(tasks)
-
-    def fill() -> None:
-        for task in source:
-            pending[remote.remote(fn, bundle, task)] = task
-            if len(pending) >= in_flight:
-                return
-
-    try:
-        fill()
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            task = pending.pop(done[0])
-            try:
-                result, node, pid = ray.get(done[0])
-            except RayTaskError as e:  # the task's own exception, without Ray's traceback
-                cause = e.cause if isinstance(e.cause, Exception) else RuntimeError(str(e))
-                if isinstance(cause, CarriedError):
-                    cause = cause.rebuilt()
-                raise cause from None
-            except RayError as e:
-                text = " ".join(str(e).split())[:300]
-                raise ClusterError(
-                    f"a Ray task ({fn.__name__}{task[1:]}) was lost {TASK_RETRIES + 1} times: "
-                    f"{type(e).__name__}: {text}. Fix: see the worker logs (ray logs), or fewer "
-                    "tasks per node"
-                ) from None
-            ran.places.add((node, pid))
-            if on_result(task, result):
-                return
-            fill()
-    finally:
-        for ref in pending:
-            ray.cancel(ref, force=True)
-
-
-# --- the driver's resumable store ----------------------------------------------------------
-class ResumeStore:
-    """A driver's received results in ``folder`` (in its output folder): one sub-folder per key,
-    written under a temporary name and renamed, for the plan ``fingerprint`` (a JSON-able
-    value). A folder left by a run of another plan is refused."""
-
-    PLAN = "plan.json"
-
-    def __init__(self, folder: Path, fingerprint: Any):
-        self.folder = Path(folder)
-        text = json.dumps(fingerprint, sort_keys=True, indent=1)
-        plan = self.folder / self.PLAN
-        if plan.is_file() and plan.read_text() != text:
-            raise ClusterError(
-                f"{self.folder} holds an interrupted run of other settings (see its "
-                f"{self.PLAN}). Fix: run again with that run's flags to resume it, or remove "
-                "that folder"
-            )
-        self.folder.mkdir(parents=True, exist_ok=True)
-        if not plan.is_file():
-            with atomic_output(plan) as tmp:
-                tmp.write_text(text)
-
-    def keys(self) -> list[str]:
-        return sorted(p.name for p in self.folder.iterdir()
-                      if p.is_dir() and not p.name.startswith("."))  # fmt: skip
-
-    def path(self, key: str) -> Path:
-        return self.folder / key
-
-    def save(self, key: str, files: dict[str, bytes]) -> Path:
-        """Keeps ``files`` (name -> bytes) under ``key``, whole or not at all."""
-        work = Path(tempfile.mkdtemp(prefix=f".{key}.", dir=self.folder))
-        for name, data in files.items():
-            (work / name).write_bytes(data)
-        final = self.path(key)
-        shutil.rmtree(final, ignore_errors=True)
-        work.rename(final)
-        return final
-
-    def remove(self) -> None:
-        shutil.rmtree(self.folder, ignore_errors=True)
+    return ray.remote(num_cpus=1, max_retries=TASK_RETRIES)(_task)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import gc
 import multiprocessing as mp
 import os
+import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -27,6 +28,12 @@ POLL_SECONDS = 0.1  # how often the parent looks at results, progress and dead w
 
 class WorkerError(RuntimeError):
     """A worker process died without finishing its task."""
+
+
+DIED = (  # WorkerError's message
+    "a worker process died (killed, or out of memory). Fix: fewer --workers, or see the system "
+    "log for the killer"
+)
 
 
 _report: Callable[[Any], None] | None = None  # where report() sends progress
@@ -90,6 +97,9 @@ def exit_with_parent(parent_pid: int) -> None:
 def _init_worker(progress, initializer, initargs) -> None:
     global _report
     os.environ.setdefault("MS_SKIP_ASSET_DOWNLOAD_PROMPT", "1")
+    # Ctrl-C reaches every process of the terminal's group: the command alone decides (it
+    # keeps what it received and stops the workers), no worker prints a traceback of its own
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # the parent here is the command itself (fork) or its forkserver, which ends with it
     exit_with_parent(os.getppid())
     _report = None if progress is None else progress.put
@@ -146,12 +156,7 @@ def run(
         while progress is not None and not progress.empty():
             on_progress(progress.get())
 
-    pool = ProcessPoolExecutor(
-        min(workers, max(1, len(tasks))),
-        mp_context=ctx,
-        initializer=_init_worker,
-        initargs=(progress, initializer, initargs),
-    )
+    pool = process_pool(min(workers, max(1, len(tasks))), initializer, initargs, context, progress)
     ok = False
     try:
         futures = {pool.submit(fn, *task): k for k, task in enumerate(tasks)}
@@ -168,15 +173,44 @@ def run(
         ok = True
         return results
     except BrokenProcessPool:
-        raise WorkerError(
-            "a worker process died (killed, or out of memory). Fix: fewer --workers, or see "
-            "the system log for the killer"
-        ) from None
+        raise WorkerError(DIED) from None
     finally:
-        if ok:
-            pool.shutdown(wait=True)
-        else:  # stop the others now, not when their tasks end
-            processes = list((pool._processes or {}).values())  # the stdlib keeps no public list
-            pool.shutdown(wait=False, cancel_futures=True)
-            for p in processes:
-                p.terminate()
+        stop_pool(pool, now=not ok)
+
+
+def process_pool(
+    workers: int,
+    initializer: Callable | None = None,
+    initargs: tuple = (),
+    context: str = "forkserver",
+    progress=None,
+) -> ProcessPoolExecutor:
+    """A pool of ``workers`` processes that end with the command (even after its SIGKILL) and
+    ignore Ctrl-C (the command stops them: :func:`stop_pool`); each runs
+    ``initializer(*initargs)`` first.
+
+    Args:
+        workers: processes.
+        initializer: called with ``initargs`` once per process before its first task.
+        initargs: its arguments.
+        context: the multiprocessing start method.
+        progress: a queue that :func:`report` puts the tasks' messages in (None: dropped).
+    """
+    return ProcessPoolExecutor(
+        workers,
+        mp_context=mp.get_context(context),
+        initializer=_init_worker,
+        initargs=(progress, initializer, initargs),
+    )
+
+
+def stop_pool(pool: ProcessPoolExecutor, now: bool) -> None:
+    """Ends ``pool``: after its tasks, or ``now`` (a task's error, a dead worker, Ctrl-C): its
+    processes are stopped at once, not when their tasks end."""
+    if not now:
+        pool.shutdown(wait=True)
+        return
+    processes = list((pool._processes or {}).values())  # the stdlib keeps no public list
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        p.terminate()

@@ -24,6 +24,7 @@ from embodied_envs.cli.args import (
     writable_dir,
 )
 from embodied_envs.cluster import ClusterError
+from embodied_envs.pipelines.resume import ResumeError
 from embodied_envs.robots import EXPERT_MODES
 
 # env keywords collect sets itself: a --config file may not set them
@@ -107,13 +108,10 @@ def cmd_collect(args) -> int:
 
     config = env_config(args.config, OWNED_KEYS) | camera_env_kwargs(args)
     layouts = checked_layouts(args.layout)
-    # the seeds every worker will use (the same for every layout) are valid seeds
-    blocks = CollectPlan(
-        layout="", num=args.num, seed=args.seed, only_success=args.only_success,
-        max_attempts=args.max_attempts, workers=workers,
-    ).blocks()  # fmt: skip
-    last = max(s for seeds, _ in blocks for s in seeds)
-    check_seed_span(args.seed, last - args.seed + 1, "episode seeds")
+    # the seeds the run may use (the same for every layout) are valid seeds
+    attempts = CollectPlan(layout="", num=args.num, only_success=args.only_success,
+                           max_attempts=args.max_attempts).attempts()  # fmt: skip
+    check_seed_span(args.seed, attempts, "episode seeds")
     writable_dir(args.out)
     if not args.ray:
         note_workers(workers)
@@ -154,12 +152,12 @@ def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
     )
     with EpisodeBar(plan.attempts(), label) as bar:
         try:
-            s = collect(plan, args.out, progress=bar)
+            s = collect(plan, args.out, progress=bar, on_resume=resumed_note(bar, label))
         except CollectError as e:
             bar.close()
             print(f"error: {e}")
             return False
-        except ClusterError:
+        except (ClusterError, ResumeError):
             raise
         except Exception as e:  # a worker's env or solver failed: one line, not a traceback
             bar.close()
@@ -171,3 +169,13 @@ def _collect_one(name: str, files, args, workers: int, config: dict) -> bool:
         f"{ran_on(s.workers, s.nodes) if args.ray else ''} -> {args.out / name}"
     )
     return True
+
+
+def resumed_note(bar: EpisodeBar, label: str):
+    """What a command says, above its bar, when it resumes an interrupted run."""
+
+    def note(kept: int, folder: Path) -> None:
+        bar.bar.write(f"{label}: resuming an interrupted run: kept {kept} episode"
+                      f"{'s' * (kept != 1)} from {folder}")  # fmt: skip
+
+    return note

@@ -25,9 +25,11 @@ from embodied_envs.cli.args import (
     seed_int,
     writable_dir,
 )
+from embodied_envs.cli.collect import resumed_note
 from embodied_envs.cluster import ClusterError
 from embodied_envs.pipelines.evaluate import VIDEO_CHOICES, EvalError, EvalPlan, evaluate
 from embodied_envs.pipelines.policies import BUILTIN_POLICIES
+from embodied_envs.pipelines.resume import ResumeError
 
 # env keywords eval sets itself: a --config file may not set them
 OWNED_KEYS = {
@@ -131,14 +133,15 @@ def cmd_eval(args) -> int:
     )
     with EpisodeBar(len(plan.tasks()), f"eval {args.policy}") as bar:
         try:
-            s = evaluate(plan, args.out, progress=bar)
+            s = evaluate(plan, args.out, progress=bar,
+                         on_resume=resumed_note(bar, f"eval {args.policy}"))  # fmt: skip
         except EvalError as e:
             bar.close()
             if e.__cause__ is not None and os.environ.get(DEBUG_ENV):
                 raise  # the policy's own traceback
             print(f"error: {e}")
             return 1
-        except ClusterError:
+        except (ClusterError, ResumeError):
             raise
         except Exception as e:  # an env or a policy failed in a worker: one line
             bar.close()

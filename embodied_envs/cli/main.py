@@ -21,6 +21,7 @@ from embodied_envs.cluster import ClusterError
 from embodied_envs.config import ConfigError
 from embodied_envs.datasets.records import DatasetError
 from embodied_envs.layout import LayoutError, PlacementError
+from embodied_envs.pipelines.resume import ResumeError, kept_episodes
 from embodied_envs.splat import SplatFileError
 from embodied_envs.workers import WorkerError, start_up, started
 
@@ -52,8 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except (
-        ClusterError, ConfigError, DatasetError, LayoutError, PlacementError, SplatFileError,
-        WorkerError,
+        ClusterError, ConfigError, DatasetError, LayoutError, PlacementError, ResumeError,
+        SplatFileError, WorkerError,
     ) as e:  # fmt: skip
         print(f"error: {e}", file=sys.stderr)
         return 1
@@ -70,19 +71,15 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def interrupted_line(args, argv: list[str]) -> str:
-    """The line an interrupted command prints: the episodes a ``--ray`` run received, kept in
-    its ``--out`` (``OUT/.resume-<name>/``, docs/scaling.md), and the command that resumes
-    them; else that nothing is kept to resume."""
-    from embodied_envs.pipelines.on_ray import RESUME_PREFIX  # only when interrupted
-
+    """The line an interrupted command prints: the episodes a ``collect`` or ``eval`` run
+    received, kept in its ``--out`` (``OUT/.resume-<name>/``, docs/scaling.md), and the
+    command that resumes them; else that nothing is kept to resume."""
     out = getattr(args, "out", None)
-    stores = sorted(Path(out).glob(f"{RESUME_PREFIX}*")) if out is not None else []
-    kept = {str(s): sum(1 for p in s.iterdir() if p.is_dir() and not p.name.startswith("."))
-            for s in stores if s.is_dir()}  # fmt: skip
+    kept = kept_episodes(Path(out)) if out is not None else {}
     command = shlex.join(["embodied-envs", *argv])
-    if not any(kept.values()):
+    if not kept:
         return f"interrupted: nothing kept to resume; to start again: {command}"
-    where = ", ".join(f"{n} in {s}" for s, n in kept.items() if n)
+    where = ", ".join(f"{n} in {s}" for s, n in kept.items())
     return f"interrupted: kept the episodes received ({where}); to resume them: {command}"
 
 

@@ -6,9 +6,12 @@ env from any working directory, per-episode seed, success and length, ``source_t
 ``"motionplanning"``), readable by ``ManiSkillTrajectoryDataset`` and replayable by
 ``replay_trajectory``; plus ``summary.json``. Every episode records its ``instruction`` and
 ``layout_file``; over a layout set each episode is a reconfiguration (``reset_kwargs`` say so),
-whose seed draws its layout again on replay. On CPU each worker is one process with one env; it
-collects a disjoint block of seeds into its own file, and the blocks are merged with ManiSkill's
-``merge_trajectories``. Everything is written under a temporary name and renamed when complete.
+whose seed draws its layout again on replay. Each seed is one task of the episode executor
+(``pipelines/runner.py``: this machine's processes or Ray), recorded into its own file in a worker
+process that keeps one env; each episode is kept in ``OUT/.resume-<name>/`` as it arrives (a run
+interrupted and started again keeps them), and the kept ones are merged in seed order with
+ManiSkill's ``merge_trajectories``. Everything is written under a temporary name and renamed
+when complete.
 """
 
 from __future__ import annotations
@@ -19,7 +22,6 @@ import fcntl
 import functools
 import json
 import logging
-import math
 import os
 import shutil
 import tempfile
@@ -31,15 +33,15 @@ from pathlib import Path
 import gymnasium as gym
 from mani_skill.trajectory.merge_trajectory import merge_trajectories
 
-from embodied_envs.cluster import Ran, cached, run_tasks
 from embodied_envs.datasets.recorder import EpisodeRecorder
 from embodied_envs.datasets.records import RECORD_KEY, scene_record
 from embodied_envs.paths import atomic_output
-from embodied_envs.pipelines import on_ray
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode
+from embodied_envs.pipelines.executor import cached
+from embodied_envs.pipelines.runner import executor_for, resume_store, run_episodes
 from embodied_envs.registration import ENTRY_ID, ENV_ID
 from embodied_envs.solvers.pick_place import SolverConfig
-from embodied_envs.workers import report, run, started
+from embodied_envs.workers import started
 
 SOURCE_DESC = (
     "embodied_envs PickPlaceSolver (embodied_envs/solvers/pick_place.py) with the robot's hand "
@@ -78,12 +80,13 @@ class CollectPlan:
         layout: the layout file (absolute), or a set's files.
         name: the dataset's folder name (default: the layout file's stem).
         num: demonstrations wanted.
-        seed: first episode seed; worker k uses the block ``seed + k * block`` onwards.
+        seed: first episode seed; the seeds run in order from it, whatever the workers.
         obs_mode: recorded observations (``none``: replay re-renders them).
         hybrid_obs: sensor RGB over the splat background (recorded in ``env_kwargs``).
         only_success: keep only successful episodes, trying up to ``max_attempts`` seeds.
         max_attempts: the bound on seeds tried for ``only_success``.
-        workers: processes.
+        workers: processes (1: this one); with ``ray``, the episodes running at once (0: the
+            cluster's CPUs).
         video: also write one MP4 per kept episode.
         fixed_hand: the expert keeps the hand's orientation (``SolverConfig.fixed_hand``): demos
             that ``pd_ee_delta_pos`` replays.
@@ -94,8 +97,7 @@ class CollectPlan:
         env_kwargs: further ``gym.make`` keywords (from ``--config`` files), recorded with the
             dataset's ``env_kwargs``.
         ray: None: on this machine; else on Ray (``pipelines/on_ray.py``): ``local`` (a Ray
-            started for the run), ``auto`` or a cluster's address; ``workers`` then caps the
-            episodes running at once (default: the cluster's CPUs).
+            started for the run), ``auto`` or a cluster's address.
     """
 
     layout: str | tuple[str, ...]
@@ -129,14 +131,6 @@ class CollectPlan:
 
     def attempts(self) -> int:
         return (self.max_attempts or 2 * self.num) if self.only_success else self.num
-
-    def blocks(self) -> list[tuple[list[int], int]]:
-        """Per worker: its seeds and how many demonstrations it must keep."""
-        w = max(1, min(self.workers, self.num))
-        quota = [self.num // w + (k < self.num % w) for k in range(w)]
-        tries = [math.ceil(self.attempts() * q / self.num) for q in quota]
-        starts = [self.seed + sum(tries[:k]) for k in range(w)]
-        return [(list(range(s, s + t)), q) for s, t, q in zip(starts, tries, quota, strict=True)]
 
 
 @dataclass
@@ -204,25 +198,6 @@ def record_seed(env: EpisodeRecorder, plan: CollectPlan, seed: int) -> Episode:
     return episode
 
 
-def _worker(plan: CollectPlan, seeds: list[int], quota: int, out_dir: str, name: str) -> list:
-    """One worker's block of seeds: one env recorded into ``out_dir/name.h5``; a record per
-    episode is reported (the parent's progress bar) and all are returned."""
-    env = recorder(make_env(plan), plan, out_dir, name)
-    started()
-    kept, records = 0, []
-    try:
-        for seed in seeds:
-            episode = record_seed(env, plan, seed)
-            kept += episode.kept
-            records.append(episode)
-            report(asdict(episode))
-            if kept >= quota:
-                break
-    finally:
-        env.close()
-    return records
-
-
 @contextlib.contextmanager
 def _quiet(logger: logging.Logger):
     """``logger`` at WARNING within the block."""
@@ -288,13 +263,16 @@ def describe_dataset(folder: Path) -> str:
         return "files this run did not write"
 
 
-def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
+def collect(plan: CollectPlan, out: Path, progress=None, on_resume=None) -> LayoutSummary:
     """Collect one layout's (or layout set's) dataset into ``out/<plan.dataset_name>/``.
 
     Args:
         plan: what to collect.
         out: the output folder.
         progress: optional callable taking each episode's record (for a progress bar).
+        on_resume: optional callable taking the number of episodes an interrupted run of the
+            same settings kept in ``out`` (``OUT/.resume-<name>/``) and that folder, when it
+            kept any: this run keeps them and runs the rest.
 
     Returns:
         The summary (also written as ``summary.json``).
@@ -304,6 +282,7 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
             successes (nothing is written then); ``out`` is held by another run; or
             ``out/<name>`` exists already (a run never replaces a dataset it did not
             write).
+        ResumeError: ``out`` holds an interrupted run of other settings.
     """
     plan = dataclasses.replace(
         plan,
@@ -320,44 +299,58 @@ def collect(plan: CollectPlan, out: Path, progress=None) -> LayoutSummary:
                 "Fix: collect each shard (--seed range) into its own --out and join them with "
                 "python -m mani_skill.trajectory.merge_trajectory, or remove that folder."
             )
-        return _collect_into(plan, out, target, progress)
+        return _collect_into(plan, out, target, progress, on_resume)
 
 
-def _collect_into(plan: CollectPlan, out: Path, target: Path, progress):
-    """``collect``'s work, with ``out`` held: the dataset is made in a work folder and renamed
-    to ``target`` when complete."""
+def _collect_into(plan: CollectPlan, out: Path, target: Path, progress, on_resume):
+    """``collect``'s work, with ``out`` held: the episodes by the run's executor, kept in its
+    resume store; the dataset is made in a work folder and renamed to ``target`` when
+    complete, and the store removed."""
     work = Path(tempfile.mkdtemp(prefix=f"{WORK_PREFIX}{plan.dataset_name}.", dir=out))
     t0 = time.perf_counter()
     try:
-        if plan.ray is not None:
-            records, parts, videos, store, ran = collect_on_ray(plan, out, progress)
-        else:
-            records, ran = _collect_here(plan, work, progress)
-            parts, videos = sorted(work.glob("part*.h5")), sorted(work.glob("seed_*.mp4"))
-            store = None
-        summary = _write_dataset(plan, work, target, records, parts, videos, t0, ran)
-        if store is not None:
+        store = resume_store(out, plan.dataset_name, plan, plan.files)
+        executor = executor_for(plan.ray, plan.workers, plan.files)
+        seeds = range(plan.seed, plan.seed + plan.attempts())
+        walk = SeedWalk(plan)
+        episodes = run_episodes(executor, store, _collect_seed,
+                                [(seed_key(s), (plan, s)) for s in seeds], progress,
+                                walk.enough, on_resume)  # fmt: skip
+        ran = [episodes[seed_key(s)] for s in range(plan.seed, walk.next)]
+        folders = [store.path(seed_key(r.seed)) for r in ran if r.kept]
+        parts = [f / "part.h5" for f in folders]
+        videos = [v for f in folders for v in sorted(f.glob("seed_*.mp4"))]
+        places = (executor.ran.workers, executor.ran.nodes)
+        try:
+            summary = _write_dataset(plan, work, target, ran, parts, videos, t0, places)
+        except CollectError:  # every attempt ran: nothing to resume
             store.remove()
+            raise
+        store.remove()
         return summary
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
 
-def _collect_here(plan: CollectPlan, work: Path, progress) -> tuple[list[Episode], tuple]:
-    """The episodes on this machine (``workers`` processes), recorded into ``work``: their
-    records in seed order and (workers, nodes)."""
-    tasks = [
-        (plan, seeds, quota, str(work), f"part{k:03d}")
-        for k, (seeds, quota) in enumerate(plan.blocks())
-    ]
-    parts = run(
-        _worker,
-        tasks,
-        len(tasks) if plan.workers > 1 else 1,
-        on_progress=None if progress is None else lambda rec: progress(Episode(**rec)),
-    )
-    records = sorted((r for part in parts for r in part), key=lambda r: r.seed)
-    return records, (len(tasks), 1)
+def seed_key(seed: int) -> str:
+    """A seed's entry in the resume store."""
+    return f"seed_{seed:06d}"
+
+
+class SeedWalk:
+    """The seeds that arrived, walked in seed order: enough once ``num`` are kept (or every
+    attempt ran), as one worker running the seeds in order stops; ``next`` is the first seed
+    past those."""
+
+    def __init__(self, plan: CollectPlan):
+        self.plan, self.next, self.kept = plan, plan.seed, 0
+
+    def enough(self, episodes: dict[str, Episode]) -> bool:
+        last = self.plan.seed + self.plan.attempts()
+        while self.kept < self.plan.num and self.next < last and seed_key(self.next) in episodes:
+            self.kept += episodes[seed_key(self.next)].kept
+            self.next += 1
+        return self.kept >= self.plan.num or self.next >= last
 
 
 def _write_dataset(plan, work, target, records, parts, videos, t0, ran) -> LayoutSummary:
@@ -416,11 +409,17 @@ def _write_dataset(plan, work, target, records, parts, videos, t0, ran) -> Layou
     return summary
 
 
-# --- on Ray (pipelines/on_ray.py) ------------------------------------------------------------
+# --- the task ---------------------------------------------------------------------------
+def _started_env(plan: CollectPlan):
+    env = make_env(plan)
+    started()  # this process's start-up is over: its env is built
+    return env
+
+
 def _collect_seed(plan: CollectPlan, seed: int):
-    """On a worker: the episode of ``seed`` recorded as the local workers record it; the
-    episode, its ``.h5`` bytes (None when not kept), its ``.json`` and its videos."""
-    env = cached("collect", plan, lambda: make_env(plan), lambda e: e.close())
+    """In a worker process (of this machine or Ray's): the episode of ``seed`` recorded in the
+    process's env, and its files: ``part.json``, ``part.h5`` (when kept) and its videos."""
+    env = cached("collect", plan, lambda: _started_env(plan), lambda e: e.close())
     with tempfile.TemporaryDirectory(prefix="embodied-envs-seed-") as tmp:
         rec = recorder(env, plan, tmp, "part")
         try:
@@ -428,52 +427,8 @@ def _collect_seed(plan: CollectPlan, seed: int):
         finally:
             rec.close_files()
         folder = Path(tmp)
-        h5 = (folder / "part.h5").read_bytes() if episode.kept else None
-        meta = json.loads((folder / "part.json").read_text())
-        videos = {p.name: p.read_bytes() for p in folder.glob("seed_*.mp4")}
-    return episode, h5, meta, videos
-
-
-def collect_on_ray(plan: CollectPlan, out: Path, progress):
-    """``plan``'s episodes on Ray: the records of the seeds one local worker would run (seed
-    order), the ``.h5`` files of the kept ones, their videos, the resume store and (workers,
-    nodes)."""
-    with on_ray.session(plan.ray, plan.workers):
-        bundle = on_ray.Bundle.put([p for f in plan.files for p in on_ray.scene_paths(f)])
-        store = on_ray.resume_store(out, plan.dataset_name, plan, bundle)
-        records = {int(k.split("_")[1]): on_ray.episode_of(store.path(k)) for k in store.keys()}
-        last = plan.seed + plan.attempts()
-        walk = {"next": plan.seed, "kept": 0, "done": False}
-
-        def settled() -> bool:
-            """Walks the seeds that arrived in order: done once ``num`` are kept (or all
-            attempts ran), as one local worker stops."""
-            while not walk["done"] and walk["next"] < last and walk["next"] in records:
-                walk["kept"] += records[walk["next"]].kept
-                walk["next"] += 1
-                walk["done"] = walk["kept"] >= plan.num
-            return walk["done"] or walk["next"] >= last
-
-        def arrived(task, result) -> bool:
-            (_, seed), (episode, h5, meta, videos) = task, result
-            files = {**videos, "part.json": json.dumps(meta).encode()}
-            if h5 is not None:
-                files["part.h5"] = h5
-            on_ray.save_episode(store, f"seed_{seed:06d}", episode, **files)
-            records[seed] = episode
-            if progress is not None:
-                progress(episode)
-            return settled()
-
-        if progress is not None:
-            for seed in sorted(records):
-                progress(records[seed])
-        ran = Ran()
-        if not settled():
-            todo = ((plan, s) for s in range(plan.seed, last) if s not in records)
-            run_tasks(_collect_seed, bundle, todo, on_ray.in_flight(plan), arrived, ran)
-        ran_seeds = [records[s] for s in range(plan.seed, walk["next"])]
-        folders = [store.path(f"seed_{r.seed:06d}") for r in ran_seeds if r.kept]
-        parts = [f / "part.h5" for f in folders]
-        videos = [v for f in folders for v in sorted(f.glob("seed_*.mp4"))]
-    return ran_seeds, parts, videos, store, (max(ran.workers, 1), max(ran.nodes, 1))
+        files: dict = {p.name: p.read_bytes() for p in folder.glob("seed_*.mp4")}
+        files["part.json"] = json.loads((folder / "part.json").read_text())  # paths mapped
+        if episode.kept:
+            files["part.h5"] = (folder / "part.h5").read_bytes()
+    return episode, files

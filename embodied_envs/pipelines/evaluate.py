@@ -1,8 +1,9 @@
 """Policy evaluation: seeded episodes per layout, success with its interval, videos, a plot.
 
 :func:`evaluate` runs a policy on ``episodes`` seeded episodes of every layout (seeds
-``seed .. seed + episodes - 1``, the same for each layout), in this process or in worker
-processes (one env per layout per worker, reused across its episodes), and writes under ``out``:
+``seed .. seed + episodes - 1``, the same for each layout), one task each of the episode
+executor (``pipelines/runner.py``: this process, worker processes or Ray; one env per layout per
+worker, reused across its episodes), and writes under ``out``:
 
 - ``episodes.json``: per episode its layout, seed, success, fail, failure (``Episode.failure``:
   the stage and the conditions of success missed), steps, return and video;
@@ -21,7 +22,9 @@ processes (one env per layout per worker, reused across its episodes), and write
 An entry of ``layouts`` may be a layout set: each of its episodes runs in the layout its seed
 draws (a reconfiguration), and ``per_layout`` reports every layout drawn.
 
-Each file is written under a temporary name and renamed when complete. An episode ends on
+Each episode is kept in ``OUT/.resume-eval/`` as it arrives: a run interrupted and started
+again with the same ``--out`` and settings keeps them and runs the rest. Each file is written
+under a temporary name and renamed when complete. An episode ends on
 ManiSkill's ``terminated`` (``success`` or ``fail``) or at the env's episode limit; its
 success is ``evaluate()["success"]`` at its end, as ``collect`` grades demonstrations.
 
@@ -43,13 +46,13 @@ from pathlib import Path
 
 import gymnasium as gym
 
-from embodied_envs.cluster import Ran, cached, run_tasks
 from embodied_envs.paths import atomic_output
-from embodied_envs.pipelines import on_ray
 from embodied_envs.pipelines.episodes import Episode, expert, film_mode, run_episode, write_video
+from embodied_envs.pipelines.executor import cached
 from embodied_envs.pipelines.policies import EvalError, Policy, load_policy, policy_driver
+from embodied_envs.pipelines.runner import executor_for, resume_store, run_episodes
 from embodied_envs.registration import CONTROL_FREQ, ENV_ID
-from embodied_envs.workers import WorkerError, run, started
+from embodied_envs.workers import WorkerError, started
 
 VIDEO_CHOICES = ("all", "fail", "none")
 WILSON_Z = 1.959963984540054  # two-sided 95% normal quantile
@@ -181,28 +184,15 @@ class EpisodeRunner:
         self.envs.clear()
 
 
-# --- worker processes ----------------------------------------------------------------------
-_RUNNER: EpisodeRunner | None = None  # this process's envs (workers.run's initializer)
-
-
-def _init_runner(plan: EvalPlan) -> None:
-    global _RUNNER
-    _RUNNER = EpisodeRunner(plan)
-
-
-def _run_episode(layout: str | tuple[str, ...], seed: int, video_dir: str) -> Episode:
-    return _RUNNER.run(layout, seed, Path(video_dir))
-
-
-# --- on Ray (pipelines/on_ray.py) ------------------------------------------------------------
+# --- the task -----------------------------------------------------------------------------
 def _eval_episode(plan: EvalPlan, layout, seed: int):
-    """On a worker: the episode of ``seed`` in ``layout`` as a local worker runs it; the
-    episode and its video's bytes (None when none was kept)."""
+    """In a worker process (of this machine or Ray's): the episode of ``seed`` in ``layout``,
+    and its video's bytes when one was kept."""
     runner = cached("eval", plan, lambda: EpisodeRunner(plan), EpisodeRunner.close)
     with tempfile.TemporaryDirectory(prefix="embodied-envs-seed-") as tmp:
         episode = runner.run(layout, seed, Path(tmp))
-        video = (Path(tmp) / episode.video).read_bytes() if episode.video else None
-    return episode, video
+        files = {episode.video: (Path(tmp) / episode.video).read_bytes()} if episode.video else {}
+    return episode, files
 
 
 def policy_file(spec: str) -> Path | None:
@@ -212,54 +202,34 @@ def policy_file(spec: str) -> Path | None:
     return path.resolve() if name.endswith((".py", ".pt", ".ts")) and path.is_file() else None
 
 
-def evaluate_on_ray(plan: EvalPlan, out: Path, progress):
-    """``plan``'s episodes on Ray, each video written under ``out/videos`` as it arrives: the
-    episodes (in task order), the resume store and (workers, nodes).
+def _run(plan: EvalPlan, out: Path, progress, on_resume):
+    """``plan``'s episodes by its executor, kept in the run's resume store: (each one's store
+    folder, the episode) in task order, the store, and (workers, nodes).
 
     Raises:
-        Exception: what an episode raised on a worker, naming the driver's files and the
-            ``--policy`` value as given.
+        Exception: what an episode raised in a worker, naming the ``--policy`` value as given.
     """
-    with on_ray.session(plan.ray, plan.workers):
-        file = policy_file(plan.policy)
-        sent = plan
-        if file is not None:  # the policy's file travels with the job, named absolutely
-            sent = dataclasses.replace(plan, policy=plan.policy.replace(
-                plan.policy.rpartition(":")[0] or plan.policy, str(file), 1))  # fmt: skip
-        paths = [p for entry in plan.layouts for p in on_ray.scene_paths(entry)]
-        bundle = on_ray.Bundle.put(paths, [file] if file is not None else [])
-        store = on_ray.resume_store(out, "eval", plan, bundle)
-        tasks = plan.tasks()
-        keys = [f"{k:06d}" for k in range(len(tasks))]
-        key_of = dict(zip(tasks, keys, strict=True))
-        results = {k: on_ray.episode_of(store.path(k)) for k in store.keys() if k in keys}
-        if progress is not None:
-            for key in sorted(results):
-                progress(results[key])
-
-        def arrived(task, result) -> bool:
-            episode, video = result
-            key = key_of[task[1:]]
-            if video is not None:
-                (out / "videos").mkdir(exist_ok=True)
-                with atomic_output(out / "videos" / episode.video) as tmp:
-                    tmp.write_bytes(video)
-            on_ray.save_episode(store, key, episode)
-            results[key] = episode
-            if progress is not None:
-                progress(episode)
-            return False
-
-        ran = Ran()
-        todo = ((sent, *task) for k, task in zip(keys, tasks, strict=True) if k not in results)
-        try:
-            run_tasks(_eval_episode, bundle, todo, on_ray.in_flight(plan), arrived, ran)
-        except Exception as e:  # the policy named as the user gave it, as a local run does
-            if sent is not plan:
-                e.args = tuple(a.replace(sent.policy, plan.policy) if isinstance(a, str) else a
-                               for a in e.args)  # fmt: skip
-            raise
-    return [results[k] for k in keys], store, (max(ran.workers, 1), max(ran.nodes, 1))
+    file = policy_file(plan.policy)
+    sent = plan
+    if file is not None:  # the policy's file named absolutely: it travels with a Ray job
+        sent = dataclasses.replace(plan, policy=plan.policy.replace(
+            plan.policy.rpartition(":")[0] or plan.policy, str(file), 1))  # fmt: skip
+    files = [file] if file is not None else []
+    store = resume_store(out, "eval", plan, plan.layouts, files)
+    executor = executor_for(plan.ray, plan.workers, plan.layouts, files)
+    tasks = [(f"{k:06d}", (sent, *task)) for k, task in enumerate(plan.tasks())]
+    try:
+        episodes = run_episodes(executor, store, _eval_episode, tasks, progress,
+                                on_resume=on_resume)  # fmt: skip
+    except WorkerError as e:
+        raise EvalError(f"evaluation stopped: {e}") from None
+    except Exception as e:  # the policy named as the user gave it
+        if sent is not plan:
+            e.args = tuple(a.replace(sent.policy, plan.policy) if isinstance(a, str) else a
+                           for a in e.args)  # fmt: skip
+        raise
+    ran = (executor.ran.workers, executor.ran.nodes)
+    return [(store.path(key), episodes[key]) for key, _ in tasks], store, ran
 
 
 # --- the whole evaluation ------------------------------------------------------------------
@@ -325,26 +295,18 @@ def plot_summary(summary: dict, results: list[Episode], path: Path) -> None:
     plt.close(fig)
 
 
-def _evaluate_here(plan: EvalPlan, video_dir: Path, progress) -> list[Episode]:
-    """The episodes on this machine (``workers`` processes), in task order."""
-    try:
-        return run(
-            _run_episode,
-            [(lay, seed, str(video_dir)) for lay, seed in plan.tasks()],
-            plan.workers,
-            initializer=_init_runner,
-            initargs=(plan,),
-            on_result=progress,
-        )
-    except WorkerError as e:
-        raise EvalError(f"evaluation stopped: {e}") from None
-    finally:
-        if plan.workers <= 1 and _RUNNER is not None:  # this process's envs
-            _RUNNER.close()
-
-
-def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dict:
+def evaluate(
+    plan: EvalPlan, out: Path, progress: Callable | None = None, on_resume: Callable | None = None
+) -> dict:
     """Run the evaluation and write its files under ``out`` (see the module docstring).
+
+    Args:
+        plan: what to evaluate.
+        out: the output folder.
+        progress: optional callable taking each episode (for a progress bar).
+        on_resume: optional callable taking the number of episodes an interrupted run of the
+            same settings kept in ``out`` (``OUT/.resume-eval/``) and that folder, when it
+            kept any: this run keeps them and runs the rest.
 
     Returns:
         The summary (also ``out/summary.json``).
@@ -352,6 +314,7 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
     Raises:
         EvalError: the policy cannot be used, a worker died, or ``out`` holds an earlier
             evaluation.
+        ResumeError: ``out`` holds an interrupted evaluation of other settings.
     """
     out = Path(out)
     if (out / "summary.json").exists():
@@ -360,11 +323,13 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
             "remove that folder"
         )
     out.mkdir(parents=True, exist_ok=True)
-    store = None
-    if plan.ray is not None:
-        results, store, ran = evaluate_on_ray(plan, out, progress)
-    else:
-        results, ran = _evaluate_here(plan, out / "videos", progress), (plan.workers, 1)
+    entries, store, ran = _run(plan, out, progress, on_resume)
+    for folder, r in entries:  # the kept videos, from the store
+        if r.video is not None:
+            (out / "videos").mkdir(exist_ok=True)
+            with atomic_output(out / "videos" / r.video) as tmp:
+                tmp.write_bytes((folder / r.video).read_bytes())
+    results = [r for _, r in entries]
     order = {lay: i for i, lay in enumerate(plan.files())}
     results.sort(key=lambda r: (order[r.layout], r.seed))
     summary = summarize(plan, results) | dict(workers=ran[0], nodes=ran[1])
@@ -372,8 +337,7 @@ def evaluate(plan: EvalPlan, out: Path, progress: Callable | None = None) -> dic
         tmp.write_text(json.dumps([episode_json(r) for r in results], indent=2))
     with atomic_output(out / "summary.json") as tmp:  # its presence marks a complete run
         tmp.write_text(json.dumps(summary, indent=2))
-    if store is not None:  # complete: nothing to resume
-        store.remove()
+    store.remove()  # complete: nothing to resume
     try:  # the summary is written: a plot that cannot be drawn must not lose it
         plot_summary(summary, results, out / "summary.png")
     except Exception as e:  # matplotlib's, whatever they are: one line

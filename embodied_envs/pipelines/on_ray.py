@@ -1,47 +1,42 @@
-"""What ``collect`` and ``eval`` share on a Ray cluster (``--ray``; their own parts are in
-``collect.py`` and ``evaluate.py``): one Ray task per episode seed, the
-same per-seed episode function as the local workers, so a seed's episode is the same on
-either (the env starts every seed's episode from a new PhysX scene: nothing depends on what a
-worker ran before).
+"""A Ray cluster behind the episode executor's interface (``--ray``): :class:`RayExecutor`,
+one Ray task per submitted episode, at most ``in_flight`` at once; connecting
+(:func:`session`, :func:`start`, :func:`check_address`) and the files a job sends.
 
 Each task runs in a worker process that keeps its env (or its evaluation runner) for the next
-task, reads the job's files from its node's copy (``cluster.Bundle``: layouts, asset folders,
-splat, a policy file) and sends back what it recorded: the episode, its ``.h5`` and ``.json``,
-its video. The driver keeps each arrival in ``OUT/.resume-<name>/`` (``cluster.ResumeStore``)
-and writes the dataset or the evaluation from them in seed order, as the local run does; a run
-interrupted and started again with the same ``--out`` and flags keeps what arrived and runs the
-rest. ``collect --only-success`` runs seeds in order, a few ahead, and keeps the first ``num``
-successes in seed order: the seeds one local worker keeps.
+task (``executor.cached``), reads the job's files from its node's copy (``cluster.Bundle``:
+layouts, asset folders, splat, a policy file) and sends back what it recorded, its paths
+mapped back onto the driver's. The tasks are the ones ``--workers`` runs (the env starts every
+seed's episode from a new PhysX scene: nothing depends on what a worker ran before), so a
+seed's episode is the same on either. A task whose worker process dies runs again, up to
+``cluster.TASK_RETRIES`` times; a task's exception comes back as it was raised.
 """
 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import socket
-from dataclasses import asdict
+from collections.abc import Callable, Iterable
+from concurrent.futures import Future
 from pathlib import Path
 
 from embodied_envs.cluster import (
     RAY_LOCAL,
+    TASK_RETRIES,
     Bundle,
+    CarriedError,
     ClusterError,
-    ResumeStore,
     cluster_cpus,
     ray_session,
+    remote_task,
     start_early,
     starting,
 )
 from embodied_envs.layout import load_layout
 from embodied_envs.layout.sets import layout_files
-from embodied_envs.pipelines.episodes import Episode
+from embodied_envs.pipelines.executor import TASKS_AHEAD, EpisodeExecutor, chained
 from embodied_envs.workers import started
 
-RESUME_PREFIX = ".resume-"  # in --out: what an interrupted --ray run received
-TASKS_AHEAD = 2  # tasks queued per worker: a worker starts its next episode at once, not after
-# the driver has received and stored its last (one at a time cost ~0.2 s an episode of 0.6)
-RUN_KEYS = ("workers", "ray")  # plan fields that do not change the episodes (not in resume)
 CONNECT_SECONDS = 10.0  # a cluster address's TCP connection, tried before Ray's (which retries
 # an address where nothing listens for minutes, printing its warnings)
 
@@ -123,19 +118,6 @@ def scene_paths(layout) -> list:
     return out
 
 
-def fingerprint(plan, bundle: Bundle) -> dict:
-    """What a resumed run must share with the run it resumes: the plan's episode settings
-    and the bytes of the files they read."""
-    settings = {k: v for k, v in asdict(plan).items() if k not in RUN_KEYS}
-    return {"plan": settings, "files_sha256": bundle.digest}
-
-
-def resume_store(out: Path, name: str, plan, bundle: Bundle) -> ResumeStore:
-    """The store of a run of ``plan`` named ``name`` in ``out`` (what an interrupted run of the
-    same plan and files received is kept)."""
-    return ResumeStore(out / f"{RESUME_PREFIX}{name}", fingerprint(plan, bundle))
-
-
 def in_flight(plan) -> int:
     """The tasks a plan has on the cluster at once: its ``workers`` (else the cluster's CPUs),
     ``TASKS_AHEAD`` per worker where the cluster's CPUs run no more than that many (the
@@ -145,10 +127,59 @@ def in_flight(plan) -> int:
     return TASKS_AHEAD * workers if workers >= cpus else workers
 
 
-def episode_of(folder: Path) -> Episode:
-    """The episode a :class:`ResumeStore` entry holds."""
-    return Episode(**json.loads((folder / "episode.json").read_text()))
+def _error(e: BaseException, fn: Callable, args: tuple) -> BaseException:
+    """A Ray task's failure as the driver raises it: the task's own exception, without Ray's
+    traceback; a worker lost more than ``TASK_RETRIES`` times as :class:`ClusterError`."""
+    from ray.exceptions import RayError, RayTaskError  # Ray is imported where a run uses it
+
+    if isinstance(e, RayTaskError):
+        cause = e.cause if isinstance(e.cause, Exception) else RuntimeError(str(e))
+        return cause.rebuilt() if isinstance(cause, CarriedError) else cause
+    if isinstance(e, RayError):
+        text = " ".join(str(e).split())[:300]
+        return ClusterError(
+            f"a Ray task ({fn.__name__}{args[1:]}) was lost {TASK_RETRIES + 1} times: "
+            f"{type(e).__name__}: {text}. Fix: see the worker logs (ray logs), or fewer tasks "
+            "per node"
+        )
+    return e
 
 
-def save_episode(store: ResumeStore, key: str, episode: Episode, **files: bytes) -> None:
-    store.save(key, {"episode.json": json.dumps(asdict(episode)).encode(), **files})
+class RayExecutor(EpisodeExecutor):
+    """Ray tasks on the cluster ``address`` names (:func:`session`), with the files of
+    ``layouts`` (files or sets) and ``files`` (a policy's) sent along (``cluster.Bundle``);
+    ``workers`` caps the episodes running at once (0: the cluster's CPUs)."""
+
+    def __init__(self, address: str, workers: int, layouts: Iterable, files: Iterable = ()):
+        super().__init__()
+        self.address, self.workers = address, workers
+        self.groups = ([p for entry in layouts for p in scene_paths(entry)], list(files))
+        self.stack = contextlib.ExitStack()
+        self.refs: dict[Future, object] = {}
+
+    def start(self) -> None:
+        self.stack.enter_context(session(self.address, self.workers))
+        try:
+            self.bundle = Bundle.put(*self.groups)
+        except BaseException:
+            self.stack.close()
+            raise
+        self.slots = in_flight(self)
+        self.remote = remote_task()
+
+    def submit(self, fn: Callable, /, *args) -> Future:
+        ref = self.remote.remote(fn, self.bundle, args)
+        future = chained(ref.future(), self.ran, lambda e: _error(e, fn, args))
+        self.refs[future] = ref
+        future.add_done_callback(lambda f: self.refs.pop(f, None))
+        return future
+
+    def shutdown(self, cancel_futures: bool = False) -> None:
+        import ray  # only where a run asks for Ray
+
+        try:
+            if cancel_futures:
+                for ref in list(self.refs.values()):
+                    ray.cancel(ref, force=True)
+        finally:
+            self.stack.close()
