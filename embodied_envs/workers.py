@@ -1,12 +1,14 @@
-"""The commands' one process runner: :func:`run` (``layout generate``, ``demo``, ``collect``,
-``eval``).
+"""The commands' worker processes: :func:`run` (``layout generate``, ``demo``) and the pool
+under ``collect`` and ``eval``'s episode executor (:func:`process_pool`,
+``pipelines/processes.py``).
 
 Tasks run in this process (``workers=1``) or in a pool of worker processes (forkserver by
 default: safe with torch and SAPIEN). A worker exits as soon as the command that started it is
-gone, even after SIGKILL, so no orphan keeps writing outputs. A worker that dies (killed, out
-of memory) is noticed within ``POLL_SECONDS``: :func:`run` stops the others and raises
-:class:`WorkerError`; an exception raised by a task stops the run the same way and is raised
-again in the parent as it was. Tasks send progress with :func:`report`.
+gone, even after SIGKILL, so no orphan keeps writing outputs, and leaves Ctrl-C to the
+command. A worker that dies (killed, out of memory) is noticed within ``POLL_SECONDS``:
+:func:`run` stops the others and raises :class:`WorkerError`; an exception raised by a task
+stops the run the same way and is raised again in the parent as it was. Tasks send progress
+with :func:`report`.
 """
 
 from __future__ import annotations

@@ -116,14 +116,19 @@ def arrays(dataset: Path) -> dict[int, dict[str, np.ndarray]]:
     return out
 
 
+def ctrl_c_default() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.slow  # three collects of 6 demos: about a minute on the 2-core machine
 def test_ctrl_c_then_the_same_command_resumes_with_workers(tmp_path):
     ref = collect(tmp_path / "ref", "--workers", "1")
     assert ref.returncode == 0, ref.stdout + ref.stderr
     out = tmp_path / "out"
     store = out / ".resume-default"
+    # its own process group, Ctrl-C's default (a shell's background job would ignore it)
     proc = collect(out, "--workers", "2", stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                   text=True, start_new_session=True)  # fmt: skip
+                   text=True, start_new_session=True, preexec_fn=ctrl_c_default)  # fmt: skip
     deadline = time.time() + 300
     while len(list(store.glob("seed_*"))) < 1 and time.time() < deadline and proc.poll() is None:
         time.sleep(0.05)
