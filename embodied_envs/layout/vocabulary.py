@@ -1,6 +1,6 @@
 """The task sentence reader's words: its verbs, prepositions and directions, the words it
-refuses wherever they stand, and the sentence split into words (``layout/sentence.py`` reads
-them; docs/tasks.md lists them)."""
+refuses wherever they stand, and the sentence split into words (``layout/clauses.py`` and
+``layout/sentence.py`` read them; docs/tasks.md lists them)."""
 
 from __future__ import annotations
 
