@@ -1,8 +1,8 @@
 """Every generator of shipped data in tools/make/ writes, into a temporary folder, what is
 shipped: the assets and the room's splat (make_assets.py, mesh_to_splat.py), the layouts
 (make_layouts.py), the grasp zoo (make_grasp_zoo.py), the upright-mover layouts
-(make_upright.py), the small-arm zoo and its held-out set (make_small_zoo.py) and the
-bad-input corpus (make_bad_inputs.py). Files are compared as data
+(make_upright.py), the small-arm zoo and its held-out set (make_small_zoo.py), the splat rooms
+(make_rooms.py) and the bad-input corpus (make_bad_inputs.py). Files are compared as data
 (``tests/data_compare.py``: meshes by geometry, PLY and JSON by value within tolerances that
 follow from the written precision), so the check holds on any processor and library release,
 and still fails on a real change (tested below). A failure names the files that differ, why,
@@ -26,6 +26,7 @@ SHIPPED = {
     "small_zoo": ROOT / "tests" / "data" / "small_zoo",
     "small_zoo_hidden": ROOT / "tests" / "data" / "small_zoo_hidden",
     "bad_inputs": ROOT / "tests" / "data" / "bad_inputs",
+    "rooms": DATA / "rooms",
 }
 
 
@@ -90,7 +91,7 @@ def test_make_assets_and_mesh_to_splat_reproduce_the_shipped_assets(tmp_path, to
     "script, shipped, args",
     [("make_layouts", "layouts", []), ("make_grasp_zoo", "zoo", []),
      ("make_upright", "upright", []), ("make_small_zoo", "small_zoo", []),
-     ("make_small_zoo", "small_zoo_hidden", ["--hidden"])],
+     ("make_small_zoo", "small_zoo_hidden", ["--hidden"]), ("make_rooms", "rooms", [])],
 )  # fmt: skip
 def test_a_generator_reproduces_what_it_ships(tmp_path, tool, script, shipped, args):
     """The shipped layouts, the grasp zoo, the upright-mover layouts and the small-arm zoo
