@@ -82,6 +82,7 @@ def test_the_visual_policy_trains_exports_and_eval_runs_it(dataset, tmp_path, ca
     info = json.loads((out / "train.json").read_text())
     assert info["kind"] == "visual" and info["image_hw"] == [SIDE, SIDE]
     assert info["iterations"] > 0 and info["state_keys"] == list(visual.STATE_KEYS)
+    assert info["aux_target"] == "can" and info["final_aux_loss"] > 0
     module = torch.jit.load(str(out / "policy.pt"))
     assert module.camera == "base_camera" and list(module.image_hw) == [SIDE, SIDE]
     code = main([
@@ -194,3 +195,18 @@ def test_a_room_whose_splat_is_broken_is_refused_naming_the_file(tmp_path):
         main(["collect", "--layout", str(DEFAULT_LAYOUT), "--num", "1", "--obs-mode", "rgb",
               "--hybrid-obs", "--rooms", str(room), "--out", str(tmp_path / "d")])  # fmt: skip
     assert str(room / "gs_model.ply") in str(e.value) and "\n" not in str(e.value)
+
+
+def test_the_auxiliary_target_is_the_movers_recorded_position_from_the_tcp(dataset):
+    """Training only: the can's recorded position less the TCP's, and the can's position."""
+    demos, _ = dataset
+    meta = json.loads(demos.with_suffix(".json").read_text())
+    _, _, _, aux = visual.load_visual_episodes(demos, meta["episodes"][:1], "can")
+    with h5py.File(demos) as f:
+        traj = f[f"traj_{meta['episodes'][0]['episode_id']}"]
+        can = traj["env_states/actors/can"][:, :3]
+        tcp = traj["obs/extra/tcp_pose"][:, :3]
+    np.testing.assert_allclose(aux[0][:, 3:], can, atol=1e-6)
+    np.testing.assert_allclose(aux[0][:, :3], can - tcp, atol=1e-6)
+    _, _, _, none = visual.load_visual_episodes(demos, meta["episodes"][:1], "no_such_actor")
+    assert np.isnan(none[0]).all()

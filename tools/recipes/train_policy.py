@@ -383,22 +383,24 @@ def train_visual(args: argparse.Namespace) -> dict:
     episodes = meta["episodes"][: args.num_demos if args.num_demos > 0 else None]
     if not episodes:
         sys.exit(f"{args.demos}: no episodes")
-    frames, states, actions = visual.load_visual_episodes(args.demos, episodes)
     env_info = meta["env_info"]
-    act_dim = actions[0].shape[1]
-    frame = (np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64))
-    if args.frame == "target":
-        env = dataset_env(env_info, args.layout, args.demos)
-        try:
+    env = dataset_env(env_info, args.layout, args.demos)
+    try:  # the first mover of env 0's task: the auxiliary target's actor
+        mover = env.unwrapped.tasks[0].objects[0]
+        frames, states, actions, aux = visual.load_visual_episodes(args.demos, episodes, mover)
+        act_dim = actions[0].shape[1]
+        frame = (np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64))
+        if args.frame == "target":
             frame = target_frame(env, states[0].shape[1], act_dim)
-        finally:
-            env.close()
+    finally:
+        env.close()
     anchors = [st[:, frame[1]] * frame[0] for st in states]
     targets, valid = chunk_targets(actions, args.chunk, args.hold, anchors)
     state = np.concatenate([st[: len(a)] for st, a in zip(states, actions, strict=True)])
     images = torch.from_numpy(
         np.concatenate([f[: len(a)] for f, a in zip(frames, actions, strict=True)])
     )  # (N, H, W, 3) uint8
+    aux = np.concatenate([t[: len(a)] for t, a in zip(aux, actions, strict=True)])
     state_std, act_std = state.std(0), targets.std(0)
     policy = visual.VisualChunkPolicy(
         tuple(images.shape[1:3]), state.mean(0), np.where(state_std < MIN_STD, 1.0, state_std),
@@ -408,6 +410,10 @@ def train_visual(args: argparse.Namespace) -> dict:
     x = (torch.from_numpy(state) - policy.state_mean) / policy.state_std
     y = (torch.from_numpy(targets) - policy.act_mean) / policy.act_std
     mask = torch.from_numpy(valid).float()[:, :, None]
+    # the auxiliary targets, normalised; where an episode has no such actor, left out
+    known = torch.from_numpy(~np.isnan(aux)).float()
+    aux_mean, aux_std = np.nanmean(aux, 0), np.nanstd(aux, 0)
+    aux_y = torch.from_numpy(np.nan_to_num((aux - aux_mean) / np.maximum(aux_std, MIN_STD)))
     optim = torch.optim.AdamW(policy.parameters(), lr=args.lr, weight_decay=args.weight_decay)
     budget = args.minutes * 60.0
     start = last_log = time.perf_counter()
@@ -418,9 +424,12 @@ def train_visual(args: argparse.Namespace) -> dict:
         batch = torch.from_numpy(rng.integers(0, len(x), args.batch_size))
         image = visual.augment(images[batch].permute(0, 3, 1, 2).float() / 255.0, generator)
         noise = torch.randn(len(batch), x.shape[1], generator=generator)
-        inputs = x[batch] + args.obs_noise * noise
-        err = (policy.raw_normalised(image, inputs) - y[batch]).abs() * mask[batch]
+        chunks, guess = policy.heads(image, x[batch] + args.obs_noise * noise)
+        err = (chunks - y[batch]).abs() * mask[batch]
         loss = err.sum() / (mask[batch].sum() * y.shape[2])
+        seen = known[batch]
+        aux_err = ((guess - aux_y[batch]).abs() * seen).sum() / seen.sum().clamp(min=1)
+        loss = loss + args.aux_weight * aux_err
         optim.zero_grad()
         loss.backward()
         optim.step()
@@ -444,6 +453,8 @@ def train_visual(args: argparse.Namespace) -> dict:
         "decay": args.decay, "hidden": args.hidden, "hold": args.hold,
         "obs_noise": args.obs_noise, "batch_size": args.batch_size, "lr": args.lr,
         "weight_decay": args.weight_decay, "seed": args.seed, "minutes": args.minutes,
+        "aux_weight": args.aux_weight, "aux_target": mover,
+        "final_aux_loss": float(aux_err.item()) if iters else None,
         "threads": torch.get_num_threads(), "iterations": iters,
         "final_loss": float(loss.item()), "train_seconds": round(seconds, 1),
     }  # fmt: skip
@@ -491,6 +502,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--weight-decay", type=float, default=1e-4)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--aux-weight", type=float, default=visual.AUX_WEIGHT,
+                    help="visual policies: the weight of the auxiliary loss (the first mover's "
+                    "position from the frame alone; 0: none)")
     ap.add_argument("--threads", type=int, default=None,
                     help=f"torch threads (default: {TORCH_THREADS} for a state policy, "
                     f"{VISUAL_THREADS} for a visual one)")

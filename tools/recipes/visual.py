@@ -11,6 +11,14 @@ actions. Training augments each frame with a random shift of up to ``SHIFT_PX`` 
 augmentation) and colour jitter (brightness, contrast, per-channel gain); rooms differ between
 episodes when the dataset was collected with ``--rooms``.
 
+Trained on actions alone, the policy learns to replay its demonstrations from the joints and
+the goal and ignores where the object is in the frame (on unseen starts its hand went to where
+the object was in training). So training also asks the encoder, from the frame alone, for the
+first mover's position relative to the hand and in the world (an auxiliary head, weight
+``AUX_WEIGHT``; the positions come from the dataset's recorded env states, which ManiSkill's
+datasets hold: privileged supervision at training time only). The policy itself never reads
+an object's pose: at run time it sees the frame, the joints, the TCP pose and the goal.
+
 The exported module takes ``(image, state)``: ``image`` the camera's ``(B, H, W, 3)`` uint8
 frame, ``state`` the concatenation of the groups named by its ``obs_keys``; ``embodied-envs
 eval`` reads its ``camera``, ``obs_keys`` and ``image_hw`` attributes to build them from the
@@ -37,6 +45,9 @@ KEYPOINTS = 32  # spatial soft-argmax keypoints
 CHANNELS = (16, 32, 32)  # the conv layers' widths (wider: 4x the training time on 2 cores)
 SHIFT_PX = 4  # random shift augmentation, pixels each way
 BRIGHTNESS, CONTRAST, GAIN = 0.2, 0.2, 0.1  # colour jitter: relative ranges
+AUX_DIM = 6  # the auxiliary target: the first mover's position relative to the TCP, and world
+AUX_WEIGHT = 1.0  # its L1 loss's weight against the actions' (both on normalised values)
+AUX_HIDDEN = 64
 
 
 def is_visual(path: Path) -> bool:
@@ -49,10 +60,14 @@ def is_visual(path: Path) -> bool:
         return isinstance(obs, h5py.Group) and f"sensor_data/{CAMERA}/rgb" in obs
 
 
-def load_visual_episodes(path: Path, episodes: list[dict]) -> tuple[list, list, list]:
-    """Per episode its frames ``(T+1, H, W, 3)`` uint8, states ``(T+1, D)`` (``STATE_KEYS``)
-    and actions ``(T, A)``; exits with one line naming what a dataset lacks."""
-    frames, states, actions = [], [], []
+def load_visual_episodes(
+    path: Path, episodes: list[dict], mover: str | None = None
+) -> tuple[list, list, list, list]:
+    """Per episode its frames ``(T+1, H, W, 3)`` uint8, states ``(T+1, D)`` (``STATE_KEYS``),
+    actions ``(T, A)`` and auxiliary targets ``(T+1, AUX_DIM)`` (the recorded actor ``mover``'s
+    position less the TCP's, and its position; NaN where the episode has no such actor);
+    exits with one line naming what a dataset lacks."""
+    frames, states, actions, aux = [], [], [], []
     with h5py.File(path, "r") as f:
         for ep in episodes:
             traj = f[f"traj_{ep['episode_id']}"]
@@ -69,7 +84,14 @@ def load_visual_episodes(path: Path, episodes: list[dict]) -> tuple[list, list, 
                 [np.asarray(obs[k], np.float32).reshape(len(frames[-1]), -1) for k in STATE_KEYS],
                 1))  # fmt: skip
             actions.append(np.asarray(traj["actions"], np.float32))
-    return frames, states, actions
+            target = np.full((len(frames[-1]), AUX_DIM), np.nan, np.float32)
+            actors = traj.get("env_states/actors")
+            if mover is not None and actors is not None and mover in actors:
+                where = np.asarray(actors[mover][:, :3], np.float32)
+                tcp = np.asarray(obs["extra/tcp_pose"][:, :3], np.float32)
+                target = np.concatenate([where - tcp, where], 1)
+            aux.append(target)
+    return frames, states, actions, aux
 
 
 class SpatialSoftArgmax(nn.Module):
@@ -124,6 +146,10 @@ class VisualChunkPolicy(nn.Module):
             width_in = width
         mlp.append(nn.Linear(width_in, chunk * act_dim))
         self.head = nn.Sequential(*mlp)
+        features = 2 * KEYPOINTS + size
+        self.aux = nn.Sequential(
+            nn.Linear(features, AUX_HIDDEN), nn.ReLU(), nn.Linear(AUX_HIDDEN, AUX_DIM)
+        )
         self.ensemble = TemporalEnsemble(chunk, act_dim, decay)
 
     def features(self, image: torch.Tensor) -> torch.Tensor:
@@ -133,8 +159,13 @@ class VisualChunkPolicy(nn.Module):
 
     def raw_normalised(self, image: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         """Float images ``(B, 3, H, W)`` and normalised states -> normalised chunks."""
-        x = torch.cat([self.features(image), state], 1)
-        return self.head(x).view(-1, self.chunk, self.act_dim)
+        return self.heads(image, state)[0]
+
+    def heads(self, image: torch.Tensor, state: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The normalised chunks and the auxiliary head's normalised targets (training)."""
+        features = self.features(image)
+        chunks = self.head(torch.cat([features, state], 1)).view(-1, self.chunk, self.act_dim)
+        return chunks, self.aux(features)
 
     def anchor(self, state: torch.Tensor) -> torch.Tensor:
         return state[:, self.joint] * self.coef
