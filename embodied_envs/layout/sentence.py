@@ -55,36 +55,49 @@ def refuse(f: str, sentence: str, why: str) -> LayoutError:
 
 
 def _movers(c: Clause, nodes: Nodes, manipulated: list[str]) -> list[str]:
-    """The nodes the clause's objects name: a plural ("the apples", "both apples", "all the
-    fruit") naming a mover names every node of its noun, wherever the layout lists it
-    (``manipulated_objs`` a hint, no filter); a singular phrase, "everything", or a plural
-    naming no mover, among the layout's movers (never another object in its place)."""
+    """The nodes the clause's objects name, wherever the layout lists them (manipulated,
+    distractor or another object; never the context): a plural ("the apples", "both apples",
+    "all the fruit") names every node of its noun; a singular phrase names one node, sought
+    first among ``manipulated_objs`` (a hint: "the apple" of a red mover apple and a green
+    distractor apple is the mover) and else among all the objects; "everything", the movers."""
     found: list[str] = []
     objects = [n for n in nodes.names if n != nodes.context]
     for p in c.objects:
         ws = [w for w in p.words if w not in ARTICLES]
-        try:  # a plural that names a mover names every node of its noun, wherever listed
-            got, plural = nodes.resolve(p, objects)
-            if not plural or ws and stem(ws[-1]) in EVERYTHING or not set(got) & set(manipulated):
-                got = None  # a singular or "everything": among the movers (below)
-        except Miscount:
-            raise
-        except Unread:
-            got = None
-        try:
-            got = got or nodes.resolve(p, manipulated)[0]
-        except Unread as e:
+        if ws and stem(ws[-1]) in EVERYTHING:
+            got = nodes.resolve(p, manipulated)[0]
+        else:
             try:
-                others, _ = nodes.resolve(p)
-            except Unread as e2:
-                if not e.none or not e2.none:
-                    raise e from None
-                raise Unread(f'"{p.text()}" names no object of the layout '
-                             f"(movers: {', '.join(manipulated)})") from None  # fmt: skip
-            raise Unread(f'"{p.text()}" is {", ".join(others)}, not among the objects this '
-                         f"layout moves (manipulated_objs: {', '.join(manipulated)})") from None
+                got, plural = nodes.resolve(p, manipulated)
+                if plural:  # a plural names every node of its noun, wherever listed
+                    got = nodes.resolve(p, objects)[0]
+            except Miscount:
+                got = nodes.resolve(p, objects)[0]  # "both apples", one a distractor
+            except Unread:
+                got = _anywhere(p, nodes, objects)
         found += [n for n in got if n not in found]
     return found
+
+
+def _anywhere(p: Phrase, nodes: Nodes, objects: list[str]) -> list[str]:
+    """The nodes ``p`` names among all the layout's objects; the context is not one."""
+    try:
+        return nodes.resolve(p, objects)[0]
+    except Unread as e:
+        if e.none and nodes.context in _named(p, nodes):
+            raise Unread(f'"{p.text()}" is the context ({nodes.context}), which stays where it '
+                         "is: name an object on it") from None  # fmt: skip
+        if e.none:
+            raise Unread(f'"{p.text()}" names no object of the layout '
+                         f"(objects: {', '.join(objects)})", none=True) from None  # fmt: skip
+        raise
+
+
+def _named(p: Phrase, nodes: Nodes) -> list[str]:
+    try:
+        return nodes.resolve(p)[0]
+    except Unread:
+        return []
 
 
 def _above(nodes: list[str], parents: dict[str, str]) -> set[str]:
@@ -118,9 +131,10 @@ def _receptacle(places, nodes: Nodes, movers: list[str], parents: dict[str, str]
 
 
 def _located(c: Clause, nodes: Nodes, movers: list[str], parents: dict[str, str]) -> None:
-    """After a pick or hold verb, "in"/"on" say where the movers stand ("pick up the pen on the
-    desk"). Naming anything else, it may mean a destination ("lift the pen on the tray"), and a
-    held object is placed nowhere: refused."""
+    """After a pick or hold verb, or beside a move's direction, "in"/"on" say where the movers
+    stand ("pick up the pen on the desk", "move the pen in the tray to the left"). Naming
+    anything else, it may mean a destination ("lift the pen on the tray", "move the pen on the
+    plate to the left" of a pen on the table), and a held object is placed nowhere: refused."""
     around = _above(movers, parents) | {nodes.context}
     for prep, _, p in c.places:
         if c.kind == HOLD:
@@ -131,8 +145,10 @@ def _located(c: Clause, nodes: Nodes, movers: list[str], parents: dict[str, str]
             raise Unread(f'"{c.verb} ... {prep} {p.text()}": a held object is not placed; say '
                          "put")  # fmt: skip
         if not set(where) <= around:
-            raise Unread(f'"{c.verb} ... {prep} {p.text()}": not where the objects stand; a '
-                         f'destination after "{c.verb}" takes into or onto')  # fmt: skip
+            then = ("beside a direction, in/on says where they stand" if c.directions else
+                    f'a destination after "{c.verb}" takes into or onto')  # fmt: skip
+            raise Unread(f'"{c.verb} ... {prep} {p.text()}": not where the objects stand; '
+                         f"{then}")  # fmt: skip
 
 
 def _region(prep: str, p: Phrase) -> Phrase:
@@ -190,6 +206,7 @@ def read_sentence(sentence: str, layout) -> Task:
         if c.kind == MOVE and c.directions and places:
             if any(x[0] in DIRECTIONAL for x in places):
                 raise Unread("it states a direction and a destination: state one")
+            _located(replace(c, places=places), nodes, movers, parents)  # as after a pick
             places = []  # "move the pen in the tray to the left": where it is
         if len(c.directions) > 1:
             raise Unread("it states two directions: state one")

@@ -199,6 +199,7 @@ def test_only_an_absent_task_desc_takes_the_default():
 MIXED = S(["apple1"], ["apple2", "plate"],
           desc={"apple1": "a red apple", "apple2": "a green apple"})
 MIXED3 = S(["apple1", "apple2"], ["apple3", "plate"])
+MUG = S(["pen"], ["mug", "tray"], desc={"mug": "a white ceramic mug", "tray": "a wooden tray"})
 MOVERS = [
     ("Put the apples on the plate", MIXED, "place [apple1, apple2] on plate"),
     ("Put all the fruit on the plate", MIXED, "place [apple1, apple2] on plate"),
@@ -211,7 +212,16 @@ MOVERS = [
     ("Put the three apples on the plate", MIXED, R + "counts 3, and it names 2"),
     ("Put the apple on the plate", MIXED, "place [apple1] on plate"),  # the hint: the mover
     ("Put the red apple on the plate", MIXED, "place [apple1] on plate"),
-    ("Put the green apple on the plate", MIXED, R + '"the green apple" is apple2, not among the'),
+    ("Put the green apple on the plate", MIXED, "place [apple2] on plate"),  # a distractor alone
+    ("Pick up apple2", MIXED, "pick [apple2]"),
+    ("Put the blue apple on the plate", MIXED, R + 'no object is described "blue" (apple1'),
+    ("Put the plate on the red apple", MIXED, "place [plate] on apple1"),
+    ("Put the mug on the tray", MUG, "place [mug] on tray"),  # the issue's: mug a distractor
+    ("Put the mug in the tray, then push the pen to the left", MUG, R + "other objects"),
+    ("Pick up the mug and put it on the tray.", MUG, "place [mug] on tray"),
+    ("Slide the mugs to the right", MUG, "move [mug] right"),
+    ("Put the table on the tray", MUG, R + '"the table" is the context (table)'),
+    ("Put the kettle on the tray", MUG, R + '"the kettle" names no object of the layout'),
     ("Put everything on the plate", MIXED3, "place [apple1, apple2] on plate"),  # the movers
 ]  # fmt: skip
 
@@ -242,6 +252,74 @@ def test_a_named_distractor_is_graded_placed_within_reach_and_in_the_instruction
     assert set(placed.task.objects) == {"can1", "can2"}
 
 
+def mug_on_tray_layout():
+    """place_two as EmbodiedGen writes it, its sentence naming the mug (a distractor) alone."""
+    from conftest import DATA
+
+    from embodied_envs.layout import LayoutInfo
+
+    path = DATA / "layouts" / "place_two.json"
+    data = json.loads(path.read_text())
+    data["relation"]["task_desc"] = "Put the mug on the tray."
+    return LayoutInfo.from_dict(data, source=path)
+
+
+def test_a_distractor_named_alone_is_the_mover_within_reach_and_checked_for_the_grasp():
+    """"Put the mug on the tray", the mug in distractor_objs: the mug is graded, placed within
+    reach, the instruction is the sentence, and the grasp check takes the mug (not the cans the
+    task leaves where they are)."""
+    from embodied_envs.envs.graspable import check_graspable
+    from embodied_envs.layout.placement import place
+
+    layout = mug_on_tray_layout()
+    assert layout.task.describe() == "place [mug] on tray" and layout.target_node == "mug"
+    assert layout.instruction == "Put the mug on the tray."
+    assert {"mug", "tray"} <= set(layout.reach_nodes)
+    assert place(layout, 0).task.objects == ("mug",)
+    narrow = SimpleNamespace(uid="tiny", payload=None, gripper=SimpleNamespace(max_opening=1e-3))
+    with pytest.raises(LayoutError, match="the task's mover 'mug' is .* cm across"):
+        check_graspable(SimpleNamespace(members=lambda: [layout]), narrow)
+
+
+# --- a move's locative says where the object stands, as a pick's does ------------------------
+def nested(task_desc):
+    """MARKER's scene with the marker IN the cup, as EmbodiedGen's hierarchy prompt nests it."""
+    scene = eg_scene(task_desc, **MARKER)
+    scene.tree = {"room": [["table", "FLOOR"], ["franka", "IN"]],
+                  "table": [["cup", "ON"], ["plate", "ON"]], "cup": [["marker", "IN"]]}
+    return scene
+
+
+LOCATIVES = [  # marker on the table (MARKER), or in the cup (nested)
+    ("Move the marker on the plate to the left", MARKER, R + '"move ... on the plate": not where'),
+    ("Push the marker in the cup to the right", MARKER, R + '"push ... in the cup": not where'),
+    ("Slide the marker on the plate forward", MARKER, R + "not where the objects stand"),
+    ("Move the marker to the left on the plate", MARKER, R + "not where the objects stand"),
+    ("Move the marker on the table to the left", MARKER, "move [marker] left"),
+    ("Pick up the marker on the plate", MARKER, R + '"pick ... on the plate": not where'),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("sentence, scene, expected", LOCATIVES, ids=[c[0] for c in LOCATIVES])
+def test_a_moves_locative_must_be_where_the_object_stands(sentence, scene, expected):
+    check(sentence, scene, expected)
+
+
+@pytest.mark.parametrize("sentence, expected", [
+    ("Move the marker in the cup to the left", "move [marker] left"),
+    ("Push the marker on the table to the right", "move [marker] right"),  # the cup stands there
+    ("Move the marker on the plate to the left", R),
+    ("Pick up the marker in the cup", "pick [marker]"),
+])  # fmt: skip
+def test_a_locative_naming_where_the_object_is_nested_reads(sentence, expected):
+    try:
+        got = resolve_task(nested(sentence), F).describe()
+    except LayoutError as e:
+        assert "not where the objects stand" in str(e), str(e)
+        got = R
+    assert got == expected
+
+
 # --- 7. the structured task, checked as strictly as a sentence ------------------------------
 PEN = S(["pen", "apple"], ["mug", "tray"])
 
@@ -259,8 +337,9 @@ PEN = S(["pen", "apple"], ["mug", "tray"])
      'relation["task_spec"]["objects"] names "pen" twice'),
     ({"kind": "pick"}, 'a pick task without "objects"'),
     ({"kind": "move", "objects": ["pen"]}, 'a move task without "direction"'),
-    ({"kind": "place", "objects": ["pen", "apple", "mug", "tray"], "receptacle": "table",
-      "relation": "on"}, 'each must be a node of relation["manipulated_objs"]'),
+    ({"kind": "place", "objects": ["pen", "table"], "receptacle": "tray", "relation": "on"},
+     'each must be an object node of the layout other than the context'),
+    ({"kind": "pick", "objects": ["kettle"]}, "each must be an object node of the layout"),
 ])  # fmt: skip
 def test_a_structured_task_missing_or_mixing_fields_is_refused_in_one_line(spec, message):
     scene = eg_scene("Put the pen in the mug", **PEN)
@@ -277,6 +356,9 @@ def test_a_structured_task_as_written_is_read():
     scene.relation["task_spec"] = {"kind": "place", "objects": ["pen", "apple"],
                                    "receptacle": "tray", "relation": "on"}  # fmt: skip
     assert resolve_task(scene, F).describe() == "place [pen, apple] on tray"
+    scene.relation["task_spec"] = {"kind": "place", "objects": ["mug"], "receptacle": "tray",
+                                   "relation": "on"}  # a distractor: a mover as in a sentence
+    assert resolve_task(scene, F).describe() == "place [mug] on tray"
 
 
 # --- 6. what gym.make refuses, layout validate and the loader refuse ------------------------
