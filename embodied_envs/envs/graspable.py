@@ -2,7 +2,8 @@
 
 A parallel gripper takes an object only across some width that fits between its open jaws: a
 convex body's narrowest width is the least, over its hull's face normals, of its extent along
-the normal. A manipulated object whose convex hull is wider than the robot's gripper opens
+the normal. An object the task moves (every mover of ``layout.task``: a manipulated object, or
+a distractor the sentence names) whose convex hull is wider than the robot's gripper opens
 (``robots.Gripper.max_opening``) everywhere cannot be grasped by that robot; the env says so
 before anything is simulated, naming the layout, the object and both widths. Likewise an object
 heavier than the robot's arm holds up at the end of its reach (``robots.Robot.payload``: its
@@ -39,7 +40,7 @@ def asset_mass(spec: AssetSpec) -> float:
 
 
 def check_graspable(layout_set: LayoutSet, robot: Robot) -> None:
-    """Every manipulated object of every layout (and pool member) fits ``robot``'s open jaws
+    """Every object the task of every layout (and pool member) moves fits ``robot``'s open jaws
     somewhere and weighs at most what its arm holds up (``Robot.payload``).
 
     Raises:
@@ -48,11 +49,12 @@ def check_graspable(layout_set: LayoutSet, robot: Robot) -> None:
     """
     opening, payload = robot.gripper.max_opening, robot.payload
     for layout in layout_set.members():
-        for node in layout.manipulated_objs:
+        for node in layout.task.objects:  # the movers, wherever the layout lists them
             spec = layout.asset_spec(node)
+            what = "manipulated object" if node in layout.manipulated_objs else "task's mover"
             if payload is not None and (mass := asset_mass(spec)) > payload:
                 raise LayoutError(
-                    f"{layout.source}: the manipulated object {node!r} weighs {mass:.3g} kg; "
+                    f"{layout.source}: the {what} {node!r} weighs {mass:.3g} kg; "
                     f"{robot.uid}'s arm holds up at most {payload:.3g} kg at its reach (its "
                     "drives' force limit, embodied_envs/robots.py), so it cannot lift it. Fix: "
                     "a lighter object (its URDF's inertial/mass), or a stronger robot "
@@ -61,7 +63,7 @@ def check_graspable(layout_set: LayoutSet, robot: Robot) -> None:
             width = narrowest_width(asset_geometry(spec).vertices)
             if width > opening:
                 raise LayoutError(
-                    f"{layout.source}: the manipulated object {node!r} is {width * 100:.1f} cm "
+                    f"{layout.source}: the {what} {node!r} is {width * 100:.1f} cm "
                     f"across at its narrowest; {robot.uid}'s jaws open {opening * 100:.1f} cm "
                     "(embodied_envs/robots.py), so it cannot grasp it. Fix: a smaller object, "
                     "or a robot with a wider gripper (relation.robot or robot_uids=)"

@@ -105,8 +105,8 @@ class LayoutInfo:
     @property
     def reach_nodes(self) -> list[str]:
         """The objects placed within the robot's reach: the manipulated ones, the task's movers
-        (a plural may name a distractor too: "the apples") and its receptacle when it is an
-        object (the movers go there)."""
+        (the sentence may name a distractor: "the apples", "the mug") and its receptacle when
+        it is an object (the movers go there)."""
         rec = self.task.receptacle
         extra = [*self.task.objects, *([rec] if rec is not None and rec != self.context else [])]
         return self.manipulated_objs + [n for n in dict.fromkeys(extra)

@@ -108,11 +108,11 @@ def _structured(key: str, spec, layout, f: str) -> Task:
             f'not be graded. Fix: remove "{other[0]}", or make "kind" "{owner}".'
         )
     _missing(spec, kind, ("objects", "direction"), field, f)
-    manipulated = layout.relation["manipulated_objs"]
-    movers = f'each must be a node of relation["manipulated_objs"] {manipulated}'
-    objects = _names(spec["objects"], f'{field}["objects"]', f, movers)
     nodes = [n for n in layout.objs_mapping if layout.objs_mapping[n] != "background"]
-    if not objects or not all(o in manipulated for o in objects):
+    things = [n for n in nodes if n != layout.relation["context"]]  # manipulated or distractor
+    movers = f"each must be an object node of the layout other than the context {things}"
+    objects = _names(spec["objects"], f'{field}["objects"]', f, movers)
+    if not objects or not all(o in things for o in objects):
         raise LayoutError(f'{f}: {field}["objects"] is {objects!r}: {movers}. Fix: name them.')
     if twice := sorted({o for o in objects if objects.count(o) > 1}):
         raise LayoutError(f'{f}: {field}["objects"] names "{twice[0]}" twice: {objects!r}. Fix: '

@@ -298,6 +298,28 @@ def test_pick_reward_is_its_maximum_at_success_and_eases_off_past_the_static_spe
     assert r(task_state(grasped=np.array([[False]]))) < 0.25  # not grasped: reaching only
 
 
+def test_a_distractor_the_sentence_names_is_the_envs_mover_and_its_instruction(tmp_path):
+    """place_two with "Put the mug on the tray." (the mug in distractor_objs): the env's task,
+    which the grade and the expert take, moves the mug, and its instruction is the sentence."""
+    import json
+
+    from conftest import write_layout
+
+    path = DATA / "layouts" / "place_two.json"
+    data = json.loads(path.read_text())
+    data["assets"] = {n: str((path.parent / a).resolve()) for n, a in data["assets"].items()}
+    data["relation"]["task_desc"] = "Put the mug on the tray."
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(write_layout(tmp_path, data)),
+                   obs_mode="state")  # fmt: skip
+    try:
+        env.reset(seed=0)
+        assert env.unwrapped.tasks[0].objects == ("mug",)
+        assert env.unwrapped.tasks[0].receptacle == "tray"
+        assert env.unwrapped.instructions == ["Put the mug on the tray."]
+    finally:
+        env.close()
+
+
 # --- the expert in the env ----------------------------------------------------------------
 @pytest.mark.parametrize(
     "name, seed",
