@@ -67,15 +67,6 @@ def test_end_effector_modes_grade_their_own_run(mode):
         assert ep.steps < 300
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 47's consistent expert and issue 50's SO-100 grasp, merged: seed 0 in "
-    "pd_joint_delta_pos misses its grasp and ends at 500 steps (283 steps in pd_joint_pos). "
-    "The mode holds the targets 0.05 rad ahead of the joints, which with the SO-100's gains "
-    "(stiffness 1e3, damping 1e2) moves a joint at most 0.5 rad/s, a third of the plans' 1.5: "
-    "seeds 0-11 succeed 7/12 in it, 11/12 in pd_joint_pos, 10/12 in pd_joint_target_delta_pos "
-    "(docs/robots.md)",
-)
 def test_one_controller_arm_catches_up_with_targets_a_step_cannot_reach():
     """The SO-100 (one controller, the jaw's target with the arm's; its expert plans at 1.5
     rad/s, past pd_joint_delta_pos's 0.1 rad a step) in pd_joint_delta_pos: each clipped step
