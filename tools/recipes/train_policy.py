@@ -280,6 +280,33 @@ def keep_mask(drop: list[str], path: Path, obs_dim: int) -> np.ndarray:
     return keep
 
 
+def fit(policy: nn.Module, args, batch_loss, pairs: int, rng) -> tuple[int, float, float]:
+    """Train ``policy`` for ``args.minutes`` of wall clock: AdamW (``args.lr``, cosine decay
+    over the time budget, ``args.weight_decay``), each iteration minimising ``batch_loss`` of
+    ``args.batch_size`` pairs drawn from ``pairs``; a progress line every ``LOG_EVERY_S``; then
+    ``OUT/policy.pt`` (TorchScript). Returns the iterations, the last loss and the seconds."""
+    optim = torch.optim.AdamW(policy.parameters(), lr=args.lr, weight_decay=args.weight_decay)
+    budget = args.minutes * 60.0
+    start = last_log = time.perf_counter()
+    iters, loss = 0, torch.tensor(float("nan"))
+    while (elapsed := time.perf_counter() - start) < budget:
+        for group in optim.param_groups:  # cosine decay over the time budget
+            group["lr"] = args.lr * 0.5 * (1.0 + math.cos(math.pi * elapsed / budget))
+        loss = batch_loss(torch.from_numpy(rng.integers(0, pairs, args.batch_size)))
+        optim.zero_grad()
+        loss.backward()
+        optim.step()
+        iters += 1
+        if time.perf_counter() - last_log > LOG_EVERY_S:
+            last_log = time.perf_counter()
+            print(f"{elapsed / 60:5.1f} min, iteration {iters}: loss {loss.item():.4f}", flush=True)
+    seconds = time.perf_counter() - start
+    args.out.mkdir(parents=True, exist_ok=True)
+    with atomic_output(args.out / "policy.pt") as tmp:
+        torch.jit.save(torch.jit.script(policy.eval()), str(tmp))
+    return iters, float(loss.item()), seconds
+
+
 def train(args: argparse.Namespace) -> dict:
     if visual.is_visual(args.demos):
         return train_visual(args)
@@ -314,30 +341,15 @@ def train(args: argparse.Namespace) -> dict:
     x = policy.normalise(torch.from_numpy(obs))
     y = (torch.from_numpy(targets) - policy.act_mean) / policy.act_std
     mask = torch.from_numpy(valid).float()[:, :, None]
-    optim = torch.optim.AdamW(policy.parameters(), lr=args.lr, weight_decay=args.weight_decay)
-    budget = args.minutes * 60.0
-    start = last_log = time.perf_counter()
-    iters, loss = 0, torch.tensor(float("nan"))
-    while (elapsed := time.perf_counter() - start) < budget:
-        for group in optim.param_groups:  # cosine decay over the time budget
-            group["lr"] = args.lr * 0.5 * (1.0 + math.cos(math.pi * elapsed / budget))
-        batch = torch.from_numpy(rng.integers(0, len(x), args.batch_size))
+
+    def batch_loss(batch: torch.Tensor) -> torch.Tensor:
         inputs = x[batch]
         if args.obs_noise > 0:
             inputs = inputs + args.obs_noise * torch.randn_like(inputs) * policy.obs_keep
         err = (policy.raw_normalised(inputs) - y[batch]).abs() * mask[batch]
-        loss = err.sum() / (mask[batch].sum() * y.shape[2])
-        optim.zero_grad()
-        loss.backward()
-        optim.step()
-        iters += 1
-        if time.perf_counter() - last_log > LOG_EVERY_S:
-            last_log = time.perf_counter()
-            print(f"{elapsed / 60:5.1f} min, iteration {iters}: loss {loss.item():.4f}", flush=True)
-    seconds = time.perf_counter() - start
-    args.out.mkdir(parents=True, exist_ok=True)
-    with atomic_output(args.out / "policy.pt") as tmp:
-        torch.jit.save(torch.jit.script(policy.eval()), str(tmp))
+        return err.sum() / (mask[batch].sum() * y.shape[2])
+
+    iters, loss, seconds = fit(policy, args, batch_loss, len(x), rng)
     kwargs = env_info.get("env_kwargs", {})
     info = {
         "demos": str(args.demos),
@@ -365,7 +377,7 @@ def train(args: argparse.Namespace) -> dict:
         "seed": args.seed,
         "minutes": args.minutes,
         "iterations": iters,
-        "final_loss": float(loss.item()),
+        "final_loss": loss,
         "train_seconds": round(seconds, 1),
     }
     with atomic_output(args.out / "train.json") as tmp:
@@ -414,33 +426,18 @@ def train_visual(args: argparse.Namespace) -> dict:
     known = torch.from_numpy(~np.isnan(aux)).float()
     aux_mean, aux_std = np.nanmean(aux, 0), np.nanstd(aux, 0)
     aux_y = torch.from_numpy(np.nan_to_num((aux - aux_mean) / np.maximum(aux_std, MIN_STD)))
-    optim = torch.optim.AdamW(policy.parameters(), lr=args.lr, weight_decay=args.weight_decay)
-    budget = args.minutes * 60.0
-    start = last_log = time.perf_counter()
-    iters, loss = 0, torch.tensor(float("nan"))
-    while (elapsed := time.perf_counter() - start) < budget:
-        for group in optim.param_groups:  # cosine decay over the time budget
-            group["lr"] = args.lr * 0.5 * (1.0 + math.cos(math.pi * elapsed / budget))
-        batch = torch.from_numpy(rng.integers(0, len(x), args.batch_size))
+    last = {}  # the last batch's auxiliary loss, for train.json
+
+    def batch_loss(batch: torch.Tensor) -> torch.Tensor:
         image = visual.augment(images[batch].permute(0, 3, 1, 2).float() / 255.0, generator)
         noise = torch.randn(len(batch), x.shape[1], generator=generator)
         chunks, guess = policy.heads(image, x[batch] + args.obs_noise * noise)
         err = (chunks - y[batch]).abs() * mask[batch]
-        loss = err.sum() / (mask[batch].sum() * y.shape[2])
         seen = known[batch]
-        aux_err = ((guess - aux_y[batch]).abs() * seen).sum() / seen.sum().clamp(min=1)
-        loss = loss + args.aux_weight * aux_err
-        optim.zero_grad()
-        loss.backward()
-        optim.step()
-        iters += 1
-        if time.perf_counter() - last_log > LOG_EVERY_S:
-            last_log = time.perf_counter()
-            print(f"{elapsed / 60:5.1f} min, iteration {iters}: loss {loss.item():.4f}", flush=True)
-    seconds = time.perf_counter() - start
-    args.out.mkdir(parents=True, exist_ok=True)
-    with atomic_output(args.out / "policy.pt") as tmp:
-        torch.jit.save(torch.jit.script(policy.eval()), str(tmp))
+        last["aux"] = ((guess - aux_y[batch]).abs() * seen).sum() / seen.sum().clamp(min=1)
+        return err.sum() / (mask[batch].sum() * y.shape[2]) + args.aux_weight * last["aux"]
+
+    iters, loss, seconds = fit(policy, args, batch_loss, len(x), rng)
     kwargs = env_info.get("env_kwargs", {})
     info = {
         "demos": str(args.demos), "episodes": len(actions), "env_id": env_info.get("env_id"),
@@ -454,9 +451,9 @@ def train_visual(args: argparse.Namespace) -> dict:
         "obs_noise": args.obs_noise, "batch_size": args.batch_size, "lr": args.lr,
         "weight_decay": args.weight_decay, "seed": args.seed, "minutes": args.minutes,
         "aux_weight": args.aux_weight, "aux_target": mover,
-        "final_aux_loss": float(aux_err.item()) if iters else None,
+        "final_aux_loss": float(last["aux"].item()) if "aux" in last else None,
         "threads": torch.get_num_threads(), "iterations": iters,
-        "final_loss": float(loss.item()), "train_seconds": round(seconds, 1),
+        "final_loss": loss, "train_seconds": round(seconds, 1),
     }  # fmt: skip
     with atomic_output(args.out / "train.json") as tmp:
         tmp.write_text(json.dumps(info, indent=2) + "\n")
