@@ -260,6 +260,15 @@ def camera_env_kwargs(args) -> dict:
         # the shipped pool by name (portable datasets); folders and globs as absolute paths
         kwargs["rooms"] = [r if r == "shipped" else str(Path(r).resolve()) for r in args.rooms]
         check_rooms(kwargs["rooms"])
+    # the env's own checks, before any worker starts (one line, as a config file's values)
+    from embodied_envs.envs.pick_embodiedgen import PickEmbodiedGenEnv  # torch: when it runs
+
+    for name, value in kwargs.items():
+        try:
+            PickEmbodiedGenEnv.check_keyword(name, value)
+        except ValueError as e:
+            flag = CAMERA_KEYS.get(name, name)
+            raise SystemExit(f"error: {flag}: {e}") from None
     return kwargs
 
 

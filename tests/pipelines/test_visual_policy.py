@@ -177,6 +177,7 @@ def test_a_visual_policy_on_state_observations_is_one_line(dataset, tmp_path, ca
         (["--obs-mode", "rgb", "--rooms", "shipped"], "--rooms are splat backgrounds"),
         (["--obs-mode", "state", "--hybrid-obs"], "--obs-mode state has none"),
         (["--obs-mode", "rgb", "--hybrid-obs", "--rooms", "/nowhere"], "holds no room"),
+        (["--obs-mode", "rgb", "--robot-visual-faces", "10"], "--robot-visual-faces: "),
     ],
 )
 def test_bad_camera_flags_are_one_line(flags, words, tmp_path, capsys):
