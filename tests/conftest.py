@@ -142,7 +142,7 @@ SLOW_FILES = {
     "tests/pipelines/test_visual_policy.py", "tests/solvers/test_modes.py",
     "tests/envs/test_rooms.py", "tests/test_structure.py", "tests/envs/test_pick_env.py",
     "tests/cli/test_embodiedgen_layout.py", "tests/datasets/test_ee_actions.py",
-    "tests/layout/test_collision.py",
+    "tests/layout/test_collision.py", "tests/envs/test_hollows.py",
 }  # fmt: skip
 
 

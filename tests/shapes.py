@@ -1,7 +1,8 @@
 """Test assets made here, in EmbodiedGen's asset format (``<stem>.urdf``, ``mesh/<stem>.obj``,
 ``mesh/<stem>_collision.obj``, meshes Y-up turned Z-up by the URDF), from trimesh shapes
 designed Z-up with their lowest point at z = 0: tables and receptacles of several shapes, their
-collision written as one object (of pieces, or one concave piece) or one object per part."""
+collision written as one object (of pieces, or one concave piece) or one object per part; hollow
+things written to hide their hollows (an open surface, two objects, a shallow recess)."""
 
 from __future__ import annotations
 
@@ -105,3 +106,25 @@ def bowl_wedges(r0=0.045, r=0.08, h=0.055, t=BOWL_FLOOR, n=16) -> list[trimesh.T
                for rr, zz in ((r0, 0), (r, h), (r - t, h), (r0 - t, t))]  # fmt: skip
         parts.append(trimesh.Trimesh(np.array(pts)).convex_hull)
     return parts
+
+
+def open_box(w=0.12, d=0.1, h=0.08) -> trimesh.Trimesh:
+    """A box open on top as a bare surface: a closed box less its lid (no thickness)."""
+    b = trimesh.creation.box(extents=(w, d, h)).apply_translation([0, 0, h / 2])
+    return trimesh.Trimesh(b.vertices, b.faces[b.face_normals[:, 2] < 0.9])
+
+
+def mug_objects(r=0.04, h=0.09, t=0.004) -> list[trimesh.Trimesh]:
+    """A mug as two objects: a closed concave body (4 mm floor and walls) and a handle."""
+    profile = np.array([[0, 0], [r, 0], [r, h], [r - t, h], [r - t, t], [0, t]])
+    body = trimesh.creation.revolve(profile, sections=24)
+    handle = box([0.03, 0.012, 0.05], [r + 0.015, 0, h / 2])
+    return [body, handle]
+
+
+def tray(r=0.1, base=0.03, recess=0.01, rim=0.01) -> trimesh.Trimesh:
+    """A closed tray: a 3 cm base with a 1 cm recess inside a 1 cm rim (hull 1.25x its volume,
+    under the 1.3 that a volume ratio would need)."""
+    top = base + recess
+    profile = np.array([[0, 0], [r, 0], [r, top], [r - rim, top], [r - rim, base], [0, base]])
+    return trimesh.creation.revolve(profile, sections=48)

@@ -216,8 +216,10 @@ def parse_urdf(urdf: Path | str) -> AssetSpec:
     link = links[0]
     visual = _mesh(link, "visual", urdf)
     collision = _mesh(link, "collision", urdf)
-    # a one-object concave mesh the simulator would fill in: its convex parts (layout/collision.py)
-    parts = convex_collision(collision.path)
+    # a collision mesh whose hulls the simulator makes would fill a hollow: its convex parts,
+    # probed in the object's frame as it rests (layout/collision.py)
+    frame = rpy_to_matrix(collision.rpy) * np.asarray(collision.scale)
+    parts = convex_collision(collision.path, tuple(frame.ravel()))
     if parts != collision.path:
         collision = dataclasses.replace(collision, path=parts, source=collision.path)
     mu1 = _float_text(link.find("collision/gazebo/mu1"), urdf, "collision/gazebo/mu1")

@@ -1,6 +1,6 @@
 """Checks of an asset's visual mesh: it loads, its materials and textures lie in the asset
 folder and read as images, and it stands where its collision mesh does (every face of the two
-boxes, and the volume)."""
+boxes, the volume, and its hollows: ``layout/hollow.py``)."""
 
 from __future__ import annotations
 
@@ -20,9 +20,10 @@ from embodied_envs.layout.assets import (
     _load_parts_checked,
     asset_geometry,
 )
-from embodied_envs.layout.collision import once_each, pieces
+from embodied_envs.layout.collision import load_mesh, once_each, pieces
 from embodied_envs.layout.errors import LayoutError
 from embodied_envs.layout.folders import resolve_path
+from embodied_envs.layout.hollow import Hollow, filled_hollow
 
 MAX_TEXTURE_BYTES = 256 << 20  # a texture file larger than this is refused before reading
 
@@ -91,7 +92,8 @@ def check_collision_matches(spec: AssetSpec, shape: VisualShape) -> None:
     compared: over ``VISUAL_REFUSED`` (or ``VISUAL_REFUSED_SHARE`` of the object) is refused,
     over ``VISUAL_MISMATCH`` warned about once per URDF, as is a volume apart by more than
     ``VISUAL_MISMATCH`` spread over the visual surface (a hollow filled in, a part missing;
-    compared when the visual mesh closes a volume).
+    compared when the visual mesh closes a volume), as is a hollow of the visual mesh the
+    collision parts fill (:func:`hollow.filled_hollow`: a thing set in it would float).
 
     Raises:
         LayoutError: naming the URDF, both boxes, the faces apart and the fix.
@@ -131,14 +133,33 @@ def check_collision_matches(spec: AssetSpec, shape: VisualShape) -> None:
                 f"mesh's {shape.volume * 1e6:.1f} cm^3 ({depth * 1000:+.1f} mm over its surface:"
                 f" {'a hollow filled in' if depth > 0 else 'a part missing'})"
             )
+    filled = visual_hollow(spec)
+    fix = "export the collision mesh from the visual mesh's shape"
+    if filled.filled:
+        notes.append(f"its collision mesh makes {filled.words()} of its visual mesh")
+        fix += " as convex parts, one object each, that leave its hollows open"
     if notes and spec.urdf_path not in _WARNED_MISMATCH:
         _WARNED_MISMATCH.add(spec.urdf_path)
         warnings.warn(
             f"{spec.urdf_path}: {'; '.join(notes)}: objects rest and are grasped on the "
             "collision mesh, so on camera they float, sink or pass into each other by as much."
-            " Fix: export the collision mesh from the visual mesh's shape.",
+            f" Fix: {fix}.",
             stacklevel=3,
         )
+
+
+def visual_hollow(spec: AssetSpec) -> Hollow:
+    """What the asset's collision parts fill of its visual mesh's hollows, in its frame (Z up);
+    read once per version of the two files."""
+    versions = (FileVersion.of(spec.visual.path), FileVersion.of(spec.collision.path))
+    key = ("visual hollow", *versions, spec.visual, spec.collision)
+
+    def probe() -> Hollow:
+        mesh = load_mesh(spec.visual.path)
+        triangles = spec.visual.to_link_frame(mesh.vertices)[mesh.faces]
+        return filled_hollow(triangles, list(asset_geometry(spec).parts))
+
+    return ASSET_FILES.get(key, probe)
 
 
 def _box(lo: np.ndarray, hi: np.ndarray) -> str:

@@ -15,7 +15,7 @@ from scipy.spatial import ConvexHull
 from shapes import BOWL_FLOOR, bowl_wedges, round_table_pieces, table_pieces, write_asset
 
 from embodied_envs.cli.main import main
-from embodied_envs.layout import LayoutError, asset_geometry, parse_urdf
+from embodied_envs.layout import LayoutError, asset_geometry, hollow, parse_urdf
 from embodied_envs.layout import collision as col
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -352,21 +352,24 @@ def open_bowl() -> trimesh.Trimesh:
     return trimesh.creation.revolve(profile, sections=32)
 
 
-@pytest.mark.parametrize("with_table", [False, True], ids=["alone", "among_pieces"])
-def test_an_open_concave_piece_is_named_in_a_warning(with_table, fresh, no_coacd, tmp_path):
-    parts = [*table_pieces(), open_bowl().apply_translation([0, 0, 0.9])] if with_table else []
-    urdf = write_asset(tmp_path / "assets", "thing", parts or [open_bowl()])
-    original = urdf.parent / "mesh" / "thing_collision.obj"
-    with pytest.warns(UserWarning) as caught:
-        spec = parse_urdf(urdf)
-    (text,) = [str(w.message) for w in caught]
-    assert text.startswith(f"{original}: one ") and "open and concave" in text, text
-    assert "Fix: close the mesh" in text
-    if with_table:  # the closed pieces still become their own hulls
-        assert "6 disconnected pieces, 1 open and concave" in text
-        assert len(col.obj_objects(spec.collision.path)) == 6
-    else:
-        assert spec.collision.path == original
+def test_an_open_concave_piece_is_named_among_pieces(tmp_path):
+    """An open bowl among closed pieces: found concave by what its hull fills (its volume
+    cannot be measured), the closed pieces convex."""
+    parts = [*table_pieces(), open_bowl().apply_translation([0, 0, 0.9])]
+    urdf = write_asset(tmp_path / "assets", "thing", parts)
+    reason = col.concavity(urdf.parent / "mesh" / "thing_collision.obj")
+    assert reason.startswith("one object of 6 disconnected pieces, 1 of them concave (not closed;")
+    assert "hollow filled 55.0 mm over its floor" in reason, reason
+
+
+def test_an_open_concave_piece_is_decomposed_as_a_shell_keeping_its_floor(fresh, tmp_path):
+    """An open bowl (no thickness): made a closed shell, decomposed, its floor kept open."""
+    spec = parse_urdf(write_asset(tmp_path / "assets", "bowl", [open_bowl()]))
+    assert spec.collision.path.parent == fresh
+    geom = asset_geometry(spec)
+    floor = col.solid_top(list(geom.parts), (0.0, 0.0)) - geom.min_z
+    assert floor == pytest.approx(0.0, abs=hollow.HOLLOW_TOLERANCE)
+    assert geom.min_z == pytest.approx(-0.0275, abs=EXACT)  # the bowl's own bottom, no lower
 
 
 def test_open_convex_pieces_are_not_warned_about(fresh, tmp_path):
