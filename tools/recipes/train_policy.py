@@ -54,6 +54,7 @@ from torch import nn
 from embodied_envs.paths import atomic_output
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import perceive  # noqa: E402
 import perturb  # noqa: E402
 import visual  # noqa: E402
 from ensemble import TemporalEnsemble  # noqa: E402
@@ -174,12 +175,16 @@ def chunk_targets(
     return np.concatenate(targets), np.concatenate(valid)
 
 
-def dataset_env(env_info: dict, layout: Path | None = None, demos: Path | None = None):
-    """The dataset's env, made once, with the state observation as a dict (its groups' slices);
-    ``layout`` in place of the layout file the dataset names (a dataset moved between machines)."""
+def dataset_env(
+    env_info: dict, layout: Path | None = None, demos: Path | None = None,
+    obs_mode: str = "state_dict",
+):  # fmt: skip
+    """The dataset's env, made once, with the state observation as a dict (its groups' slices)
+    or ``obs_mode``; ``layout`` in place of the layout file the dataset names (a dataset moved
+    between machines)."""
     import gymnasium as gym
 
-    kwargs = dict(env_info.get("env_kwargs", {}), obs_mode="state_dict", render_mode=None)
+    kwargs = dict(env_info.get("env_kwargs", {}), obs_mode=obs_mode, render_mode=None)
     if layout is not None:
         kwargs["layout_file"] = str(layout)
     named = kwargs.get("layout_file")
@@ -270,23 +275,31 @@ def agent_groups(path: Path) -> tuple[dict[str, slice], str]:
     sys.exit(f"{path}: no recorded articulation's qpos and qvel lead the observation")
 
 
-def keep_mask(drop: list[str], path: Path, obs_dim: int) -> np.ndarray:
-    """1 per observation value the policy sees, 0 for those of the groups in ``drop``."""
+def keep_mask(
+    drop: list[str], path: Path, obs_dim: int, slices: dict[str, slice] | None = None
+) -> np.ndarray:
+    """1 per observation value the policy sees, 0 for those of the groups in ``drop`` (found in
+    ``slices``, else in the dataset's recorded state observation)."""
     keep = np.ones(obs_dim, np.float32)
     if drop:
-        groups = agent_groups(path)[0]
+        groups = slices if slices is not None else agent_groups(path)[0]
         for name in drop:
             keep[groups[name]] = 0.0
     return keep
 
 
-def fit(policy: nn.Module, args, batch_loss, pairs: int, rng) -> tuple[int, float, float]:
-    """Train ``policy`` for ``args.minutes`` of wall clock: AdamW (``args.lr``, cosine decay
-    over the time budget, ``args.weight_decay``), each iteration minimising ``batch_loss`` of
-    ``args.batch_size`` pairs drawn from ``pairs``; a progress line every ``LOG_EVERY_S``; then
-    ``OUT/policy.pt`` (TorchScript). Returns the iterations, the last loss and the seconds."""
+def fit(
+    policy: nn.Module, args, batch_loss, pairs: int, rng, minutes: float | None = None,
+    export: nn.Module | None = None, save: bool = True, name: str = "",
+) -> tuple[int, float, float]:  # fmt: skip
+    """Train ``policy`` for ``minutes`` (default ``args.minutes``) of wall clock: AdamW
+    (``args.lr``, cosine decay over the time budget, ``args.weight_decay``), each iteration
+    minimising ``batch_loss`` of ``args.batch_size`` pairs drawn from ``pairs``; a progress line
+    every ``LOG_EVERY_S``; then, with ``save``, ``OUT/policy.pt``: ``export`` (default
+    ``policy``) as TorchScript. Returns the iterations, the last loss and the
+    seconds."""
     optim = torch.optim.AdamW(policy.parameters(), lr=args.lr, weight_decay=args.weight_decay)
-    budget = args.minutes * 60.0
+    budget = (args.minutes if minutes is None else minutes) * 60.0
     start = last_log = time.perf_counter()
     iters, loss = 0, torch.tensor(float("nan"))
     while (elapsed := time.perf_counter() - start) < budget:
@@ -299,17 +312,20 @@ def fit(policy: nn.Module, args, batch_loss, pairs: int, rng) -> tuple[int, floa
         iters += 1
         if time.perf_counter() - last_log > LOG_EVERY_S:
             last_log = time.perf_counter()
-            print(f"{elapsed / 60:5.1f} min, iteration {iters}: loss {loss.item():.4f}", flush=True)
+            print(f"{name}{elapsed / 60:5.1f} min, iteration {iters}: loss {loss.item():.4f}",
+                  flush=True)  # fmt: skip
     seconds = time.perf_counter() - start
-    args.out.mkdir(parents=True, exist_ok=True)
-    with atomic_output(args.out / "policy.pt") as tmp:
-        torch.jit.save(torch.jit.script(policy.eval()), str(tmp))
+    if save:
+        args.out.mkdir(parents=True, exist_ok=True)
+        with atomic_output(args.out / "policy.pt") as tmp:
+            module = policy if export is None else export
+            torch.jit.save(torch.jit.script(module.eval()), str(tmp))
     return iters, float(loss.item()), seconds
 
 
 def train(args: argparse.Namespace) -> dict:
     if visual.is_visual(args.demos):
-        return train_visual(args)
+        return train_perceiving(args) if args.visual == "perceive" else train_visual(args)
     torch.set_num_threads(TORCH_THREADS)
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
@@ -380,6 +396,133 @@ def train(args: argparse.Namespace) -> dict:
         "final_loss": loss,
         "train_seconds": round(seconds, 1),
     }
+    with atomic_output(args.out / "train.json") as tmp:
+        tmp.write_text(json.dumps(info, indent=2) + "\n")
+    return info
+
+
+def train_perceiving(args: argparse.Namespace) -> dict:
+    """A visual policy with a perception bottleneck (``perceive.py``) from a dataset with
+    camera frames: the estimator, then the state policy on its estimates."""
+    torch.set_num_threads(args.threads or VISUAL_THREADS)
+    torch.manual_seed(args.seed)
+    rng = np.random.default_rng(args.seed)
+    generator = torch.Generator().manual_seed(args.seed)
+    meta = json.loads(args.demos.with_suffix(".json").read_text())
+    episodes = meta["episodes"][: args.num_demos if args.num_demos > 0 else None]
+    if not episodes:
+        sys.exit(f"{args.demos}: no episodes")
+    env_info = meta["env_info"]
+    frames = perceive.load_frames(args.demos, episodes)
+    env = dataset_env(env_info, args.layout, args.demos)
+    try:
+        slices = perturb.obs_slices(env)
+        flats, actions, bases = perceive.flat_states(env, args.demos, episodes)
+        act_dim = actions[0].shape[1]
+        frame = (np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64))
+        if args.frame == "target":
+            frame = target_frame(env, flats[0].shape[1], act_dim)
+        anchors = [o[:, frame[1]] * frame[0] for o in flats]
+        targets, valid = chunk_targets(actions, args.chunk, args.hold, anchors)
+        obs = np.concatenate([o[: len(a)] for o, a in zip(flats, actions, strict=True)])
+        obs_std, act_std, flat = obs.std(0), targets.std(0), targets[:, 0]
+        demo_obs = obs
+        obs, targets, valid = with_corrective_copies(
+            args, env, (flats, actions, bases), obs, targets, valid, frame
+        )
+        # the estimator: every frame of the episodes but the held-out ones, and frames rendered
+        # through the env at other placements and rooms, to their perceived values
+        held = max(1, round(perceive.HOLD_OUT * len(episodes))) if len(episodes) > 1 else 0
+        learn = slice(0, len(episodes) - held)
+        started = time.perf_counter()
+        camera_env = dataset_env(env_info, args.layout, args.demos,
+                                 env_info["env_kwargs"].get("obs_mode", "rgb"))  # fmt: skip
+        try:
+            more_frames, more_flats = perceive.rendered_frames(
+                camera_env, env, perceive.RENDER_SHARE * args.minutes * 60,
+                np.concatenate(flats[learn])[:, slices["qpos"]], perceive.RENDER_SIGMA, rng,
+            )  # fmt: skip
+        finally:
+            camera_env.close()
+    finally:
+        env.close()
+    template = perceive.constant_template(flats, slices, args.demos)
+    seen = perceive.perceived_index(slices)
+    images = torch.from_numpy(np.concatenate([*frames[learn], more_frames]))
+    labels = torch.from_numpy(np.concatenate([*flats[learn], more_flats])[:, seen])
+    estimator = perceive.Estimator(
+        tuple(images.shape[1:3]), labels.mean(0).numpy(), labels.std(0).numpy()
+    )
+    y = (labels - estimator.mean) / estimator.std
+
+    def estimator_loss(batch: torch.Tensor) -> torch.Tensor:
+        image = images[batch].permute(0, 3, 1, 2).float() / 255.0
+        image = visual.augment(image, generator, perceive.SHIFT_PX)
+        return (estimator.normalised(image) - y[batch]).abs().mean()
+
+    render_seconds = time.perf_counter() - started
+    share = perceive.ESTIMATOR_SHARE * args.minutes
+    est_iters, est_loss, est_seconds = fit(estimator, args, estimator_loss, len(images), rng,
+                                           share, save=False, name="estimator ")  # fmt: skip
+    for p in estimator.parameters():
+        p.requires_grad_(False)
+    vary = estimator.vary.numpy() > 0
+    error = np.zeros(len(seen), np.float32)  # the held-out RMS error per perceived value
+    if held:
+        hold_images = torch.from_numpy(np.concatenate(frames[learn.stop :]))
+        truth = np.concatenate(flats[learn.stop :])[:, seen]
+        miss = perceive.estimate(estimator, hold_images).numpy() - truth
+        error = np.sqrt((miss**2).mean(0))
+    blur = torch.from_numpy(np.where(vary, np.maximum(error, perceive.MIN_ERROR), 0.0))
+    keep = keep_mask(args.drop, args.demos, obs.shape[1], slices)
+    keep[perceive.orientation_index(slices)] = 0.0
+    policy = ChunkPolicy(
+        demo_obs.mean(0), np.where(obs_std < MIN_STD, 1.0, obs_std), keep, targets.mean(0),
+        np.where(act_std < MIN_STD, 1.0, act_std), flat.min(0), flat.max(0),
+        args.chunk, args.hidden, args.decay, frame,
+    )  # fmt: skip
+    composite = perceive.PerceivingPolicy(estimator, policy, template, slices, images.shape[1:3])
+    x = torch.from_numpy(obs)
+    target = (torch.from_numpy(targets) - policy.act_mean) / policy.act_std
+    mask = torch.from_numpy(valid).float()[:, :, None]
+    state, truth_t = x[:, : composite.lead], x[:, torch.from_numpy(seen)]
+
+    def policy_loss(batch: torch.Tensor) -> torch.Tensor:
+        guess = truth_t[batch] + blur * torch.randn(len(batch), len(seen), generator=generator)
+        inputs = policy.normalise(composite.assemble(state[batch], guess.float()))
+        if args.obs_noise > 0:
+            noise = torch.randn(inputs.shape, generator=generator)
+            inputs = inputs + args.obs_noise * noise * policy.obs_keep
+        err = (policy.raw_normalised(inputs) - target[batch]).abs() * mask[batch]
+        return err.sum() / (mask[batch].sum() * target.shape[2])
+
+    own = (1.0 - perceive.RENDER_SHARE - perceive.ESTIMATOR_SHARE) * args.minutes  # at least
+    rest = max(args.minutes - (time.perf_counter() - started) / 60, own)
+    iters, loss, seconds = fit(policy, args, policy_loss, len(x), rng, rest,
+                               export=composite, name="policy ")  # fmt: skip
+    live = [i for i, v in enumerate(vary) if v]
+    names = perceive.perceived_names(slices)
+    kwargs = env_info.get("env_kwargs", {})
+    info = {
+        "demos": str(args.demos), "episodes": len(actions), "env_id": env_info.get("env_id"),
+        "kind": "visual", "obs_mode": kwargs.get("obs_mode"),
+        "control_mode": kwargs.get("control_mode"), "layout_file": kwargs.get("layout_file"),
+        "camera": visual.CAMERA, "image_hw": list(images.shape[1:3]),
+        "state_keys": list(perceive.STATE_KEYS), "hybrid_obs": kwargs.get("hybrid_obs", False),
+        "rooms": kwargs.get("rooms"), "robot_visual_faces": kwargs.get("robot_visual_faces"),
+        "estimator_episodes": learn.stop, "held_out_episodes": held,
+        "rendered_frames": len(more_frames), "render_seconds": round(render_seconds, 1),
+        "estimator_iterations": est_iters, "estimator_loss": est_loss,
+        "estimator_seconds": round(est_seconds, 1),
+        "held_out_error_m": {names[i]: round(float(error[i]), 4) for i in live},
+        "pairs": len(demo_obs), "pairs_with_copies": len(x), "act_dim": act_dim,
+        "chunk": args.chunk, "frame": args.frame, "decay": args.decay, "hidden": args.hidden,
+        "hold": args.hold, "obs_noise": args.obs_noise, "perturb": args.perturb,
+        "perturb_copies": args.perturb_copies, "batch_size": args.batch_size, "lr": args.lr,
+        "weight_decay": args.weight_decay, "seed": args.seed, "minutes": args.minutes,
+        "threads": torch.get_num_threads(), "iterations": iters, "final_loss": loss,
+        "train_seconds": round(time.perf_counter() - started, 1),
+    }  # fmt: skip
     with atomic_output(args.out / "train.json") as tmp:
         tmp.write_text(json.dumps(info, indent=2) + "\n")
     return info
@@ -502,6 +645,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--aux-weight", type=float, default=visual.AUX_WEIGHT,
                     help="visual policies: the weight of the auxiliary loss (the first mover's "
                     "position from the frame alone; 0: none)")
+    ap.add_argument("--visual", choices=["perceive", "end-to-end"], default="perceive",
+                    help="visual policies: perceive (an estimator of the objects' positions "
+                    "from the frame, then a state policy on its estimates), or end-to-end")
     ap.add_argument("--threads", type=int, default=None,
                     help=f"torch threads (default: {TORCH_THREADS} for a state policy, "
                     f"{VISUAL_THREADS} for a visual one)")

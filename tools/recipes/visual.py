@@ -111,6 +111,28 @@ class SpatialSoftArgmax(nn.Module):
         return torch.cat([(weights * self.xs).sum(-1), (weights * self.ys).sum(-1)], 1)
 
 
+class Encoder(nn.Module):
+    """``(B, 3, H, W)`` float frames in [0, 1] -> ``(B, width)`` features: a conv net
+    (``CHANNELS``, two stride-2 layers), ``KEYPOINTS`` maps' spatial soft-argmax positions and
+    the last layer's channel means."""
+
+    def __init__(self, image_hw: tuple[int, int]):
+        super().__init__()
+        layers: list[nn.Module] = []
+        size = 3
+        for k, width in enumerate(CHANNELS):
+            layers += [nn.Conv2d(size, width, 3, stride=2 if k < 2 else 1, padding=1), nn.ReLU()]
+            size = width
+        self.conv = nn.Sequential(*layers)
+        self.keypoints = nn.Conv2d(size, KEYPOINTS, 1)
+        self.soft_argmax = SpatialSoftArgmax(image_hw[0] // 4, image_hw[1] // 4)
+        self.width = 2 * KEYPOINTS + size
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        maps = self.conv(image - 0.5)
+        return torch.cat([self.soft_argmax(self.keypoints(maps)), maps.mean((2, 3))], 1)
+
+
 class VisualChunkPolicy(nn.Module):
     """``(image, state)`` -> the temporally ensembled action of this step, per env."""
 
@@ -131,14 +153,8 @@ class VisualChunkPolicy(nn.Module):
         ).items():  # fmt: skip
             self.register_buffer(name, torch.as_tensor(np.asarray(value), dtype=torch.float32))
         self.register_buffer("joint", torch.as_tensor(np.asarray(joint), dtype=torch.long))
-        layers: list[nn.Module] = []
-        size = 3
-        for k, width in enumerate(CHANNELS):
-            layers += [nn.Conv2d(size, width, 3, stride=2 if k < 2 else 1, padding=1), nn.ReLU()]
-            size = width
-        self.conv = nn.Sequential(*layers)
-        self.keypoints = nn.Conv2d(size, KEYPOINTS, 1)
-        self.soft_argmax = SpatialSoftArgmax(image_hw[0] // 4, image_hw[1] // 4)
+        self.encoder = Encoder(image_hw)
+        size = CHANNELS[-1]
         mlp: list[nn.Module] = []
         width_in = 2 * KEYPOINTS + size + len(state_mean)
         for width in hidden:
@@ -152,18 +168,13 @@ class VisualChunkPolicy(nn.Module):
         )
         self.ensemble = TemporalEnsemble(chunk, act_dim, decay)
 
-    def features(self, image: torch.Tensor) -> torch.Tensor:
-        """``(B, 3, H, W)`` float images in [0, 1] -> the encoder's features."""
-        maps = self.conv(image - 0.5)
-        return torch.cat([self.soft_argmax(self.keypoints(maps)), maps.mean((2, 3))], 1)
-
     def raw_normalised(self, image: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         """Float images ``(B, 3, H, W)`` and normalised states -> normalised chunks."""
         return self.heads(image, state)[0]
 
     def heads(self, image: torch.Tensor, state: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The normalised chunks and the auxiliary head's normalised targets (training)."""
-        features = self.features(image)
+        features = self.encoder(image)
         chunks = self.head(torch.cat([features, state], 1)).view(-1, self.chunk, self.act_dim)
         return chunks, self.aux(features)
 
@@ -183,14 +194,16 @@ class VisualChunkPolicy(nn.Module):
         return torch.clamp(action, self.act_low, self.act_high)
 
 
-def augment(images: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
-    """``(B, 3, H, W)`` float images, each shifted by up to ``SHIFT_PX`` pixels (edges
+def augment(
+    images: torch.Tensor, generator: torch.Generator, shift: int = SHIFT_PX
+) -> torch.Tensor:
+    """``(B, 3, H, W)`` float images, each shifted by up to ``shift`` pixels (edges
     replicated) and colour-jittered."""
     b, _, h, w = images.shape
-    padded = F.pad(images, (SHIFT_PX,) * 4, mode="replicate")
-    dx = torch.randint(0, 2 * SHIFT_PX + 1, (b,), generator=generator)
-    dy = torch.randint(0, 2 * SHIFT_PX + 1, (b,), generator=generator)
-    rows = (dy[:, None] + torch.arange(h)[None])[:, None, :, None].expand(b, 3, h, w + 2 * SHIFT_PX)
+    padded = F.pad(images, (shift,) * 4, mode="replicate")
+    dx = torch.randint(0, 2 * shift + 1, (b,), generator=generator)
+    dy = torch.randint(0, 2 * shift + 1, (b,), generator=generator)
+    rows = (dy[:, None] + torch.arange(h)[None])[:, None, :, None].expand(b, 3, h, w + 2 * shift)
     shifted = padded.gather(2, rows)
     cols = (dx[:, None] + torch.arange(w)[None])[:, None, None, :].expand(b, 3, h, w)
     shifted = shifted.gather(3, cols)
