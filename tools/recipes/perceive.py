@@ -44,6 +44,8 @@ import visual  # noqa: E402
 
 from embodied_envs.envs.tasks import KIND_IDS  # noqa: E402
 
+CAMERA_PARAMS = tuple(f"sensor_param/{visual.CAMERA}/{k}" for k in ("intrinsic_cv", "extrinsic_cv"))
+KEYPOINT_WEIGHT = 1.0  # the estimator's keypoint loss (each object's pixel) against its values'
 # the rgb observation's groups that lead the state observation, in its order
 STATE_KEYS = ("agent/qpos", "agent/qvel", "extra/is_grasped", "extra/tcp_pose",
               "extra/goal_pos", "extra/task_kind")  # fmt: skip
@@ -55,7 +57,6 @@ RENDER_SIGMA = 0.05  # rad: the extra frames' arm, off a demonstrated configurat
 HOLD_OUT = 0.1  # the share of episodes that measure the estimator (at least one)
 ESTIMATOR_SHARE = 0.5  # of --minutes: the estimator's training; the rest the policy's
 HIDDEN = 256  # the estimator's MLP
-MIN_ERROR = 0.002  # m: the least blur of a perceived value in the policy's training
 MIN_STD = 1e-3  # a perceived value varying less than this over the dataset is a constant
 
 
@@ -73,12 +74,29 @@ def perceived_index(slices: dict[str, slice]) -> np.ndarray:
     return np.array(origins + to_goal + rec, np.int64)
 
 
+def to_goal_positions(slices: dict[str, slice]) -> np.ndarray:
+    """Where the movers' vectors to their goals are among the perceived values."""
+    m = slots(slices)
+    return np.arange(m * POS, 2 * m * POS)
+
+
 def perceived_names(slices: dict[str, slice]) -> list[str]:
     """Per perceived value (``perceived_index``'s order), its name."""
     m, axes = slots(slices), "xyz"
     return ([f"mover {s} {a}" for s in range(m) for a in axes]
             + [f"mover {s} to goal {a}" for s in range(m) for a in axes]
             + [f"receptacle {a}" for a in axes])  # fmt: skip
+
+
+def keypoint_points(flats: np.ndarray, slices: dict[str, slice]) -> tuple[np.ndarray, np.ndarray]:
+    """The objects whose pixels the estimator's first keypoints are asked for, per state
+    observation ``(N, D)``: every mover slot's origin, then the receptacle's ``(N, K, 3)``, and
+    which are there ``(N, K)`` (the slot and receptacle masks)."""
+    m = slots(slices)
+    movers = flats[:, slices["mover_pose"]].reshape(len(flats), m, POSE)[:, :, :POS]
+    rec = flats[:, slices["receptacle_pose"]][:, None, :POS]
+    there = np.concatenate([flats[:, slices["mover_mask"]], flats[:, slices["receptacle_mask"]]], 1)
+    return np.concatenate([movers, rec], 1), there > 0.5
 
 
 def orientation_index(slices: dict[str, slice]) -> np.ndarray:
@@ -125,19 +143,43 @@ def flat_states(env, path: Path, episodes: list[dict]) -> tuple[list, list, list
     return out, actions, bases
 
 
-def load_frames(path: Path, episodes: list[dict]) -> list[np.ndarray]:
-    """Per episode its camera frames ``(T+1, H, W, 3)`` uint8; one line naming a missing key."""
-    frames = []
+def load_frames(path: Path, episodes: list[dict]) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per episode its camera frames ``(T+1, H, W, 3)`` uint8 and the camera's projection
+    matrices ``(T+1, 3, 4)`` (intrinsics times extrinsics); one line naming a missing key."""
+    frames, cameras = [], []
+    need = (f"sensor_data/{visual.CAMERA}/rgb", *CAMERA_PARAMS, *STATE_KEYS)
     with h5py.File(path, "r") as f:
         for ep in episodes:
             obs = f[f"traj_{ep['episode_id']}/obs"]
-            missing = [k for k in (f"sensor_data/{visual.CAMERA}/rgb", *STATE_KEYS) if k not in obs]
+            missing = [k for k in need if k not in obs]
             if missing:
                 sys.exit(f"{path}: traj_{ep['episode_id']} has no obs/{missing[0]}. Fix: collect "
-                         "with --obs-mode rgb (a visual policy needs the camera frames, the "
-                         "joints, the grasp flag and the goal)")  # fmt: skip
+                         "with --obs-mode rgb (a visual policy needs the camera frames and "
+                         "parameters, the joints, the grasp flag and the goal)")  # fmt: skip
             frames.append(np.asarray(obs[f"sensor_data/{visual.CAMERA}/rgb"], np.uint8))
-    return frames
+            cameras.append(projection(*(np.asarray(obs[k], np.float32) for k in CAMERA_PARAMS)))
+    return frames, cameras
+
+
+def projection(intrinsic: np.ndarray, extrinsic: np.ndarray) -> np.ndarray:
+    """``(N, 3, 3)`` OpenCV intrinsics and ``(N, 3, 4)`` extrinsics -> ``(N, 3, 4)``."""
+    return (intrinsic @ extrinsic).astype(np.float32)
+
+
+def pixel_targets(points: np.ndarray, camera: np.ndarray, hw: tuple[int, int]):
+    """World points ``(N, K, 3)`` seen by cameras ``(N, 3, 4)`` -> their places in the
+    soft-argmax's coordinates ``(N, K, 2)`` (``visual.SpatialSoftArgmax`` over the encoder's
+    maps, a quarter of the frame's size: -1 and 1 the first and last map cells' centres) and
+    whether each is in front of the camera and inside the frame ``(N, K)``."""
+    homog = np.concatenate([points, np.ones_like(points[..., :1])], -1)
+    uvw = np.einsum("nij,nkj->nki", camera, homog)
+    depth = uvw[..., 2]
+    uv = uvw[..., :2] / np.where(np.abs(depth) < 1e-6, 1e-6, depth)[..., None]
+    size = np.array([hw[1], hw[0]], np.float32)  # (x, y)
+    cells = size / 4
+    coords = ((uv - 1.5) / 4) / (cells - 1) * 2 - 1  # a pixel's centre at integer u: OpenCV's
+    inside = (depth > 0) & (uv >= 0).all(-1) & (uv <= size - 1).all(-1)
+    return coords.astype(np.float32), inside
 
 
 class Estimator(nn.Module):
@@ -160,7 +202,15 @@ class Estimator(nn.Module):
 
     def normalised(self, image: torch.Tensor) -> torch.Tensor:
         """``(B, 3, H, W)`` float frames in [0, 1] -> normalised estimates."""
-        return self.mlp(self.encoder(image))
+        return self.heads(image)[0]
+
+    def heads(self, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The normalised estimates and the encoder's keypoints ``(B, KEYPOINTS, 2)`` (training
+        asks keypoint ``k`` for the ``k``-th object's pixel: ``keypoint_points``)."""
+        features = self.encoder(image)
+        k = visual.KEYPOINTS
+        points = torch.stack([features[:, :k], features[:, k : 2 * k]], -1)
+        return self.mlp(features), points
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         x = image.permute(0, 3, 1, 2).float() / 255.0
@@ -245,10 +295,11 @@ def rendered_frames(
     a room no demonstration or evaluation draws), the arm set to a demonstrated configuration
     (a row of ``joints``, moved by Gaussian offsets of ``sigma`` radians, within the joints'
     limits), its camera's frame, and the state observation ``state_env`` computes there.
-    Returns the frames ``(N, H, W, 3)`` and the state observations ``(N, D)``."""
+    Returns the frames ``(N, H, W, 3)``, the cameras' projections ``(N, 3, 4)`` and the state
+    observations ``(N, D)``."""
     from mani_skill.utils.common import flatten_state_dict  # the env's process only
 
-    frames, flats = [], []
+    frames, cameras, flats = [], [], []
     cam, state = camera_env.unwrapped, state_env.unwrapped
     limits = cam.agent.robot.get_qlimits()[0].cpu().numpy()
     start = time.perf_counter()
@@ -259,9 +310,12 @@ def rendered_frames(
         cam.agent.robot.set_qpos(torch.as_tensor(q[None], dtype=torch.float32))
         obs = cam.get_obs()
         frames.append(np.asarray(obs["sensor_data"][visual.CAMERA]["rgb"][0], np.uint8))
+        param = obs["sensor_param"][visual.CAMERA]
+        cameras.append(projection(*(np.asarray(param[k.rsplit("/", 1)[1]][0])
+                                    for k in CAMERA_PARAMS)))  # fmt: skip
         state.set_state_dict(cam.get_state_dict())
         flats.append(np.asarray(flatten_state_dict(state.get_obs(), use_torch=True)[0]))
-    return np.stack(frames), np.stack(flats).astype(np.float32)
+    return np.stack(frames), np.stack(cameras), np.stack(flats).astype(np.float32)
 
 
 @torch.no_grad()

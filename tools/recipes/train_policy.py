@@ -51,6 +51,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from embodied_envs.envs.tasks import KIND_IDS
 from embodied_envs.paths import atomic_output
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -413,7 +414,7 @@ def train_perceiving(args: argparse.Namespace) -> dict:
     if not episodes:
         sys.exit(f"{args.demos}: no episodes")
     env_info = meta["env_info"]
-    frames = perceive.load_frames(args.demos, episodes)
+    frames, cameras = perceive.load_frames(args.demos, episodes)
     env = dataset_env(env_info, args.layout, args.demos)
     try:
         slices = perturb.obs_slices(env)
@@ -438,7 +439,7 @@ def train_perceiving(args: argparse.Namespace) -> dict:
         camera_env = dataset_env(env_info, args.layout, args.demos,
                                  env_info["env_kwargs"].get("obs_mode", "rgb"))  # fmt: skip
         try:
-            more_frames, more_flats = perceive.rendered_frames(
+            more_frames, more_cameras, more_flats = perceive.rendered_frames(
                 camera_env, env, perceive.RENDER_SHARE * args.minutes * 60,
                 np.concatenate(flats[learn])[:, slices["qpos"]], perceive.RENDER_SIGMA, rng,
             )  # fmt: skip
@@ -449,7 +450,18 @@ def train_perceiving(args: argparse.Namespace) -> dict:
     template = perceive.constant_template(flats, slices, args.demos)
     seen = perceive.perceived_index(slices)
     images = torch.from_numpy(np.concatenate([*frames[learn], more_frames]))
-    labels = torch.from_numpy(np.concatenate([*flats[learn], more_flats])[:, seen])
+    seen_flats = np.concatenate([*flats[learn], more_flats])
+    labels = torch.from_numpy(seen_flats[:, seen])
+    # the first keypoints: each object's pixel, where it is there and in the frame
+    points, there = perceive.keypoint_points(seen_flats, slices)
+    pixels, inside = perceive.pixel_targets(
+        points, np.concatenate([*cameras[learn], more_cameras]), tuple(images.shape[1:3])
+    )
+    pixels, shown = torch.from_numpy(pixels), torch.from_numpy(there & inside).float()[..., None]
+    # a pick goal is in no frame: its vectors are computed from the estimates (assemble)
+    weight = torch.ones(len(seen))
+    if (seen_flats[:, slices["task_kind"].start + KIND_IDS["pick"]] > 0.5).all():
+        weight[perceive.to_goal_positions(slices)] = 0.0
     estimator = perceive.Estimator(
         tuple(images.shape[1:3]), labels.mean(0).numpy(), labels.std(0).numpy()
     )
@@ -458,7 +470,10 @@ def train_perceiving(args: argparse.Namespace) -> dict:
     def estimator_loss(batch: torch.Tensor) -> torch.Tensor:
         image = images[batch].permute(0, 3, 1, 2).float() / 255.0
         image = visual.augment(image, generator, perceive.SHIFT_PX)
-        return (estimator.normalised(image) - y[batch]).abs().mean()
+        guess, keys = estimator.heads(image)
+        values = ((guess - y[batch]).abs() * weight).sum() / (weight.sum() * len(batch))
+        off = (keys[:, : pixels.shape[1]] - pixels[batch]).abs() * shown[batch]
+        return values + perceive.KEYPOINT_WEIGHT * off.sum() / shown[batch].sum().clamp(min=1)
 
     render_seconds = time.perf_counter() - started
     share = perceive.ESTIMATOR_SHARE * args.minutes
@@ -473,7 +488,6 @@ def train_perceiving(args: argparse.Namespace) -> dict:
         truth = np.concatenate(flats[learn.stop :])[:, seen]
         miss = perceive.estimate(estimator, hold_images).numpy() - truth
         error = np.sqrt((miss**2).mean(0))
-    blur = torch.from_numpy(np.where(vary, np.maximum(error, perceive.MIN_ERROR), 0.0))
     keep = keep_mask(args.drop, args.demos, obs.shape[1], slices)
     keep[perceive.orientation_index(slices)] = 0.0
     policy = ChunkPolicy(
@@ -488,8 +502,7 @@ def train_perceiving(args: argparse.Namespace) -> dict:
     state, truth_t = x[:, : composite.lead], x[:, torch.from_numpy(seen)]
 
     def policy_loss(batch: torch.Tensor) -> torch.Tensor:
-        guess = truth_t[batch] + blur * torch.randn(len(batch), len(seen), generator=generator)
-        inputs = policy.normalise(composite.assemble(state[batch], guess.float()))
+        inputs = policy.normalise(composite.assemble(state[batch], truth_t[batch]))
         if args.obs_noise > 0:
             noise = torch.randn(inputs.shape, generator=generator)
             inputs = inputs + args.obs_noise * noise * policy.obs_keep
@@ -500,7 +513,7 @@ def train_perceiving(args: argparse.Namespace) -> dict:
     rest = max(args.minutes - (time.perf_counter() - started) / 60, own)
     iters, loss, seconds = fit(policy, args, policy_loss, len(x), rng, rest,
                                export=composite, name="policy ")  # fmt: skip
-    live = [i for i, v in enumerate(vary) if v]
+    live = [i for i, v in enumerate(vary) if v and weight[i] > 0]
     names = perceive.perceived_names(slices)
     kwargs = env_info.get("env_kwargs", {})
     info = {
