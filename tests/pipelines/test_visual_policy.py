@@ -285,16 +285,43 @@ def test_a_dataset_without_env_states_is_refused_naming_it(dataset, tmp_path):
     assert not (tmp_path / "r" / "policy.pt").exists()
 
 
-def test_the_auxiliary_target_is_the_movers_recorded_position_from_the_tcp(dataset):
-    """Training only: the can's recorded position less the TCP's, and the can's position."""
+def test_pixel_targets_place_points_where_the_camera_sees_them():
+    """OpenCV's camera (a pixel's centre at integer coordinates) into the soft-argmax's
+    coordinates over a quarter-size map: -1 and 1 the first and last cells' centres."""
+    h, w = 48, 64
+    intrinsic = np.array([[50.0, 0, (w - 1) / 2], [0, 50.0, (h - 1) / 2], [0, 0, 1]])
+    camera = perceive.projection(intrinsic[None], np.eye(3, 4)[None])
+    first = (1.5 - (w - 1) / 2) / 50.0  # x at depth 1 of the first cell's centre (pixel 1.5)
+    points = np.array([[[0, 0, 1], [first, 0, 1], [-first, 0, 1], [0, 0, -1], [5, 0, 1]]])
+    coords, inside = perceive.pixel_targets(points, camera, (h, w))
+    np.testing.assert_allclose(coords[0, 0], [0, 0], atol=1e-6)
+    np.testing.assert_allclose(coords[0, 1, 0], -1, atol=1e-6)
+    np.testing.assert_allclose(coords[0, 2, 0], 1, atol=1e-6)
+    assert inside[0].tolist() == [True, True, True, False, False]  # behind, outside
+
+
+def test_rendered_frames_show_other_placements_with_their_labels(dataset):
+    """The estimator's extra frames: other placements (the can's labelled position varies), the
+    arm near a demonstrated configuration, the can's projected pixel inside the frame."""
     demos, _ = dataset
-    meta = json.loads(demos.with_suffix(".json").read_text())
-    _, _, _, aux = visual.load_visual_episodes(demos, meta["episodes"][:1], "can")
-    with h5py.File(demos) as f:
-        traj = f[f"traj_{meta['episodes'][0]['episode_id']}"]
-        can = traj["env_states/actors/can"][:, :3]
-        tcp = traj["obs/extra/tcp_pose"][:, :3]
-    np.testing.assert_allclose(aux[0][:, 3:], can, atol=1e-6)
-    np.testing.assert_allclose(aux[0][:, :3], can - tcp, atol=1e-6)
-    _, _, _, none = visual.load_visual_episodes(demos, meta["episodes"][:1], "no_such_actor")
-    assert np.isnan(none[0]).all()
+    env, meta = state_env(demos)
+    kwargs = dict(meta["env_info"]["env_kwargs"], render_mode=None)
+    camera_env = gym.make("PickEmbodiedGen-v1", **kwargs)
+    try:
+        slices = perturb.obs_slices(env)
+        flats, _, _ = perceive.flat_states(env, demos, meta["episodes"][:1])
+        joints = flats[0][:, slices["qpos"]]
+        frames, cameras, labels = perceive.rendered_frames(
+            camera_env, env, 0.0, joints, 0.01, np.random.default_rng(0), least=4
+        )
+    finally:
+        camera_env.close()
+        env.close()
+    assert len(frames) == 4 and frames.shape[1:] == (SIDE, SIDE, 3)
+    can = labels[:, slices["mover_pose"]][:, :3]
+    assert can[:, :2].std(0).min() > 0.01  # m: placements differ
+    nearest = np.abs(labels[:, None, slices["qpos"]] - joints[None]).max(-1).min(1)
+    assert nearest.max() < 0.1  # rad: 0.01 rad offsets, clipped to the limits
+    points, there = perceive.keypoint_points(labels, slices)
+    _, inside = perceive.pixel_targets(points, cameras, (SIDE, SIDE))
+    assert inside[:, 0].all() and there[:, 0].all() and not there[:, 1].any()

@@ -1,35 +1,45 @@
-"""A visual policy with a perception bottleneck: an estimator reads the objects' positions from
-the camera frame, and a state policy (``train_policy.ChunkPolicy``, with its corrective copies)
-acts on the joints, the TCP, the goal and those estimates. No object pose is read at run time.
+"""The visual recipe: a policy with a perception bottleneck. An estimator reads the objects'
+positions from the camera frame, and a state policy (``train_policy.ChunkPolicy``, with its
+corrective copies) acts on the joints, the TCP, the goal and those estimates. No object pose is
+read at run time.
 
 Trained end to end on actions alone, a pixel policy on 200 demonstrations replays them from the
 joints and ignores where the object is (docs/evaluation.md); the state policy's corrective
 copies, which taught it to re-grasp, move the arm and recompute the observation, which a frame
-cannot be. Split in two, each half learns what it can from the same dataset:
+cannot be. Split in two, each half learns what it can:
 
 - the **estimator** (``Estimator``: ``visual.Encoder``, a conv net ending in a spatial
-  soft-argmax, then an MLP) maps the frame alone to the observation's ``PERCEIVED`` values: each
-  mover slot's position and its vector to its goal, and the receptacle's position. Its labels are
-  the state observation the env computes from the dataset's recorded env states
-  (``flat_states``: privileged supervision, training only). Augmented with colour jitter and a
-  shift of up to ``SHIFT_PX`` pixel; the rooms vary when the dataset was collected with
-  ``--rooms``. The last ``HOLD_OUT`` of the episodes are kept out of its training and measure its
-  error, in metres, on frames it never saw.
+  soft-argmax, then an MLP) maps the frame alone to the perceived values (``perceived_index``):
+  each mover slot's position and its vector to its goal, and the receptacle's position. Its
+  labels are the state observation the env computes from the recorded env states
+  (``flat_states``: privileged supervision, training only). Its frames are the demonstrations'
+  and frames rendered through the env (``rendered_frames``: other placements and rooms, the arm
+  near a demonstrated configuration; 200 demonstrations show 200 placements only). Its first
+  keypoints are asked for each object's pixel (the camera's projection of its position,
+  ``pixel_targets``), which a convolution finds wherever the object stands. Augmented with
+  colour jitter and a shift of up to ``SHIFT_PX`` pixel. The last ``HOLD_OUT`` of the episodes
+  are kept out of its training and measure its error on frames it never saw.
 - the **policy** is the state recipe's ChunkPolicy over the state observation with the
-  perceived values in place of the true ones (the TCP-to-mover vectors recomputed from them,
-  ``PerceivingPolicy.assemble``), the orientations left out (a frame of a symmetric can does not
-  tell its yaw), trained on the demonstrations and their corrective copies with the perceived
-  values blurred by the estimator's held-out error per value: it learns to act on estimates as
-  good as the estimator's.
+  perceived values in place of the true ones, the TCP-to-mover vectors and a pick's vectors to
+  its goal (a goal no frame shows) computed from them (``PerceivingPolicy.assemble``), the
+  orientations left out (a frame of a can does not tell its yaw). It is trained on the true
+  state of the demonstrations and their corrective copies (trained on states blurred by the
+  estimator's error instead, it became imprecise: docs/evaluation.md).
 
-The exported ``PerceivingPolicy`` takes ``(image, state)`` as ``visual.VisualChunkPolicy`` does
-(``camera``, ``obs_keys``, ``image_hw``), ``state`` the leading groups of the state observation
+The exported ``PerceivingPolicy`` takes ``(image, state)``: ``image`` the camera's
+``(B, H, W, 3)`` uint8 frame, ``state`` the leading groups of the state observation
 (``STATE_KEYS``: the joints, the grasp flag, the TCP, the goal and the task kind), all in the
-env's ``rgb`` observation.
+env's ``rgb`` observation; ``embodied-envs eval`` reads its ``camera``, ``obs_keys`` and
+``image_hw`` attributes to build them.
+
+Its share of ``--minutes``: rendering ``RENDER_SHARE``, the estimator ``ESTIMATOR_SHARE``, the
+policy the rest.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -40,9 +50,12 @@ import torch
 from torch import nn
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import perturb  # noqa: E402
+import train_policy as tp  # noqa: E402
 import visual  # noqa: E402
 
 from embodied_envs.envs.tasks import KIND_IDS  # noqa: E402
+from embodied_envs.paths import atomic_output  # noqa: E402
 
 CAMERA_PARAMS = tuple(f"sensor_param/{visual.CAMERA}/{k}" for k in ("intrinsic_cv", "extrinsic_cv"))
 KEYPOINT_WEIGHT = 1.0  # the estimator's keypoint loss (each object's pixel) against its values'
@@ -57,7 +70,6 @@ RENDER_SIGMA = 0.05  # rad: the extra frames' arm, off a demonstrated configurat
 HOLD_OUT = 0.1  # the share of episodes that measure the estimator (at least one)
 ESTIMATOR_SHARE = 0.5  # of --minutes: the estimator's training; the rest the policy's
 HIDDEN = 256  # the estimator's MLP
-MIN_STD = 1e-3  # a perceived value varying less than this over the dataset is a constant
 
 
 def slots(slices: dict[str, slice]) -> int:
@@ -184,8 +196,8 @@ def pixel_targets(points: np.ndarray, camera: np.ndarray, hw: tuple[int, int]):
 
 class Estimator(nn.Module):
     """``(B, H, W, 3)`` uint8 frames -> the perceived values ``(B, P)``, in the observation's
-    units; ``mean`` and ``std`` are the dataset's (a value whose ``std`` is under ``MIN_STD`` is
-    that constant)."""
+    units; ``mean`` and ``std`` are the dataset's (a value whose ``std`` is under
+    ``train_policy.MIN_STD`` is that constant)."""
 
     def __init__(self, image_hw: tuple[int, int], mean: np.ndarray, std: np.ndarray):
         super().__init__()
@@ -195,10 +207,10 @@ class Estimator(nn.Module):
             nn.Linear(HIDDEN, len(mean)),
         )  # fmt: skip
         self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32))
-        self.register_buffer("std", torch.as_tensor(np.where(std < MIN_STD, 1.0, std),
+        self.register_buffer("std", torch.as_tensor(np.where(std < tp.MIN_STD, 1.0, std),
                                                      dtype=torch.float32))  # fmt: skip
         # a value that never varies in the dataset (an empty slot) is its constant, not a guess
-        self.register_buffer("vary", torch.as_tensor(std > MIN_STD, dtype=torch.float32))
+        self.register_buffer("vary", torch.as_tensor(std > tp.MIN_STD, dtype=torch.float32))
 
     def normalised(self, image: torch.Tensor) -> torch.Tensor:
         """``(B, 3, H, W)`` float frames in [0, 1] -> normalised estimates."""
@@ -288,13 +300,14 @@ def constant_template(flats: list[np.ndarray], slices: dict[str, slice], path: P
 
 
 def rendered_frames(
-    camera_env, state_env, seconds: float, joints: np.ndarray, sigma: float, rng
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    camera_env, state_env, seconds: float, joints: np.ndarray, sigma: float, rng, least: int = 1
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """More frames for the estimator, rendered for ``seconds`` of wall clock: ``camera_env``
     (the dataset's env and camera flags) reset by seeds from ``RENDER_SEED`` up (a placement and
     a room no demonstration or evaluation draws), the arm set to a demonstrated configuration
     (a row of ``joints``, moved by Gaussian offsets of ``sigma`` radians, within the joints'
-    limits), its camera's frame, and the state observation ``state_env`` computes there.
+    limits), its camera's frame, and the state observation ``state_env`` computes there; at
+    least ``least`` frames.
     Returns the frames ``(N, H, W, 3)``, the cameras' projections ``(N, 3, 4)`` and the state
     observations ``(N, D)``."""
     from mani_skill.utils.common import flatten_state_dict  # the env's process only
@@ -303,7 +316,7 @@ def rendered_frames(
     cam, state = camera_env.unwrapped, state_env.unwrapped
     limits = cam.agent.robot.get_qlimits()[0].cpu().numpy()
     start = time.perf_counter()
-    while not frames or time.perf_counter() - start < seconds:  # one at least
+    while len(frames) < least or time.perf_counter() - start < seconds:
         camera_env.reset(seed=RENDER_SEED + len(frames))
         q = joints[rng.integers(len(joints))] + rng.normal(0.0, sigma, joints.shape[1])
         q = np.clip(q, limits[:, 0], limits[:, 1])
@@ -324,3 +337,142 @@ def estimate(estimator: Estimator, images: torch.Tensor, batch: int = 512) -> to
     out = torch.cat([estimator(images[i : i + batch]) for i in range(0, len(images), batch)])
     estimator.train()
     return out
+
+
+def train(args: argparse.Namespace) -> dict:
+    """A visual policy with a perception bottleneck (``py``) from a dataset with
+    camera frames: the estimator, then the state policy on its estimates."""
+    torch.set_num_threads(args.threads or tp.VISUAL_THREADS)
+    torch.manual_seed(args.seed)
+    rng = np.random.default_rng(args.seed)
+    generator = torch.Generator().manual_seed(args.seed)
+    meta = json.loads(args.demos.with_suffix(".json").read_text())
+    episodes = meta["episodes"][: args.num_demos if args.num_demos > 0 else None]
+    if not episodes:
+        sys.exit(f"{args.demos}: no episodes")
+    env_info = meta["env_info"]
+    frames, cameras = load_frames(args.demos, episodes)
+    env = tp.dataset_env(env_info, args.layout, args.demos)
+    try:
+        slices = perturb.obs_slices(env)
+        flats, actions, bases = flat_states(env, args.demos, episodes)
+        act_dim = actions[0].shape[1]
+        frame = (np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64))
+        if args.frame == "target":
+            frame = tp.target_frame(env, flats[0].shape[1], act_dim)
+        anchors = [o[:, frame[1]] * frame[0] for o in flats]
+        targets, valid = tp.chunk_targets(actions, args.chunk, args.hold, anchors)
+        obs = np.concatenate([o[: len(a)] for o, a in zip(flats, actions, strict=True)])
+        obs_std, act_std, flat = obs.std(0), targets.std(0), targets[:, 0]
+        demo_obs = obs
+        obs, targets, valid = tp.with_corrective_copies(
+            args, env, (flats, actions, bases), obs, targets, valid, frame
+        )
+        # the estimator: every frame of the episodes but the held-out ones, and frames rendered
+        # through the env at other placements and rooms, to their perceived values
+        held = max(1, round(HOLD_OUT * len(episodes))) if len(episodes) > 1 else 0
+        learn = slice(0, len(episodes) - held)
+        started = time.perf_counter()
+        camera_env = tp.dataset_env(env_info, args.layout, args.demos,
+                                 env_info["env_kwargs"].get("obs_mode", "rgb"))  # fmt: skip
+        try:
+            more_frames, more_cameras, more_flats = rendered_frames(
+                camera_env, env, RENDER_SHARE * args.minutes * 60,
+                np.concatenate(flats[learn])[:, slices["qpos"]], RENDER_SIGMA, rng,
+            )  # fmt: skip
+        finally:
+            camera_env.close()
+    finally:
+        env.close()
+    template = constant_template(flats, slices, args.demos)
+    seen = perceived_index(slices)
+    images = torch.from_numpy(np.concatenate([*frames[learn], more_frames]))
+    seen_flats = np.concatenate([*flats[learn], more_flats])
+    labels = torch.from_numpy(seen_flats[:, seen])
+    # the first keypoints: each object's pixel, where it is there and in the frame
+    points, there = keypoint_points(seen_flats, slices)
+    pixels, inside = pixel_targets(
+        points, np.concatenate([*cameras[learn], more_cameras]), tuple(images.shape[1:3])
+    )
+    pixels, shown = torch.from_numpy(pixels), torch.from_numpy(there & inside).float()[..., None]
+    # a pick goal is in no frame: its vectors are computed from the estimates (assemble)
+    weight = torch.ones(len(seen))
+    if (seen_flats[:, slices["task_kind"].start + KIND_IDS["pick"]] > 0.5).all():
+        weight[to_goal_positions(slices)] = 0.0
+    estimator = Estimator(
+        tuple(images.shape[1:3]), labels.mean(0).numpy(), labels.std(0).numpy()
+    )
+    y = (labels - estimator.mean) / estimator.std
+
+    def estimator_loss(batch: torch.Tensor) -> torch.Tensor:
+        image = images[batch].permute(0, 3, 1, 2).float() / 255.0
+        image = visual.augment(image, generator, SHIFT_PX)
+        guess, keys = estimator.heads(image)
+        values = ((guess - y[batch]).abs() * weight).sum() / (weight.sum() * len(batch))
+        off = (keys[:, : pixels.shape[1]] - pixels[batch]).abs() * shown[batch]
+        return values + KEYPOINT_WEIGHT * off.sum() / shown[batch].sum().clamp(min=1)
+
+    render_seconds = time.perf_counter() - started
+    share = ESTIMATOR_SHARE * args.minutes
+    est_iters, est_loss, est_seconds = tp.fit(estimator, args, estimator_loss, len(images), rng,
+                                           share, save=False, name="estimator ")  # fmt: skip
+    for p in estimator.parameters():
+        p.requires_grad_(False)
+    vary = estimator.vary.numpy() > 0
+    error = np.zeros(len(seen), np.float32)  # the held-out RMS error per perceived value
+    if held:
+        hold_images = torch.from_numpy(np.concatenate(frames[learn.stop :]))
+        truth = np.concatenate(flats[learn.stop :])[:, seen]
+        miss = estimate(estimator, hold_images).numpy() - truth
+        error = np.sqrt((miss**2).mean(0))
+    keep = tp.keep_mask(args.drop, args.demos, obs.shape[1], slices)
+    keep[orientation_index(slices)] = 0.0
+    policy = tp.ChunkPolicy(
+        demo_obs.mean(0), np.where(obs_std < tp.MIN_STD, 1.0, obs_std), keep, targets.mean(0),
+        np.where(act_std < tp.MIN_STD, 1.0, act_std), flat.min(0), flat.max(0),
+        args.chunk, args.hidden, args.decay, frame,
+    )  # fmt: skip
+    composite = PerceivingPolicy(estimator, policy, template, slices, images.shape[1:3])
+    x = torch.from_numpy(obs)
+    target = (torch.from_numpy(targets) - policy.act_mean) / policy.act_std
+    mask = torch.from_numpy(valid).float()[:, :, None]
+    state, truth_t = x[:, : composite.lead], x[:, torch.from_numpy(seen)]
+
+    def policy_loss(batch: torch.Tensor) -> torch.Tensor:
+        inputs = policy.normalise(composite.assemble(state[batch], truth_t[batch]))
+        if args.obs_noise > 0:
+            noise = torch.randn(inputs.shape, generator=generator)
+            inputs = inputs + args.obs_noise * noise * policy.obs_keep
+        err = (policy.raw_normalised(inputs) - target[batch]).abs() * mask[batch]
+        return err.sum() / (mask[batch].sum() * target.shape[2])
+
+    own = (1.0 - RENDER_SHARE - ESTIMATOR_SHARE) * args.minutes  # at least
+    rest = max(args.minutes - (time.perf_counter() - started) / 60, own)
+    iters, loss, seconds = tp.fit(policy, args, policy_loss, len(x), rng, rest,
+                               export=composite, name="policy ")  # fmt: skip
+    live = [i for i, v in enumerate(vary) if v and weight[i] > 0]
+    names = perceived_names(slices)
+    kwargs = env_info.get("env_kwargs", {})
+    info = {
+        "demos": str(args.demos), "episodes": len(actions), "env_id": env_info.get("env_id"),
+        "kind": "visual", "obs_mode": kwargs.get("obs_mode"),
+        "control_mode": kwargs.get("control_mode"), "layout_file": kwargs.get("layout_file"),
+        "camera": visual.CAMERA, "image_hw": list(images.shape[1:3]),
+        "state_keys": list(STATE_KEYS), "hybrid_obs": kwargs.get("hybrid_obs", False),
+        "rooms": kwargs.get("rooms"), "robot_visual_faces": kwargs.get("robot_visual_faces"),
+        "estimator_episodes": learn.stop, "held_out_episodes": held,
+        "rendered_frames": len(more_frames), "render_seconds": round(render_seconds, 1),
+        "estimator_iterations": est_iters, "estimator_loss": est_loss,
+        "estimator_seconds": round(est_seconds, 1),
+        "held_out_error_m": {names[i]: round(float(error[i]), 4) for i in live},
+        "pairs": len(demo_obs), "pairs_with_copies": len(x), "act_dim": act_dim,
+        "chunk": args.chunk, "frame": args.frame, "decay": args.decay, "hidden": args.hidden,
+        "hold": args.hold, "obs_noise": args.obs_noise, "perturb": args.perturb,
+        "perturb_copies": args.perturb_copies, "batch_size": args.batch_size, "lr": args.lr,
+        "weight_decay": args.weight_decay, "seed": args.seed, "minutes": args.minutes,
+        "threads": torch.get_num_threads(), "iterations": iters, "final_loss": loss,
+        "train_seconds": round(time.perf_counter() - started, 1),
+    }  # fmt: skip
+    with atomic_output(args.out / "train.json") as tmp:
+        tmp.write_text(json.dumps(info, indent=2) + "\n")
+    return info

@@ -51,11 +51,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from embodied_envs.envs.tasks import KIND_IDS
 from embodied_envs.paths import atomic_output
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import perceive  # noqa: E402
 import perturb  # noqa: E402
 import visual  # noqa: E402
 from ensemble import TemporalEnsemble  # noqa: E402
@@ -326,7 +324,11 @@ def fit(
 
 def train(args: argparse.Namespace) -> dict:
     if visual.is_visual(args.demos):
-        return train_perceiving(args) if args.visual == "perceive" else train_visual(args)
+        # the visual recipe builds on this module's state recipe: imported here, not at the top
+        # (each imports the other)
+        import perceive
+
+        return perceive.train(args)
     torch.set_num_threads(TORCH_THREADS)
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
@@ -402,220 +404,6 @@ def train(args: argparse.Namespace) -> dict:
     return info
 
 
-def train_perceiving(args: argparse.Namespace) -> dict:
-    """A visual policy with a perception bottleneck (``perceive.py``) from a dataset with
-    camera frames: the estimator, then the state policy on its estimates."""
-    torch.set_num_threads(args.threads or VISUAL_THREADS)
-    torch.manual_seed(args.seed)
-    rng = np.random.default_rng(args.seed)
-    generator = torch.Generator().manual_seed(args.seed)
-    meta = json.loads(args.demos.with_suffix(".json").read_text())
-    episodes = meta["episodes"][: args.num_demos if args.num_demos > 0 else None]
-    if not episodes:
-        sys.exit(f"{args.demos}: no episodes")
-    env_info = meta["env_info"]
-    frames, cameras = perceive.load_frames(args.demos, episodes)
-    env = dataset_env(env_info, args.layout, args.demos)
-    try:
-        slices = perturb.obs_slices(env)
-        flats, actions, bases = perceive.flat_states(env, args.demos, episodes)
-        act_dim = actions[0].shape[1]
-        frame = (np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64))
-        if args.frame == "target":
-            frame = target_frame(env, flats[0].shape[1], act_dim)
-        anchors = [o[:, frame[1]] * frame[0] for o in flats]
-        targets, valid = chunk_targets(actions, args.chunk, args.hold, anchors)
-        obs = np.concatenate([o[: len(a)] for o, a in zip(flats, actions, strict=True)])
-        obs_std, act_std, flat = obs.std(0), targets.std(0), targets[:, 0]
-        demo_obs = obs
-        obs, targets, valid = with_corrective_copies(
-            args, env, (flats, actions, bases), obs, targets, valid, frame
-        )
-        # the estimator: every frame of the episodes but the held-out ones, and frames rendered
-        # through the env at other placements and rooms, to their perceived values
-        held = max(1, round(perceive.HOLD_OUT * len(episodes))) if len(episodes) > 1 else 0
-        learn = slice(0, len(episodes) - held)
-        started = time.perf_counter()
-        camera_env = dataset_env(env_info, args.layout, args.demos,
-                                 env_info["env_kwargs"].get("obs_mode", "rgb"))  # fmt: skip
-        try:
-            more_frames, more_cameras, more_flats = perceive.rendered_frames(
-                camera_env, env, perceive.RENDER_SHARE * args.minutes * 60,
-                np.concatenate(flats[learn])[:, slices["qpos"]], perceive.RENDER_SIGMA, rng,
-            )  # fmt: skip
-        finally:
-            camera_env.close()
-    finally:
-        env.close()
-    template = perceive.constant_template(flats, slices, args.demos)
-    seen = perceive.perceived_index(slices)
-    images = torch.from_numpy(np.concatenate([*frames[learn], more_frames]))
-    seen_flats = np.concatenate([*flats[learn], more_flats])
-    labels = torch.from_numpy(seen_flats[:, seen])
-    # the first keypoints: each object's pixel, where it is there and in the frame
-    points, there = perceive.keypoint_points(seen_flats, slices)
-    pixels, inside = perceive.pixel_targets(
-        points, np.concatenate([*cameras[learn], more_cameras]), tuple(images.shape[1:3])
-    )
-    pixels, shown = torch.from_numpy(pixels), torch.from_numpy(there & inside).float()[..., None]
-    # a pick goal is in no frame: its vectors are computed from the estimates (assemble)
-    weight = torch.ones(len(seen))
-    if (seen_flats[:, slices["task_kind"].start + KIND_IDS["pick"]] > 0.5).all():
-        weight[perceive.to_goal_positions(slices)] = 0.0
-    estimator = perceive.Estimator(
-        tuple(images.shape[1:3]), labels.mean(0).numpy(), labels.std(0).numpy()
-    )
-    y = (labels - estimator.mean) / estimator.std
-
-    def estimator_loss(batch: torch.Tensor) -> torch.Tensor:
-        image = images[batch].permute(0, 3, 1, 2).float() / 255.0
-        image = visual.augment(image, generator, perceive.SHIFT_PX)
-        guess, keys = estimator.heads(image)
-        values = ((guess - y[batch]).abs() * weight).sum() / (weight.sum() * len(batch))
-        off = (keys[:, : pixels.shape[1]] - pixels[batch]).abs() * shown[batch]
-        return values + perceive.KEYPOINT_WEIGHT * off.sum() / shown[batch].sum().clamp(min=1)
-
-    render_seconds = time.perf_counter() - started
-    share = perceive.ESTIMATOR_SHARE * args.minutes
-    est_iters, est_loss, est_seconds = fit(estimator, args, estimator_loss, len(images), rng,
-                                           share, save=False, name="estimator ")  # fmt: skip
-    for p in estimator.parameters():
-        p.requires_grad_(False)
-    vary = estimator.vary.numpy() > 0
-    error = np.zeros(len(seen), np.float32)  # the held-out RMS error per perceived value
-    if held:
-        hold_images = torch.from_numpy(np.concatenate(frames[learn.stop :]))
-        truth = np.concatenate(flats[learn.stop :])[:, seen]
-        miss = perceive.estimate(estimator, hold_images).numpy() - truth
-        error = np.sqrt((miss**2).mean(0))
-    keep = keep_mask(args.drop, args.demos, obs.shape[1], slices)
-    keep[perceive.orientation_index(slices)] = 0.0
-    policy = ChunkPolicy(
-        demo_obs.mean(0), np.where(obs_std < MIN_STD, 1.0, obs_std), keep, targets.mean(0),
-        np.where(act_std < MIN_STD, 1.0, act_std), flat.min(0), flat.max(0),
-        args.chunk, args.hidden, args.decay, frame,
-    )  # fmt: skip
-    composite = perceive.PerceivingPolicy(estimator, policy, template, slices, images.shape[1:3])
-    x = torch.from_numpy(obs)
-    target = (torch.from_numpy(targets) - policy.act_mean) / policy.act_std
-    mask = torch.from_numpy(valid).float()[:, :, None]
-    state, truth_t = x[:, : composite.lead], x[:, torch.from_numpy(seen)]
-
-    def policy_loss(batch: torch.Tensor) -> torch.Tensor:
-        inputs = policy.normalise(composite.assemble(state[batch], truth_t[batch]))
-        if args.obs_noise > 0:
-            noise = torch.randn(inputs.shape, generator=generator)
-            inputs = inputs + args.obs_noise * noise * policy.obs_keep
-        err = (policy.raw_normalised(inputs) - target[batch]).abs() * mask[batch]
-        return err.sum() / (mask[batch].sum() * target.shape[2])
-
-    own = (1.0 - perceive.RENDER_SHARE - perceive.ESTIMATOR_SHARE) * args.minutes  # at least
-    rest = max(args.minutes - (time.perf_counter() - started) / 60, own)
-    iters, loss, seconds = fit(policy, args, policy_loss, len(x), rng, rest,
-                               export=composite, name="policy ")  # fmt: skip
-    live = [i for i, v in enumerate(vary) if v and weight[i] > 0]
-    names = perceive.perceived_names(slices)
-    kwargs = env_info.get("env_kwargs", {})
-    info = {
-        "demos": str(args.demos), "episodes": len(actions), "env_id": env_info.get("env_id"),
-        "kind": "visual", "obs_mode": kwargs.get("obs_mode"),
-        "control_mode": kwargs.get("control_mode"), "layout_file": kwargs.get("layout_file"),
-        "camera": visual.CAMERA, "image_hw": list(images.shape[1:3]),
-        "state_keys": list(perceive.STATE_KEYS), "hybrid_obs": kwargs.get("hybrid_obs", False),
-        "rooms": kwargs.get("rooms"), "robot_visual_faces": kwargs.get("robot_visual_faces"),
-        "estimator_episodes": learn.stop, "held_out_episodes": held,
-        "rendered_frames": len(more_frames), "render_seconds": round(render_seconds, 1),
-        "estimator_iterations": est_iters, "estimator_loss": est_loss,
-        "estimator_seconds": round(est_seconds, 1),
-        "held_out_error_m": {names[i]: round(float(error[i]), 4) for i in live},
-        "pairs": len(demo_obs), "pairs_with_copies": len(x), "act_dim": act_dim,
-        "chunk": args.chunk, "frame": args.frame, "decay": args.decay, "hidden": args.hidden,
-        "hold": args.hold, "obs_noise": args.obs_noise, "perturb": args.perturb,
-        "perturb_copies": args.perturb_copies, "batch_size": args.batch_size, "lr": args.lr,
-        "weight_decay": args.weight_decay, "seed": args.seed, "minutes": args.minutes,
-        "threads": torch.get_num_threads(), "iterations": iters, "final_loss": loss,
-        "train_seconds": round(time.perf_counter() - started, 1),
-    }  # fmt: skip
-    with atomic_output(args.out / "train.json") as tmp:
-        tmp.write_text(json.dumps(info, indent=2) + "\n")
-    return info
-
-
-def train_visual(args: argparse.Namespace) -> dict:
-    """A visuomotor policy (``visual.py``) from a dataset with camera frames."""
-    torch.set_num_threads(args.threads or VISUAL_THREADS)
-    torch.manual_seed(args.seed)
-    rng = np.random.default_rng(args.seed)
-    generator = torch.Generator().manual_seed(args.seed)
-    meta = json.loads(args.demos.with_suffix(".json").read_text())
-    episodes = meta["episodes"][: args.num_demos if args.num_demos > 0 else None]
-    if not episodes:
-        sys.exit(f"{args.demos}: no episodes")
-    env_info = meta["env_info"]
-    env = dataset_env(env_info, args.layout, args.demos)
-    try:  # the first mover of env 0's task: the auxiliary target's actor
-        mover = env.unwrapped.tasks[0].objects[0]
-        frames, states, actions, aux = visual.load_visual_episodes(args.demos, episodes, mover)
-        act_dim = actions[0].shape[1]
-        frame = (np.zeros(act_dim, np.float32), np.zeros(act_dim, np.int64))
-        if args.frame == "target":
-            frame = target_frame(env, states[0].shape[1], act_dim)
-    finally:
-        env.close()
-    anchors = [st[:, frame[1]] * frame[0] for st in states]
-    targets, valid = chunk_targets(actions, args.chunk, args.hold, anchors)
-    state = np.concatenate([st[: len(a)] for st, a in zip(states, actions, strict=True)])
-    images = torch.from_numpy(
-        np.concatenate([f[: len(a)] for f, a in zip(frames, actions, strict=True)])
-    )  # (N, H, W, 3) uint8
-    aux = np.concatenate([t[: len(a)] for t, a in zip(aux, actions, strict=True)])
-    state_std, act_std = state.std(0), targets.std(0)
-    policy = visual.VisualChunkPolicy(
-        tuple(images.shape[1:3]), state.mean(0), np.where(state_std < MIN_STD, 1.0, state_std),
-        targets.mean(0), np.where(act_std < MIN_STD, 1.0, act_std), targets[:, 0].min(0),
-        targets[:, 0].max(0), args.chunk, args.hidden, args.decay, frame, list(visual.STATE_KEYS),
-    )  # fmt: skip
-    x = (torch.from_numpy(state) - policy.state_mean) / policy.state_std
-    y = (torch.from_numpy(targets) - policy.act_mean) / policy.act_std
-    mask = torch.from_numpy(valid).float()[:, :, None]
-    # the auxiliary targets, normalised; where an episode has no such actor, left out
-    known = torch.from_numpy(~np.isnan(aux)).float()
-    aux_mean, aux_std = np.nanmean(aux, 0), np.nanstd(aux, 0)
-    aux_y = torch.from_numpy(np.nan_to_num((aux - aux_mean) / np.maximum(aux_std, MIN_STD)))
-    last = {}  # the last batch's auxiliary loss, for train.json
-
-    def batch_loss(batch: torch.Tensor) -> torch.Tensor:
-        image = visual.augment(images[batch].permute(0, 3, 1, 2).float() / 255.0, generator)
-        noise = torch.randn(len(batch), x.shape[1], generator=generator)
-        chunks, guess = policy.heads(image, x[batch] + args.obs_noise * noise)
-        err = (chunks - y[batch]).abs() * mask[batch]
-        seen = known[batch]
-        last["aux"] = ((guess - aux_y[batch]).abs() * seen).sum() / seen.sum().clamp(min=1)
-        return err.sum() / (mask[batch].sum() * y.shape[2]) + args.aux_weight * last["aux"]
-
-    iters, loss, seconds = fit(policy, args, batch_loss, len(x), rng)
-    kwargs = env_info.get("env_kwargs", {})
-    info = {
-        "demos": str(args.demos), "episodes": len(actions), "env_id": env_info.get("env_id"),
-        "kind": "visual", "obs_mode": kwargs.get("obs_mode"),
-        "control_mode": kwargs.get("control_mode"), "layout_file": kwargs.get("layout_file"),
-        "camera": visual.CAMERA, "image_hw": list(images.shape[1:3]),
-        "state_keys": list(visual.STATE_KEYS), "hybrid_obs": kwargs.get("hybrid_obs", False),
-        "rooms": kwargs.get("rooms"), "robot_visual_faces": kwargs.get("robot_visual_faces"),
-        "pairs": len(x), "act_dim": act_dim, "chunk": args.chunk, "frame": args.frame,
-        "decay": args.decay, "hidden": args.hidden, "hold": args.hold,
-        "obs_noise": args.obs_noise, "batch_size": args.batch_size, "lr": args.lr,
-        "weight_decay": args.weight_decay, "seed": args.seed, "minutes": args.minutes,
-        "aux_weight": args.aux_weight, "aux_target": mover,
-        "final_aux_loss": float(last["aux"].item()) if "aux" in last else None,
-        "threads": torch.get_num_threads(), "iterations": iters,
-        "final_loss": loss, "train_seconds": round(seconds, 1),
-    }  # fmt: skip
-    with atomic_output(args.out / "train.json") as tmp:
-        tmp.write_text(json.dumps(info, indent=2) + "\n")
-    return info
-
-
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -655,12 +443,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--lr", type=float, default=1e-3)
     ap.add_argument("--weight-decay", type=float, default=1e-4)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--aux-weight", type=float, default=visual.AUX_WEIGHT,
-                    help="visual policies: the weight of the auxiliary loss (the first mover's "
-                    "position from the frame alone; 0: none)")
-    ap.add_argument("--visual", choices=["perceive", "end-to-end"], default="perceive",
-                    help="visual policies: perceive (an estimator of the objects' positions "
-                    "from the frame, then a state policy on its estimates), or end-to-end")
     ap.add_argument("--threads", type=int, default=None,
                     help=f"torch threads (default: {TORCH_THREADS} for a state policy, "
                     f"{VISUAL_THREADS} for a visual one)")

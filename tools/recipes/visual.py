@@ -1,33 +1,16 @@
-"""The visuomotor half of ``train_policy.py``: a policy from camera frames, the robot's joints
-and the task's goal (no object poses), trained by behaviour cloning with action chunking and
-run with the state recipe's temporal ensembling (``ensemble.TemporalEnsemble``).
+"""What the visual recipe (``perceive.py``) shares: the camera it reads, the image encoder and
+the frames' augmentation, and a contact sheet of a dataset's frames (``python visual.py``).
 
 The encoder is a small convolutional net over the ``base_camera``'s RGB frame ending in a
 spatial soft-argmax (each of ``KEYPOINTS`` feature maps gives its expected image position, as
-robomimic's and diffusion policy's image encoders do: positions are what a grasp needs) and the
-maps' means; its features, with the normalised proprioception (``agent/qpos``,
-``extra/tcp_pose``) and goal (``extra/goal_pos``), feed an MLP that predicts the next ``chunk``
-actions. Training augments each frame with a random shift of up to ``SHIFT_PX`` pixels (DrQ's
-augmentation) and colour jitter (brightness, contrast, per-channel gain); rooms differ between
-episodes when the dataset was collected with ``--rooms``.
-
-Trained on actions alone, the policy learns to replay its demonstrations from the joints and
-the goal and ignores where the object is in the frame (on unseen starts its hand went to where
-the object was in training). So training also asks the encoder, from the frame alone, for the
-first mover's position relative to the hand and in the world (an auxiliary head, weight
-``AUX_WEIGHT``; the positions come from the dataset's recorded env states, which ManiSkill's
-datasets hold: privileged supervision at training time only). The policy itself never reads
-an object's pose: at run time it sees the frame, the joints, the TCP pose and the goal.
-
-The exported module takes ``(image, state)``: ``image`` the camera's ``(B, H, W, 3)`` uint8
-frame, ``state`` the concatenation of the groups named by its ``obs_keys``; ``embodied-envs
-eval`` reads its ``camera``, ``obs_keys`` and ``image_hw`` attributes to build them from the
-env's observation.
+robomimic's and diffusion policy's image encoders do) and the last maps' means. Training
+augments each frame with a random shift (DrQ's augmentation) and colour jitter (brightness,
+contrast, per-channel gain); rooms differ between episodes when the dataset was collected with
+``--rooms``.
 """
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import h5py
@@ -36,18 +19,11 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ensemble import TemporalEnsemble  # noqa: E402
-
 CAMERA = "base_camera"  # the env's sensor camera
-STATE_KEYS = ("agent/qpos", "extra/tcp_pose", "extra/goal_pos")  # what the policy reads
 KEYPOINTS = 32  # spatial soft-argmax keypoints
 CHANNELS = (16, 32, 32)  # the conv layers' widths (wider: 4x the training time on 2 cores)
 SHIFT_PX = 4  # random shift augmentation, pixels each way
 BRIGHTNESS, CONTRAST, GAIN = 0.2, 0.2, 0.1  # colour jitter: relative ranges
-AUX_DIM = 6  # the auxiliary target: the first mover's position relative to the TCP, and world
-AUX_WEIGHT = 1.0  # its L1 loss's weight against the actions' (both on normalised values)
-AUX_HIDDEN = 64
 
 
 def is_visual(path: Path) -> bool:
@@ -58,40 +34,6 @@ def is_visual(path: Path) -> bool:
             return False
         obs = f[names[0]].get("obs")
         return isinstance(obs, h5py.Group) and f"sensor_data/{CAMERA}/rgb" in obs
-
-
-def load_visual_episodes(
-    path: Path, episodes: list[dict], mover: str | None = None
-) -> tuple[list, list, list, list]:
-    """Per episode its frames ``(T+1, H, W, 3)`` uint8, states ``(T+1, D)`` (``STATE_KEYS``),
-    actions ``(T, A)`` and auxiliary targets ``(T+1, AUX_DIM)`` (the recorded actor ``mover``'s
-    position less the TCP's, and its position; NaN where the episode has no such actor);
-    exits with one line naming what a dataset lacks."""
-    frames, states, actions, aux = [], [], [], []
-    with h5py.File(path, "r") as f:
-        for ep in episodes:
-            traj = f[f"traj_{ep['episode_id']}"]
-            obs = traj["obs"]
-            missing = [k for k in (f"sensor_data/{CAMERA}/rgb", *STATE_KEYS) if k not in obs]
-            if missing:
-                sys.exit(
-                    f"{path}: traj_{ep['episode_id']} has no obs/{missing[0]}. Fix: collect "
-                    "with --obs-mode rgb (a visual policy needs the camera frames, the joints "
-                    "and the goal)"
-                )
-            frames.append(np.asarray(obs[f"sensor_data/{CAMERA}/rgb"], np.uint8))
-            states.append(np.concatenate(
-                [np.asarray(obs[k], np.float32).reshape(len(frames[-1]), -1) for k in STATE_KEYS],
-                1))  # fmt: skip
-            actions.append(np.asarray(traj["actions"], np.float32))
-            target = np.full((len(frames[-1]), AUX_DIM), np.nan, np.float32)
-            actors = traj.get("env_states/actors")
-            if mover is not None and actors is not None and mover in actors:
-                where = np.asarray(actors[mover][:, :3], np.float32)
-                tcp = np.asarray(obs["extra/tcp_pose"][:, :3], np.float32)
-                target = np.concatenate([where - tcp, where], 1)
-            aux.append(target)
-    return frames, states, actions, aux
 
 
 class SpatialSoftArgmax(nn.Module):
@@ -131,67 +73,6 @@ class Encoder(nn.Module):
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         maps = self.conv(image - 0.5)
         return torch.cat([self.soft_argmax(self.keypoints(maps)), maps.mean((2, 3))], 1)
-
-
-class VisualChunkPolicy(nn.Module):
-    """``(image, state)`` -> the temporally ensembled action of this step, per env."""
-
-    def __init__(
-        self, image_hw: tuple[int, int], state_mean, state_std, act_mean, act_std, act_low,
-        act_high, chunk: int, hidden: list[int], decay: float, frame, obs_keys: list[str],
-    ):  # fmt: skip
-        super().__init__()
-        act_dim = len(act_low)
-        self.chunk, self.act_dim = chunk, act_dim
-        self.camera = CAMERA
-        self.obs_keys = list(obs_keys)
-        self.image_hw = [int(image_hw[0]), int(image_hw[1])]
-        coef, joint = frame
-        for name, value in dict(
-            state_mean=state_mean, state_std=state_std, act_mean=act_mean, act_std=act_std,
-            act_low=act_low, act_high=act_high, coef=coef,
-        ).items():  # fmt: skip
-            self.register_buffer(name, torch.as_tensor(np.asarray(value), dtype=torch.float32))
-        self.register_buffer("joint", torch.as_tensor(np.asarray(joint), dtype=torch.long))
-        self.encoder = Encoder(image_hw)
-        size = CHANNELS[-1]
-        mlp: list[nn.Module] = []
-        width_in = 2 * KEYPOINTS + size + len(state_mean)
-        for width in hidden:
-            mlp += [nn.Linear(width_in, width), nn.ReLU()]
-            width_in = width
-        mlp.append(nn.Linear(width_in, chunk * act_dim))
-        self.head = nn.Sequential(*mlp)
-        features = 2 * KEYPOINTS + size
-        self.aux = nn.Sequential(
-            nn.Linear(features, AUX_HIDDEN), nn.ReLU(), nn.Linear(AUX_HIDDEN, AUX_DIM)
-        )
-        self.ensemble = TemporalEnsemble(chunk, act_dim, decay)
-
-    def raw_normalised(self, image: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
-        """Float images ``(B, 3, H, W)`` and normalised states -> normalised chunks."""
-        return self.heads(image, state)[0]
-
-    def heads(self, image: torch.Tensor, state: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The normalised chunks and the auxiliary head's normalised targets (training)."""
-        features = self.encoder(image)
-        chunks = self.head(torch.cat([features, state], 1)).view(-1, self.chunk, self.act_dim)
-        return chunks, self.aux(features)
-
-    def anchor(self, state: torch.Tensor) -> torch.Tensor:
-        return state[:, self.joint] * self.coef
-
-    @torch.jit.export
-    def reset(self) -> None:
-        self.ensemble.reset()
-
-    def forward(self, image: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
-        x = image.permute(0, 3, 1, 2).float() / 255.0
-        normalised = (state - self.state_mean) / self.state_std
-        chunk = self.raw_normalised(x, normalised) * self.act_std + self.act_mean
-        anchor = self.anchor(state)
-        action = self.ensemble(chunk + anchor[:, None], anchor)
-        return torch.clamp(action, self.act_low, self.act_high)
 
 
 def augment(
