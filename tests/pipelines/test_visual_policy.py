@@ -147,16 +147,26 @@ def test_the_augmentation_shifts_and_jitters_within_its_bounds():
     assert gains.std() > 0.02  # jittered per image
 
 
-def test_a_dataset_without_a_field_the_policy_needs_is_refused_naming_it(dataset, tmp_path):
+@pytest.mark.parametrize(
+    "missing, words",
+    [
+        ("traj_0/obs/extra/goal_pos", "has no obs/extra/goal_pos. Fix: collect with --obs-mode"),
+        ("traj_0/obs/sensor_param", "has no obs/sensor_param/base_camera/intrinsic_cv. Fix:"),
+        ("traj_0/env_states", "traj_0 has no env_states"),
+    ],
+)
+def test_a_dataset_without_a_field_the_policy_needs_is_refused_naming_it(
+    dataset, tmp_path, missing, words
+):
     demos, _ = dataset
     broken = tmp_path / "trajectory.h5"
     with h5py.File(demos) as src, h5py.File(broken, "w") as dst:
         for name in src:
             src.copy(name, dst)
-        del dst["traj_0/obs/extra/goal_pos"]
+        del dst[missing]
     broken.with_suffix(".json").write_text(demos.with_suffix(".json").read_text())
     assert visual.is_visual(demos) and visual.is_visual(broken)
-    with pytest.raises(SystemExit, match="has no obs/extra/goal_pos. Fix: collect with --obs-mode"):
+    with pytest.raises(SystemExit, match=words):
         train_policy.main(
             ["--demos", str(broken), "--out", str(tmp_path / "r"), "--minutes", "0.01"]
         )
@@ -268,21 +278,6 @@ def test_the_policy_acts_on_the_envs_state_with_the_perceived_values(dataset):
     guess = module.estimator(image)
     assert (guess[:, 6:9] == 0).all()  # the third slot's position (perceived_index's order)
     assert (guess[:, :3] != 0).all()  # the can's
-
-
-def test_a_dataset_without_env_states_is_refused_naming_it(dataset, tmp_path):
-    demos, _ = dataset
-    broken = tmp_path / "trajectory.h5"
-    with h5py.File(demos) as src, h5py.File(broken, "w") as dst:
-        for name in src:
-            src.copy(name, dst)
-        del dst["traj_0/env_states"]
-    broken.with_suffix(".json").write_text(demos.with_suffix(".json").read_text())
-    with pytest.raises(SystemExit, match="traj_0 has no env_states"):
-        train_policy.main(
-            ["--demos", str(broken), "--out", str(tmp_path / "r"), "--minutes", "0.01"]
-        )
-    assert not (tmp_path / "r" / "policy.pt").exists()
 
 
 def test_pixel_targets_place_points_where_the_camera_sees_them():
