@@ -151,3 +151,17 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if Path(item.path).resolve().relative_to(ROOT).as_posix() in SLOW_FILES:
             item.add_marker(slow)
+
+
+@pytest.fixture
+def fresh(monkeypatch, tmp_path):
+    """An empty collision cache, decompositions allowed, this process's memory of them
+    cleared (tests of layout/collision.py and layout/hollow.py)."""
+    from embodied_envs.layout import collision as col  # the tests that ask for it only
+
+    monkeypatch.setenv(col.CACHE_ENV, str(tmp_path / "cache"))
+    monkeypatch.delenv(col.OPT_OUT_ENV, raising=False)
+    col._convex_collision.cache_clear()
+    col._WARNED.clear()
+    yield tmp_path / "cache" / "collision"
+    col._convex_collision.cache_clear()

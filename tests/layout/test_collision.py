@@ -50,17 +50,6 @@ def snapshot(folder: Path) -> dict:
 
 
 @pytest.fixture
-def fresh(monkeypatch, tmp_path):
-    """An empty cache, decompositions allowed, this process's memory of them cleared."""
-    monkeypatch.setenv(col.CACHE_ENV, str(tmp_path / "cache"))
-    monkeypatch.delenv(col.OPT_OUT_ENV, raising=False)
-    col._convex_collision.cache_clear()
-    col._WARNED.clear()
-    yield tmp_path / "cache" / "collision"
-    col._convex_collision.cache_clear()
-
-
-@pytest.fixture
 def no_coacd(monkeypatch):
     import coacd
 

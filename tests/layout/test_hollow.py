@@ -23,16 +23,6 @@ def hull_fill(mesh: trimesh.Trimesh) -> hollow.Hollow:
     return hollow.filled_hollow(mesh.triangles, [np.asarray(mesh.vertices)])
 
 
-@pytest.fixture
-def fresh(monkeypatch, tmp_path):
-    monkeypatch.setenv(col.CACHE_ENV, str(tmp_path / "cache"))
-    monkeypatch.delenv(col.OPT_OUT_ENV, raising=False)
-    col._convex_collision.cache_clear()
-    col._WARNED.clear()
-    yield tmp_path / "cache" / "collision"
-    col._convex_collision.cache_clear()
-
-
 @pytest.mark.parametrize(
     "shape, depth",
     [(open_box, 0.08), (lambda: mug_objects()[0], 0.086), (tray, 0.01)],
