@@ -142,6 +142,7 @@ def ray_session(address: str | None, cpus: int | None = None):
 def _init(address: str | None, cpus: int | None) -> None:
     """``ray.init`` for :func:`ray_session`."""
     import ray  # only where a command runs on Ray
+    from ray.exceptions import AuthenticationError  # Ray's token authentication (2.52 on)
 
     package = str(Path(embodied_envs.__file__).parent)
     kwargs: dict[str, Any] = dict(
@@ -163,13 +164,65 @@ def _init(address: str | None, cpus: int | None) -> None:
         # environment: one held each worker's start ~10 s, and Ray's idle workers go unused)
         with _python_path(str(Path(package).parent) if local else None):
             ray.init(address=address, **kwargs)
-    except ConnectionError as e:
-        where = os.environ.get("RAY_ADDRESS") if address is None else address
+    except (ConnectionError, AuthenticationError) as e:
+        said = _refusal(e)
+        if said is not None:  # the cluster is up and refused: not "no cluster there"
+            raise ClusterError(_refused_line(named(address), said)) from None
+        if isinstance(e, AuthenticationError):  # RAY_AUTH_MODE=token, and no token to send
+            raise ClusterError(
+                f"{named(address)}: this machine has no authentication token to send "
+                f"(RAY_AUTH_MODE=token; Ray: {' '.join(e.message.split())}). Fix: {TOKEN_FIX}"
+            ) from None
         raise ClusterError(
-            f"--ray {where}: no running Ray cluster there ({' '.join(str(e).split())}). Fix: "
+            f"{named(address)}: no running Ray cluster there ({' '.join(str(e).split())}). Fix: "
             "start one (ray start --head), give its address, or give --ray without a value for "
             "a Ray of this machine alone"
         ) from None
+
+
+TOKEN_FIX = (  # a token refused or missing: where Ray reads the cluster's token
+    "give this machine the cluster's token (`ray get-auth-token` on its head) in RAY_AUTH_TOKEN "
+    "or ~/.ray/auth_token, with RAY_AUTH_MODE=token"
+)
+
+
+def named(address: str | None) -> str:
+    """How the command names the cluster ``address`` gives (None or ``auto``: the one
+    ``RAY_ADDRESS`` names, if set)."""
+    env = os.environ.get("RAY_ADDRESS")
+    text = "--ray" if address is None else f"--ray {address}"
+    return text + (f" (RAY_ADDRESS={env})" if address in (None, "auto") and env else "")
+
+
+def _refusal(error: BaseException) -> str | None:
+    """Ray's words, when ``ray.init``'s ``ConnectionError`` (or an error it chains) says that
+    the cluster refused this machine's authentication (gRPC's ``Unauthenticated``: a wrong
+    token, or none); None for any other failure."""
+    texts = []
+    while error is not None and len(texts) < 8:
+        texts.append(str(error))
+        error = error.__cause__ or error.__context__
+    text = "\n".join(texts)
+    found = re.search(r"InvalidAuthToken: ([^.\n]+)", text)
+    if found is not None:
+        return found.group(1).strip()
+    return "Unauthenticated" if "Unauthenticated" in text else None
+
+
+def _refused_line(where: str, said: str) -> str:
+    """The line for a cluster that refused this machine: its token (or that none was sent:
+    Ray sends one only with ``RAY_AUTH_MODE=token``), Ray's words and the fix."""
+    if os.environ.get("RAY_AUTH_MODE", "").lower() != "token":  # Ray sets it where it sends one
+        return (
+            f"{where}: the Ray cluster there requires an authentication token and this machine "
+            f"sent none (RAY_AUTH_MODE is not token here; Ray: {said}). Fix: {TOKEN_FIX}"
+        )
+    source = ("RAY_AUTH_TOKEN" if os.environ.get("RAY_AUTH_TOKEN")
+              else os.environ.get("RAY_AUTH_TOKEN_PATH") or "~/.ray/auth_token")  # fmt: skip
+    return (
+        f"{where}: the Ray cluster there refused this machine's authentication token (from "
+        f"{source}; Ray: {said}). Fix: {TOKEN_FIX}"
+    )
 
 
 @contextmanager

@@ -27,6 +27,7 @@ from embodied_envs.cluster import (
     CarriedError,
     ClusterError,
     cluster_cpus,
+    named,
     ray_session,
     remote_task,
     start_early,
@@ -75,18 +76,20 @@ def start(address: str | None, workers: int, warm: str) -> None:
 def check_address(address: str | None) -> None:
     """Raises :class:`ClusterError` in one line, within :data:`CONNECT_SECONDS`, when nothing
     accepts a TCP connection at the cluster ``address`` names (None, or ``auto``:
-    ``RAY_ADDRESS``'s, if set). An address that is not ``host:port`` (``ray://`` taken off:
-    Ray's client) is left to Ray."""
+    ``RAY_ADDRESS``'s, if set), or when it is not ``host:port`` (``ray://`` taken off: Ray's
+    client; Ray's traceback said so seconds later). Another scheme's (``name://``) is left to
+    Ray."""
     env = os.environ.get("RAY_ADDRESS")
     from_env = address in (None, "auto")
     target = env if from_env else address
-    if not target:
+    if not target or target in ("auto", RAY_LOCAL) or "://" in target.removeprefix("ray://"):
         return
-    named = f"--ray {address}" if address is not None else "--ray"
-    named += f" (RAY_ADDRESS={env})" if from_env else ""
     host, sep, port = target.removeprefix("ray://").rpartition(":")
     if not sep or not host or not port.isdigit():
-        return
+        raise ClusterError(
+            f"{named(address)}: {target!r} is not a Ray cluster's address (host:port, "
+            "ray://host:port or auto). Fix: give its head's address, e.g. --ray 10.0.0.1:6379"
+        )
     try:
         socket.create_connection((host.strip("[]"), int(port)), CONNECT_SECONDS).close()
     except OSError as e:
@@ -94,7 +97,7 @@ def check_address(address: str | None) -> None:
                else (e.strerror or str(e)).lower())  # fmt: skip
         alone = "unset RAY_ADDRESS and give" if from_env else "give"
         raise ClusterError(
-            f"{named}: no Ray cluster reachable at {host}:{port} ({why}). Fix: start one "
+            f"{named(address)}: no Ray cluster reachable at {host}:{port} ({why}). Fix: start one "
             f"there (ray start --head), name a running one, or {alone} --ray without a value "
             "for a Ray of this machine alone"
         ) from None

@@ -1,7 +1,8 @@
 """`collect --ray` and `eval --ray` on a real Ray cluster of two nodes on this machine
 (``ray.cluster_utils.Cluster``, one CPU each), started by the tests: the same data as one local
 worker, a killed worker, an interrupted driver resumed, a worker's error (a policy's, a
-layout's) as the local line."""
+layout's, a policy's sys.exit) as the local line; a dead address, and a cluster of one node that
+wants a token, refused in one line."""
 
 import json
 import os
@@ -279,6 +280,24 @@ def test_a_dead_address_is_one_line_within_30_s(tmp_path, how):
     assert res.stderr.count("\n") == 1, res.stderr
 
 
+
+@pytest.mark.parametrize("address", ["myhost", "localhost:notaport", ":6379"])
+def test_an_address_that_is_not_host_port_is_one_line_before_ray_starts(monkeypatch, address):
+    """Not Ray's ValueError traceback, seconds later."""
+    from embodied_envs.cluster import ClusterError
+    from embodied_envs.pipelines.on_ray import check_address
+
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    with pytest.raises(ClusterError) as e:
+        check_address(address)
+    assert str(e.value) == (
+        f"--ray {address}: {address!r} is not a Ray cluster's address (host:port, "
+        "ray://host:port or auto). Fix: give its head's address, e.g. --ray 10.0.0.1:6379"
+    )
+    monkeypatch.setenv("RAY_ADDRESS", address)
+    with pytest.raises(ClusterError, match=rf"^--ray auto \(RAY_ADDRESS={address}\): '"):
+        check_address("auto")
+
 EXITING = """
 import sys
 def make(env):
@@ -302,3 +321,67 @@ def test_a_policy_calling_sys_exit_on_a_worker_is_its_one_line_error(cluster, tm
     ]
     assert [ln for ln in res.stdout.splitlines() if ln.startswith("error:")] == line
     assert "lost" not in res.stdout + res.stderr
+
+
+TOKEN = "a" * 64  # the token cluster's: Ray's are 64 hex digits
+TOKEN_CLUSTER = """
+import sys
+from ray.cluster_utils import Cluster
+c = Cluster(initialize_head=True, head_node_args=dict(num_cpus=1, include_dashboard=False,
+            object_store_memory=128 * 2**20))
+print(c.address, flush=True)
+sys.stdin.read()  # up until the test closes it (or ends)
+c.shutdown()
+"""
+
+
+@pytest.fixture(scope="module")
+def token_cluster():
+    """A Ray of one node that wants a token (``RAY_AUTH_MODE=token``), in a process of its own:
+    this one's Ray settings stay as they are."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("RAY_AUTH", "RAY_ADDRESS"))}
+    env.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=TOKEN)
+    proc = subprocess.Popen([sys.executable, "-c", TOKEN_CLUSTER], env=env, text=True,
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE)  # fmt: skip
+    address = proc.stdout.readline().strip()
+    assert address, "the token cluster did not start"
+    yield address
+    proc.stdin.close()
+    proc.wait(timeout=120)
+
+
+TOKEN_FIX = (
+    "Fix: give this machine the cluster's token (`ray get-auth-token` on its head) in "
+    "RAY_AUTH_TOKEN or ~/.ray/auth_token, with RAY_AUTH_MODE=token"
+)
+REFUSED = "Ray: Authentication token is missing or incorrect"  # Ray 2.60's words
+
+
+@pytest.mark.parametrize("sent", ["a wrong token", "no token", "no token here"])
+def test_a_cluster_refusing_the_token_is_one_line_saying_so(token_cluster, tmp_path, sent):
+    """The cluster is up: not "no running Ray cluster there"."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("RAY_AUTH", "RAY_ADDRESS"))}
+    env.update(MS_SKIP_ASSET_DOWNLOAD_PROMPT="1", OMP_NUM_THREADS="1")
+    env["RAY_gcs_server_port_wait_time_s"] = "2"  # Ray's tries at connecting (20 s: 20 tries)
+    if sent == "a wrong token":
+        env.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN="b" * 64)
+    elif sent == "no token here":
+        env.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN_PATH=str(tmp_path / "no_token"))
+    t0 = time.monotonic()
+    res = subprocess.run(CLI + collect_args(tmp_path, 1, "--ray", token_cluster), cwd=tmp_path,
+                         env=env, capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert time.monotonic() - t0 < 30
+    assert res.returncode == 1, res.stdout + res.stderr
+    where = f"error: --ray {token_cluster}:"
+    line = {
+        "a wrong token": f"{where} the Ray cluster there refused this machine's authentication "
+        f"token (from RAY_AUTH_TOKEN; {REFUSED}). {TOKEN_FIX}",
+        "no token": f"{where} the Ray cluster there requires an authentication token and this "
+        f"machine sent none (RAY_AUTH_MODE is not token here; {REFUSED}). {TOKEN_FIX}",
+        "no token here": f"{where} this machine has no authentication token to send "
+        "(RAY_AUTH_MODE=token; Ray: RAY_AUTH_TOKEN_PATH is set but file cannot be opened or is "
+        f"empty: {tmp_path / 'no_token'}). {TOKEN_FIX}",
+    }[sent]
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("error:")]
+    assert errors == [line], res.stderr
+    assert res.stderr.endswith(line + "\n") and "Traceback" not in res.stderr
