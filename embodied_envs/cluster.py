@@ -15,7 +15,8 @@ sends with it, and tasks with retries.
 - :func:`remote_task`: a task as Ray runs it, on the node's copy of the files. A task whose
   worker process dies (killed, out of memory, its node lost) runs again, up to
   :data:`TASK_RETRIES` times; an exception a task raises comes back as it was raised (its
-  message naming the driver's files; :class:`CarriedError`), not as Ray's traceback. The
+  message naming the driver's files; :class:`CarriedError`), not as Ray's traceback, and so
+  does its ``sys.exit`` (:class:`TaskExit`), which would otherwise end its worker process. The
   episode executor's Ray backend (``pipelines/on_ray.py``) submits them.
 """
 
@@ -386,7 +387,20 @@ def _task(fn: Callable, bundle: Bundle, args: tuple):
         except Exception:
             raise CarriedError.of(e) from None
         raise
+    except SystemExit as e:  # the task's code asked its process to end (sys.exit)
+        if hasattr(e, "ray_terminate_msg"):  # Ray's own: this worker told to stop
+            raise
+        raise TaskExit(*paths.to_driver(e.args)) from None  # not a worker lost: said as is
     return paths.to_driver(result), ray.get_runtime_context().get_node_id(), os.getpid()
+
+
+class TaskExit(Exception):
+    """A task's ``SystemExit`` (its args), carried back as an exception: Ray would end the
+    worker process and run the task again as a lost worker's. The driver raises the
+    ``SystemExit`` again, as a local run's code raises it (:meth:`rebuilt`)."""
+
+    def rebuilt(self) -> SystemExit:
+        return SystemExit(*self.args)
 
 
 class CarriedError(Exception):

@@ -26,6 +26,7 @@ from embodied_envs.cluster import (
     Bundle,
     CarriedError,
     ClusterError,
+    TaskExit,
     cluster_cpus,
     named,
     ray_session,
@@ -131,13 +132,14 @@ def in_flight(plan) -> int:
 
 
 def _error(e: BaseException, fn: Callable, args: tuple) -> BaseException:
-    """A Ray task's failure as the driver raises it: the task's own exception, without Ray's
-    traceback; a worker lost more than ``TASK_RETRIES`` times as :class:`ClusterError`."""
+    """A Ray task's failure as the driver raises it: the task's own exception (its
+    ``SystemExit`` too), without Ray's traceback; a worker lost more than ``TASK_RETRIES``
+    times as :class:`ClusterError`."""
     from ray.exceptions import RayError, RayTaskError  # Ray is imported where a run uses it
 
     if isinstance(e, RayTaskError):
         cause = e.cause if isinstance(e.cause, Exception) else RuntimeError(str(e))
-        return cause.rebuilt() if isinstance(cause, CarriedError) else cause
+        return cause.rebuilt() if isinstance(cause, CarriedError | TaskExit) else cause
     if isinstance(e, RayError):
         text = " ".join(str(e).split())[:300]
         return ClusterError(

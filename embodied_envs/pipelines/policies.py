@@ -11,10 +11,11 @@ episode start: a policy with state per env, e.g. temporal ensembling, clears it)
 receives the env's observation as ManiSkill returns it (torch tensors with a leading batch of 1,
 as from ``ManiSkillVectorEnv``) and returns an action of shape ``(A,)`` or ``(1, A)``.
 
-A policy's action that is not a finite array of that shape, or a policy that raises (or calls
-``sys.exit``: on Ray that would end the worker process, retried as a lost worker), stops the
+A policy's action that is not a finite array of that shape, or a policy that raises, stops the
 evaluation with one :class:`EvalError` line naming the policy, the step, the episode's seed and
-the expected shape; nothing is clipped or replaced.
+the expected shape; nothing is clipped or replaced. A policy's code that ends its process
+(``sys.exit``, ``os._exit``: on Ray that would be a worker lost and its episode run again) is
+the same line, on every backend (:func:`policy_code`).
 """
 
 from __future__ import annotations
@@ -24,7 +25,9 @@ import importlib.util
 import inspect
 import os
 import sys
+import threading
 from collections.abc import Callable
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +37,50 @@ BUILTIN_POLICIES = ("expert", "random", "zero")
 
 class EvalError(RuntimeError):
     """An evaluation that cannot run (names the policy, the episode and the fix)."""
+
+
+class PolicyExit(Exception):
+    """A policy's code asked its process to end (``sys.exit``, ``os._exit``): what it did, in
+    words (:func:`policy_code`)."""
+
+
+_real_exit = os._exit  # os._exit, for the threads that run no policy code
+_in_policy: set[int] = set()  # the threads running a policy's code now
+
+
+def _exit(code: int) -> None:
+    """``os._exit`` once a policy has run here: from the thread running the policy's code,
+    :class:`PolicyExit`; from any other (a worker's parent watch, Ray's), the process ends."""
+    if threading.get_ident() in _in_policy:
+        raise PolicyExit(f"called os._exit({code})")
+    _real_exit(code)
+
+
+@contextmanager
+def policy_code():
+    """Runs a policy's code (its import, factory, ``reset``, each action): an end of the
+    process it asks for is :class:`PolicyExit` here, so that the process lives to say so in
+    one line, as the local run does (on Ray, a worker process that ends is lost and its task
+    run again). ``os._exit`` is replaced, for good, by one that raises only in the thread
+    inside this block; a ``SystemExit`` of the policy's becomes :class:`PolicyExit`, Ray's own
+    (its ``ray_terminate_msg``: the worker told to stop) goes on. A process that dies otherwise
+    (a crash in native code, a kill) is not the policy's word: a lost worker."""
+    global _real_exit
+    if os._exit is not _exit:
+        _real_exit, os._exit = os._exit, _exit
+    thread = threading.get_ident()
+    inside = thread in _in_policy
+    _in_policy.add(thread)
+    try:
+        yield
+    except SystemExit as e:
+        if hasattr(e, "ray_terminate_msg"):
+            raise
+        text = " ".join(str(e).split())
+        raise PolicyExit(f"raised SystemExit: {text}" if text else "raised SystemExit") from e
+    finally:
+        if not inside:
+            _in_policy.discard(thread)
 
 
 def _import_target(spec: str):
@@ -51,11 +98,15 @@ def _import_target(spec: str):
                 raise FileNotFoundError(f"no such file {path}")
             loaded = importlib.util.spec_from_file_location(path.stem, path)
             module = importlib.util.module_from_spec(loaded)
-            loaded.loader.exec_module(module)
+            with policy_code():
+                loaded.loader.exec_module(module)
         else:
             if os.getcwd() not in sys.path:  # as `python -m` would: the user's own modules
                 sys.path.insert(0, os.getcwd())
-            module = importlib.import_module(module_name)
+            with policy_code():
+                module = importlib.import_module(module_name)
+    except PolicyExit as e:  # the module's own code ends the process as it is imported
+        raise EvalError(f"--policy {spec}: importing {module_name!r} {e}") from None
     except Exception as e:  # whatever the user's module raises on import
         raise EvalError(
             f"--policy {spec}: cannot import {module_name!r} ({type(e).__name__}: {e}). Fix: "
@@ -109,9 +160,10 @@ def load_policy(spec: str, env) -> Policy | None:
     except (TypeError, ValueError):
         takes_env = False
     try:
-        made = factory(env) if takes_env else factory()
-    except (Exception, SystemExit) as e:  # sys.exit too: a Ray task's would lose its worker
-        raise EvalError(f"--policy {spec}: the factory raised {type(e).__name__}: {e}") from None
+        with policy_code():
+            made = factory(env) if takes_env else factory()
+    except Exception as e:  # the user's code (an exit too: policy_code)
+        raise policy_raised(spec, "the factory", e) from None
     import torch  # in the process that runs episodes; `embodied-envs --help` stays without it
 
     reset = getattr(made, "reset", None)
@@ -228,10 +280,12 @@ def checked_action(action, shape: tuple[int, ...], spec: str, step: int, seed: i
     return arr.reshape(shape)
 
 
-def policy_raised(spec: str, call: str, error: Exception, where: str) -> EvalError:
-    """The one-line error for a policy whose ``call`` raised ``error`` (its own message kept)."""
+def policy_raised(spec: str, call: str, error: Exception, where: str = "") -> EvalError:
+    """The one-line error for a policy whose ``call`` raised ``error`` (its own message kept),
+    or ended its process (:class:`PolicyExit`)."""
     text = " ".join(str(error).split())
-    return EvalError(f"--policy {spec}: {call} raised {type(error).__name__}: {text} {where}")
+    did = text if isinstance(error, PolicyExit) else f"raised {type(error).__name__}: {text}"
+    return EvalError(" ".join(filter(None, (f"--policy {spec}: {call} {did}", where))))
 
 
 def policy_driver(policy: Policy, spec: str):
@@ -247,14 +301,16 @@ def policy_driver(policy: Policy, spec: str):
         drawn = str(env.unwrapped.layouts[0].source)
         shape = tuple(env.action_space.shape)
         try:
-            policy.reset(seed)
-        except (Exception, SystemExit) as e:  # the user's code (sys.exit too): one line
+            with policy_code():
+                policy.reset(seed)
+        except Exception as e:  # the user's code (an exit too: policy_code): one line
             raise policy_raised(spec, "reset(seed)", e, at_step(0, seed, drawn)) from e
         limit = env.spec.max_episode_steps if env.spec is not None else None
         while limit is None or tally.steps < limit:
             try:
-                raw = policy.act(obs)
-            except (Exception, SystemExit) as e:  # the user's code: one line, its step
+                with policy_code():
+                    raw = policy.act(obs)
+            except Exception as e:  # the user's code (an exit too): one line, its step
                 raise policy_raised(spec, "the policy", e, at_step(tally.steps, seed, drawn)) from e
             action = checked_action(raw, shape, spec, tally.steps, seed, drawn)
             obs, _, terminated, truncated, _ = tally.step(action)

@@ -1,7 +1,7 @@
 """`collect --ray` and `eval --ray` on a real Ray cluster of two nodes on this machine
 (``ray.cluster_utils.Cluster``, one CPU each), started by the tests: the same data as one local
 worker, a killed worker, an interrupted driver resumed, a worker's error (a policy's, a
-layout's, a policy's sys.exit) as the local line; a dead address, and a cluster of one node that
+layout's, a policy's exit) as the local line; a dead address, and a cluster of one node that
 wants a token, refused in one line."""
 
 import json
@@ -299,28 +299,58 @@ def test_an_address_that_is_not_host_port_is_one_line_before_ray_starts(monkeypa
         check_address("auto")
 
 EXITING = """
+import os
 import sys
 def make(env):
     def act(obs):
-        sys.exit("no weights here")
+        {call}
     return act
 """
 
 
-def test_a_policy_calling_sys_exit_on_a_worker_is_its_one_line_error(cluster, tmp_path):
-    """Not a worker lost and retried: the policy's call, as the local run names it."""
-    (tmp_path / "quits.py").write_text(EXITING)
+@pytest.mark.parametrize("call, did", [
+    ('sys.exit("no weights here")', "raised SystemExit: no weights here"),
+    ("os._exit(3)", "called os._exit(3)"),
+])  # fmt: skip
+def test_a_policy_ending_its_process_on_a_worker_is_its_one_line_error(cluster, tmp_path, call,
+                                                                       did):  # fmt: skip
+    """Not a worker lost and retried: the policy's call, as the local run names it (os._exit
+    would end the worker process: it raises in the policy's code, policies.policy_code)."""
+    (tmp_path / "quits.py").write_text(EXITING.format(call=call))
     args = ["eval", "--policy", "quits.py:make", "--episodes", "1", "--max-episode-steps", "5"]
     local = cli([*args, "--out", "local"], tmp_path)
     res = cli([*args, "--ray", "auto", "--out", "ray"], tmp_path, cluster)
-    assert local.returncode == res.returncode == 1
+    assert local.returncode == res.returncode == 1, res.stdout + res.stderr
     line = [ln for ln in local.stdout.splitlines() if ln.startswith("error:")]
     assert line == [
-        "error: --policy quits.py:make: the policy raised SystemExit: no weights here at step 0 "
-        "of episode seed 0 (default.json)"
+        f"error: --policy quits.py:make: the policy {did} at step 0 of episode seed 0 "
+        "(default.json)"
     ]
     assert [ln for ln in res.stdout.splitlines() if ln.startswith("error:")] == line
     assert "lost" not in res.stdout + res.stderr
+
+
+def test_a_tasks_sys_exit_comes_back_as_itself_not_as_a_lost_worker():
+    """Ray would end the worker process of a task raising SystemExit and run it again; the
+    task carries it back (``cluster.TaskExit``) and the driver raises it as a local run does.
+    Ray's own (``ray_terminate_msg``: the worker told to stop) goes on."""
+    from types import SimpleNamespace
+
+    from embodied_envs.cluster import Paths, TaskExit, _task
+
+    bundle = SimpleNamespace(unpacked=lambda: Paths(()))
+    with pytest.raises(TaskExit) as carried:
+        _task(sys.exit, bundle, ("no weights here",))
+    exit_ = carried.value.rebuilt()
+    assert type(exit_) is SystemExit and exit_.code == "no weights here"
+
+    def stopped():
+        e = SystemExit(1)
+        e.ray_terminate_msg = "The process receives a SIGTERM."
+        raise e
+
+    with pytest.raises(SystemExit):
+        _task(stopped, bundle, ())
 
 
 TOKEN = "a" * 64  # the token cluster's: Ray's are 64 hex digits
