@@ -88,13 +88,10 @@ class HybridRenderer:
         self.backend = resolve_backend(backend)
         self.device = torch.device(device)
         x, y, z, w = (float(v) for v in init_quat_xyzw)
-        # each stored splat turned Z-up once; each env's layout pose moves the camera instead
-        self.splats = {
-            Path(path): pose_splat(read_ply(path), torch.zeros(3), torch.tensor([w, x, y, z])).to(
-                self.device
-            )
-            for path in rooms
-        }
+        self._init_wxyz = torch.tensor([w, x, y, z])
+        self.splats = {}  # room -> its splat, turned Z-up
+        for path in rooms:
+            self.add_room(Path(path), read_ply(path))
         self.depth_test = bool(depth_test)
         self.poses: list[LayoutPose] = []  # per env, the background node's layout pose
         self.rooms: list[Path] = []  # per env, its splat file
@@ -106,6 +103,11 @@ class HybridRenderer:
         self._prerender_due = False  # set by configure, cleared by prerender
         self.renders = 0  # background renders so far
         self.render_seconds = 0.0  # time spent in them
+
+    def add_room(self, room: Path, splat) -> None:
+        """Make ``splat`` (a ``GaussianSplat`` in the frame rooms are stored in) the room named
+        ``room``: turned Z-up once here; each env's layout pose moves the camera instead."""
+        self.splats[Path(room)] = pose_splat(splat, torch.zeros(3), self._init_wxyz).to(self.device)
 
     # --- configuration -------------------------------------------------------------------
     def to(self, device: torch.device | str) -> HybridRenderer:

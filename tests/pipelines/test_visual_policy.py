@@ -91,6 +91,8 @@ def test_the_visual_policy_trains_exports_and_eval_runs_it(dataset, tmp_path, ca
     assert {"mover 0 x", "mover 0 y", "mover 0 z"} <= set(info["held_out_error_m"])
     assert all(0 <= v < 1 for v in info["held_out_error_m"].values())
     assert "mover 1 x" not in info["held_out_error_m"]  # empty in a one-can task
+    # every recorded frame was found over one of the shipped rooms: its background can be swapped
+    assert info["swap_rooms"] >= 1 and info["swappable_frames"] == 1.0
     module = torch.jit.load(str(out / "policy.pt"))
     assert module.camera == "base_camera" and list(module.image_hw) == [SIDE, SIDE]
     code = main([
@@ -145,6 +147,48 @@ def test_the_augmentation_shifts_and_jitters_within_its_bounds():
     high = (1 + visual.BRIGHTNESS) * (1 + visual.GAIN)
     assert gains.min() >= low - 1e-6 and gains.max() <= high + 1e-6
     assert gains.std() > 0.02  # jittered per image
+
+
+def test_a_frames_background_is_found_and_swapped_and_its_foreground_kept():
+    gen = torch.Generator().manual_seed(1)
+    rooms = torch.randint(0, 256, (3, 12, 12, 3), dtype=torch.uint8, generator=gen)
+    frames = rooms[[2, 0, 1, 2]].clone()
+    frames[:, 3:7, 4:9] = torch.randint(0, 256, (4, 4, 5, 3), dtype=torch.uint8, generator=gen)
+    frames[3] = torch.randint(0, 256, (12, 12, 3), dtype=torch.uint8, generator=gen)  # no room's
+    masks = visual.foreground_masks(frames, rooms, least=0.2, batch=3)
+    square = torch.zeros(12, 12, dtype=torch.bool)
+    square[3:7, 4:9] = True
+    assert torch.equal(masks[:3], square.expand(3, 12, 12)) and masks[3].all()
+    images = frames.permute(0, 3, 1, 2).float() / 255
+    others = torch.rand(2, 3, 12, 12, generator=gen)
+    swapped = visual.swap_backgrounds(images, masks, others, gen, share=1.0)
+    assert torch.equal(swapped[:, :, 3:7, 4:9], images[:, :, 3:7, 4:9])  # the foreground
+    for k in range(3):  # each background is one of the other rooms, whole
+        assert any(torch.equal(swapped[k, :, ~square], o[:, ~square]) for o in others)
+    assert torch.equal(swapped[3], images[3])  # all foreground: kept
+    assert torch.equal(visual.swap_backgrounds(images, masks, others, gen, 0.0), images)
+    # share 0.5 swaps about half the frames
+    many = images[:1].expand(400, -1, -1, -1)
+    out = visual.swap_backgrounds(many, masks[:1].expand(400, -1, -1), others, gen, 0.5)
+    changed = (out != many).flatten(1).any(1).float().mean()
+    assert 0.4 < changed < 0.6
+
+
+def test_random_rooms_are_seeded_and_differ():
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools" / "make"))
+    import make_rooms
+
+    def styles(seed):
+        rng = np.random.default_rng(seed)
+        return [make_rooms.random_style(rng) for _ in range(8)]
+
+    assert styles(3) == styles(3) and styles(3) != styles(4)
+    drawn = styles(3)
+    assert len({s.walls for s in drawn}) == 8 and len({s.pattern for s in drawn}) > 1
+    colours = [c for s in drawn for c in s.walls]
+    assert all(20 <= v <= 250 for c in colours for v in c)
+    mesh = make_rooms.room_mesh(drawn[0])  # a room of the shipped rooms' size
+    assert np.allclose(mesh.bounds[1] - mesh.bounds[0], [5.05, 2.64, 5.05], atol=0.06)
 
 
 @pytest.mark.parametrize(

@@ -67,6 +67,30 @@ HELD_OUT_STYLES = {
 }  # fmt: skip
 
 
+PATTERNS = ("checker", "stripes", "plain", "tiles")
+WINDOW_WALLS = ("-x", "+x", "-y")
+FURNITURE = ("shelf", "paintings", "cabinets", "plants")
+
+
+def random_style(rng: np.random.Generator) -> Style:
+    """A room drawn from the whole style space (any colours, pattern, window, furniture and
+    light): the visual recipe's background swaps (``tools/recipes/perceive.py``)."""
+
+    def colour() -> tuple[int, int, int]:
+        return tuple(int(v) for v in rng.integers(20, 251, 3))
+
+    return Style(
+        floor=(colour(), colour()),
+        pattern=str(rng.choice(PATTERNS)),
+        walls=(colour(), colour(), colour(), colour()),
+        window_wall=str(rng.choice(WINDOW_WALLS)),
+        window=colour(),
+        furniture=str(rng.choice(FURNITURE)),
+        light=tuple(float(v) for v in rng.uniform(0.8, 1.15, 3)),
+        seed=int(rng.integers(1 << 30)),
+    )
+
+
 def _tinted(colour, light) -> tuple[int, int, int]:
     return tuple(int(np.clip(c * f, 0, 255)) for c, f in zip(colour, light, strict=True))
 
@@ -155,10 +179,15 @@ def room_mesh(style: Style) -> trimesh.Trimesh:
     return room
 
 
+def room_splat(style: Style, count: int = COUNT):
+    """The room of ``style`` as ``count`` Gaussians (a ``GaussianSplat``)."""
+    return mesh_to_splat(room_mesh(style), count, seed=style.seed, visible_from=ROOM_INSIDE)
+
+
 def make_room(style: Style, out: Path, count: int = COUNT) -> Path:
     """Write the room of ``style`` as ``out/gs_model.ply``; returns its path."""
     out.mkdir(parents=True, exist_ok=True)
-    splat = mesh_to_splat(room_mesh(style), count, seed=style.seed, visible_from=ROOM_INSIDE)
+    splat = room_splat(style, count)
     path = out / "gs_model.ply"
     with atomic_output(path) as tmp:
         write_ply(splat, tmp)

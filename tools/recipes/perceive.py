@@ -50,6 +50,8 @@ import torch
 from torch import nn
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "make"))
+import make_rooms  # noqa: E402
 import perturb  # noqa: E402
 import train_policy as tp  # noqa: E402
 import visual  # noqa: E402
@@ -70,6 +72,11 @@ RENDER_SIGMA = 0.05  # rad: the extra frames' arm, off a demonstrated configurat
 HOLD_OUT = 0.1  # the share of episodes that measure the estimator (at least one)
 ESTIMATOR_SHARE = 0.5  # of --minutes: the estimator's training; the rest the policy's
 HIDDEN = 256  # the estimator's MLP
+SWAP_ROOMS = 48  # random rooms (make_rooms.random_style) the estimator's background swaps draw
+ROOMS_SHARE = 0.1  # of the rendering share: at most this long rendering them
+SWAP_GAUSSIANS = 20_000  # per random room
+SWAP_SHARE = 0.5  # of the estimator's frames per batch: their room swapped for a random one
+MIN_MATCH = 0.2  # a frame sharing fewer of its pixels with every known room keeps its own
 
 
 def slots(slices: dict[str, slice]) -> int:
@@ -331,6 +338,43 @@ def rendered_frames(
     return np.stack(frames), np.stack(cameras), np.stack(flats).astype(np.float32)
 
 
+def sensor_view(env):
+    """``env``'s camera as the splat renderer takes it (after a reset)."""
+    from embodied_envs.splat.camera import PinholeCamera  # the env's process only
+
+    sensor = env.unwrapped.scene.sensors[visual.CAMERA]
+    return PinholeCamera.from_opengl(
+        sensor.camera.get_model_matrix()[0].cpu().numpy().astype(np.float64),
+        sensor.camera.get_intrinsic_matrix()[0].cpu().numpy().astype(np.float64),
+        sensor.config.width, sensor.config.height,
+    )  # fmt: skip
+
+
+def room_views(env) -> torch.Tensor:
+    """What ``env``'s camera shows of each room of its pool (without one, its layout's room)
+    with nothing in front: ``(K, H, W, 3)`` uint8, rendered by the env's own splat renderer."""
+    u = env.unwrapped
+    env.reset(seed=RENDER_SEED)
+    camera, rooms = sensor_view(env), u.room_pool or u.hybrid.rooms[:1]
+    return torch.stack([u.hybrid.render_one(camera, u.hybrid.poses[0], room)[0].cpu()
+                        for room in rooms])  # fmt: skip
+
+
+def random_rooms(env, seconds: float, rng) -> torch.Tensor:
+    """Rooms drawn from the whole style space (``make_rooms.random_style``) as ``env``'s camera
+    sees them, rendered by its splat renderer: ``(R, H, W, 3)`` uint8, ``SWAP_ROOMS`` or as many
+    as ``seconds`` allow (at least one)."""
+    u = env.unwrapped
+    env.reset(seed=RENDER_SEED)
+    camera, out, start = sensor_view(env), [], time.perf_counter()
+    while not out or (len(out) < SWAP_ROOMS and time.perf_counter() - start < seconds):
+        style = make_rooms.random_style(rng)
+        room = Path(f"random_room_{len(out)}")
+        u.hybrid.add_room(room, make_rooms.room_splat(style, SWAP_GAUSSIANS))
+        out.append(u.hybrid.render_one(camera, u.hybrid.poses[0], room)[0].cpu())
+    return torch.stack(out)
+
+
 @torch.no_grad()
 def estimate(estimator: Estimator, images: torch.Tensor, batch: int = 512) -> torch.Tensor:
     estimator.eval()
@@ -373,11 +417,16 @@ def train(args: argparse.Namespace) -> dict:
         held = max(1, round(HOLD_OUT * len(episodes))) if len(episodes) > 1 else 0
         learn = slice(0, len(episodes) - held)
         started = time.perf_counter()
+        # background swaps: the frames' rooms (known) replaced by random ones; hybrid frames only
+        hybrid = bool(env_info["env_kwargs"].get("hybrid_obs", False))
         camera_env = tp.dataset_env(env_info, args.layout, args.demos,
                                  env_info["env_kwargs"].get("obs_mode", "rgb"))  # fmt: skip
         try:
+            known = room_views(camera_env) if hybrid else None
+            budget = ROOMS_SHARE * RENDER_SHARE * args.minutes * 60
+            swaps = random_rooms(camera_env, budget, rng) if hybrid else None
             more_frames, more_cameras, more_flats = rendered_frames(
-                camera_env, env, RENDER_SHARE * args.minutes * 60,
+                camera_env, env, RENDER_SHARE * args.minutes * 60 - (time.perf_counter() - started),
                 np.concatenate(flats[learn])[:, slices["qpos"]], RENDER_SIGMA, rng,
             )  # fmt: skip
         finally:
@@ -395,6 +444,8 @@ def train(args: argparse.Namespace) -> dict:
         points, np.concatenate([*cameras[learn], more_cameras]), tuple(images.shape[1:3])
     )
     pixels, shown = torch.from_numpy(pixels), torch.from_numpy(there & inside).float()[..., None]
+    masks = visual.foreground_masks(images, known, MIN_MATCH) if hybrid else None
+    swap_rgb = swaps.permute(0, 3, 1, 2).float() / 255.0 if hybrid else None
     # a pick goal is in no frame: its vectors are computed from the estimates (assemble)
     weight = torch.ones(len(seen))
     if (seen_flats[:, slices["task_kind"].start + KIND_IDS["pick"]] > 0.5).all():
@@ -406,6 +457,8 @@ def train(args: argparse.Namespace) -> dict:
 
     def estimator_loss(batch: torch.Tensor) -> torch.Tensor:
         image = images[batch].permute(0, 3, 1, 2).float() / 255.0
+        if swap_rgb is not None:
+            image = visual.swap_backgrounds(image, masks[batch], swap_rgb, generator, SWAP_SHARE)
         image = visual.augment(image, generator, SHIFT_PX)
         guess, keys = estimator.heads(image)
         values = ((guess - y[batch]).abs() * weight).sum() / (weight.sum() * len(batch))
@@ -462,6 +515,9 @@ def train(args: argparse.Namespace) -> dict:
         "rooms": kwargs.get("rooms"), "robot_visual_faces": kwargs.get("robot_visual_faces"),
         "estimator_episodes": learn.stop, "held_out_episodes": held,
         "rendered_frames": len(more_frames), "render_seconds": round(render_seconds, 1),
+        "swap_rooms": 0 if swaps is None else len(swaps),
+        "swappable_frames": 0 if masks is None else round(float((~masks).any((1, 2))
+                                                                .float().mean()), 3),
         "estimator_iterations": est_iters, "estimator_loss": est_loss,
         "estimator_seconds": round(est_seconds, 1),
         "held_out_error_m": {names[i]: round(float(error[i]), 4) for i in live},

@@ -176,14 +176,15 @@ def chunk_targets(
 
 def dataset_env(
     env_info: dict, layout: Path | None = None, demos: Path | None = None,
-    obs_mode: str = "state_dict",
+    obs_mode: str = "state_dict", **overrides,
 ):  # fmt: skip
     """The dataset's env, made once, with the state observation as a dict (its groups' slices)
     or ``obs_mode``; ``layout`` in place of the layout file the dataset names (a dataset moved
-    between machines)."""
+    between machines); ``overrides`` other env keywords (another room pool)."""
     import gymnasium as gym
 
     kwargs = dict(env_info.get("env_kwargs", {}), obs_mode=obs_mode, render_mode=None)
+    kwargs |= overrides
     if layout is not None:
         kwargs["layout_file"] = str(layout)
     named = kwargs.get("layout_file")

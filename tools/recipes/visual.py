@@ -4,9 +4,10 @@ the frames' augmentation, and a contact sheet of a dataset's frames (``python vi
 The encoder is a small convolutional net over the ``base_camera``'s RGB frame ending in a
 spatial soft-argmax (each of ``KEYPOINTS`` feature maps gives its expected image position, as
 robomimic's and diffusion policy's image encoders do) and the last maps' means. Training
-augments each frame with a random shift (DrQ's augmentation) and colour jitter (brightness,
-contrast, per-channel gain); rooms differ between episodes when the dataset was collected with
-``--rooms``.
+augments each frame with a background swap (the frame's own room replaced by another, where the
+frame's pixels are not its background's: ``foreground_masks``, ``swap_backgrounds``), a random
+shift (DrQ's augmentation) and colour jitter (brightness, contrast, per-channel gain); rooms
+differ between episodes too when the dataset was collected with ``--rooms``.
 """
 
 from __future__ import annotations
@@ -96,6 +97,35 @@ def augment(
     out = (shifted - mean) * uniform((b, 1, 1, 1), CONTRAST) + mean
     out = out * uniform((b, 1, 1, 1), BRIGHTNESS) * uniform((b, 3, 1, 1), GAIN)
     return out.clamp(0.0, 1.0)
+
+
+def foreground_masks(frames: torch.Tensor, backgrounds: torch.Tensor, least: float,
+                     batch: int = 1024) -> torch.Tensor:  # fmt: skip
+    """``(N, H, W, 3)`` uint8 hybrid frames and the ``(K, H, W, 3)`` backgrounds they may be
+    composited over -> ``(N, H, W)`` bool: the pixels that are not their background's. A frame's
+    background is the one it shares the most pixels with (the composite copies its pixels
+    exactly); a frame that shares under ``least`` of its pixels with every one (another camera)
+    is all foreground, kept whole."""
+    out = torch.ones(frames.shape[:3], dtype=torch.bool)
+    for i in range(0, len(frames), batch):
+        same = (frames[i : i + batch, None] == backgrounds[None]).all(-1)  # (n, K, H, W)
+        share = same.float().mean((2, 3))
+        best = share.argmax(1)
+        mine = same[torch.arange(len(same)), best]
+        out[i : i + batch] = ~mine | (share.amax(1) < least)[:, None, None]
+    return out
+
+
+def swap_backgrounds(images: torch.Tensor, masks: torch.Tensor, rooms: torch.Tensor,
+                     generator: torch.Generator, share: float) -> torch.Tensor:  # fmt: skip
+    """``(B, 3, H, W)`` float images, a ``share`` of them (drawn) with their background pixels
+    (``masks`` ``(B, H, W)`` False) replaced by those of a room drawn from ``rooms``
+    ``(R, 3, H, W)``: the robot, the table and the objects over a room no frame showed."""
+    b = images.shape[0]
+    chosen = torch.rand(b, generator=generator) < share
+    room = rooms[torch.randint(len(rooms), (b,), generator=generator)]
+    keep = masks[:, None] | ~chosen[:, None, None, None]
+    return torch.where(keep, images, room)
 
 
 def contact_sheet(path: Path, out: Path, episodes: int = 8, scale: int = 2) -> Path:
