@@ -174,10 +174,16 @@ class ArmDriver:
         """One control step of every env: ``action`` holds the arm's joint targets and the
         hand's action (``pd_joint_pos``), given to the env in its control mode
         (``solvers/modes.py``); while that mode's action had to be clipped, up to
-        ``modes.CATCH_UP`` steps more toward the same targets."""
+        ``modes.CATCH_UP`` steps more toward the same targets, each while a clipped joint
+        still gains on its target (``ModeActions.gaining``)."""
+        out = self.mode_actions(action)
         for _ in range(1 + CATCH_UP):
-            self._step_once(self.mode_actions(action))
+            self._step_once(out)
             if self.ended or not self.mode_actions.clipped:
+                return
+            excess = self.mode_actions.excess
+            out = self.mode_actions(action)
+            if not self.mode_actions.gaining(excess):
                 return
 
     def _step_once(self, action: np.ndarray) -> None:
@@ -205,6 +211,7 @@ class ArmDriver:
         planned=None,
         open_before: int = 0,
         rank_first: bool = False,
+        twins: list | None = None,
     ) -> list[sapien.Pose | None]:
         """Plan and execute one stage in every env that has not failed yet.
 
@@ -233,6 +240,12 @@ class ArmDriver:
                 ``then`` too) wins, a straight joint line to any option before a detour to
                 any: a choice that follows the options' order, not the steps they cost
                 (``SolverConfig.consistent``).
+            twins: with ``rank_first``, per env a label per option (None: none): options of
+                one label are one grasp at other wrist turns (a two-jaw grasp turned by pi);
+                the first that plans is weighed against the later ones of its label, and the
+                one whose path and ``then`` cost the fewest steps wins (the wrist roll the
+                short way: so100_block seeds 5 and 7 turned it 4.4 rad, 10 s in
+                ``pd_joint_delta_pos``, where the other way was 1.1-1.3 rad).
 
         Returns:
             Per env the pose that was planned to (None where none could be).
@@ -249,7 +262,7 @@ class ArmDriver:
             elif target is not None and not self.reports[i].plan_failures:
                 best, failures = self._choose(
                     i, options, qpos[i], methods, obstacles, option_steps, then, path_ok,
-                    rank_first,
+                    rank_first, None if twins is None else twins[i],
                 )
                 if best is None:
                     self.reports[i].plan_failures.append(f"{stage}: " + "; ".join(failures))
@@ -274,8 +287,9 @@ class ArmDriver:
         return chosen
 
     def _choose(
-        self, i, options, qpos, methods, obstacles, option_steps, then, path_ok, rank_first=False
-    ):
+        self, i, options, qpos, methods, obstacles, option_steps, then, path_ok, rank_first=False,
+        twins=None,
+    ):  # fmt: skip
         """``_per_env``'s choice for env i: ``(cost, path, pose, k)`` of the option that wins
         (None when none plans) and the failures.
 
@@ -288,23 +302,31 @@ class ArmDriver:
         no option's ``then`` plans, the first whose path does (as without ``rank_first``, an
         option whose ``then`` fails costs ``max_path_steps`` more: the stage after it plans
         again from where the arm then is; the SO-100's lying marker, held-out seeds 0, 1, 3, 4).
+        ``twins`` (with ``rank_first``): a label per option; the first option that plans is
+        weighed against the later options of its label, by their steps alone, a twin whose
+        straight line is blocked by its detour (so100_block seed 10: the short way's line
+        passed the can, its long way turned the wrist 3.1 rad).
         """
         best, failures, unplanned = None, [], None
+        per_rank = 0 if rank_first else (option_steps or 0)  # steps a rank lower costs
         for m, how in enumerate(methods):
             passes = (False, True) if how == "rrt" and option_steps is not None else (True,)
             todo = list(range(len(options)))
             for detour in passes:
                 blocked = []  # options whose straight line is blocked: for the detour pass
-                for k in todo:
+                queue = list(todo)
+                while queue:
+                    k = queue.pop(0)
                     within = None
                     if best is not None and option_steps is not None:
                         # a path of `within` steps or more cannot beat the best (ties: rank)
-                        within = best[0] - option_steps * k + (k < best[3])
+                        within = best[0] - per_rank * k + (k < best[3])
                         if within <= 0:
                             break  # later options rank lower still
                     key = (self.stages, m, k)
+                    twin = best is not None and rank_first  # its detour weighed at once
                     path, status = self._plan(
-                        i, options[k], qpos, how, obstacles, key, within, detour
+                        i, options[k], qpos, how, obstacles, key, within, detour or twin
                     )
                     if status == STRAIGHT_BLOCKED:
                         blocked.append(k)
@@ -318,7 +340,7 @@ class ArmDriver:
                         if status.endswith(START_REFUSED):  # every path starts there
                             return best, failures
                         continue
-                    cost = len(path) + (option_steps or 0) * k
+                    cost = len(path) + per_rank * k
                     if best is not None and (cost, k) > (best[0], best[3]):
                         continue  # what follows only adds steps
                     if then is not None:
@@ -330,10 +352,16 @@ class ArmDriver:
                                 unplanned = (cost + self.cfg.max_path_steps, path, options[k], k)
                             continue
                         cost += self.cfg.max_path_steps if more is None else more
+                    first = best is None
                     if best is None or (cost, k) < (best[0], best[3]):
                         best = (cost, path, options[k], k)
-                    if option_steps is None or rank_first:
+                    if option_steps is None or (rank_first and twins is None):
                         return best, failures
+                    if first and rank_first:  # then its twins: blocked before it, and after
+                        queue = [j for j in blocked + queue if twins[j] == twins[k]]
+                        blocked = []
+                if best is not None and rank_first:  # its twins weighed: no detour to any
+                    return best, failures
                 todo = blocked
             if best is not None:
                 break

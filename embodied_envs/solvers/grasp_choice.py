@@ -113,6 +113,9 @@ class GraspChoice:
         tcp = self._tcp().to_transformation_matrix().cpu().numpy()
         gripper = self.gripper_model
         poses = []
+        # per env a label per grasp, the same for one grasp at other wrist turns (a planar
+        # hand's: ``_planar``), or None: ``ArmDriver._choose``'s ``twins``
+        self.grasp_twins: list[list[int] | None] = [None] * self.num_envs
         for i, layout in enumerate(self.base.layouts):
             actor = self.base.env_actors[f"env{i}"][self._node(i)]
             spec = asset_spec(layout, self._node(i))
@@ -156,8 +159,9 @@ class GraspChoice:
                              + synthesised)  # fmt: skip
                 continue
             if planar:
-                poses.append(self._against_fixed_jaw(
-                    self._planar(checked, closing, support, gripper), verts))  # fmt: skip
+                options, labels = self._planar(checked, closing, support, gripper)
+                poses.append(self._against_fixed_jaw(options, verts))
+                self.grasp_twins[i] = labels
                 continue
             down = np.array([0, 0, -1.0])
             footprint = [
@@ -173,14 +177,17 @@ class GraspChoice:
             poses.append(footprint + synthesised if first else synthesised + footprint)
         return poses
 
-    def _planar(self, checked, closing, support, gripper) -> list:
+    def _planar(self, checked, closing, support, gripper) -> tuple[list, list[int]]:
         """A planar hand's grasps (``robots.Hand.planar``): of the footprint's centre, the
         approach in the arm's vertical plane, tilted ``planar_tilts`` from straight down
         toward the far side, closing along the footprint's narrow side as far as that is
         across the approach (either way: the wrist roll takes one or the other), the centre
         raised where the tilted fingers would reach into the table (a short object), each kept
         when it passes the footprint grasp's checks; then the synthesised grasps posed with
-        the approach the arm can make for each contact pair (``solvers/planar.py``)."""
+        the approach the arm can make for each contact pair (``solvers/planar.py``). And a
+        label per grasp, the same for one grasp's two ways (a two-jaw grasp turned by pi: the
+        wrist roll either way, within its range), of which the solver takes the one its arm
+        reaches soonest (``ArmDriver._choose``'s ``twins``)."""
         i, grasps, pose, centre = checked
         base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
         out = centre[:2] - base
@@ -205,8 +212,8 @@ class GraspChoice:
         cone = np.sin(np.deg2rad(self.grasp_config.cone_deg))
         footprint_tilts = sorted((t for t in tilts if lean(t) <= cone), key=lambda t: (
             float(off_reach(np.deg2rad(t), reach)), round(lean(t), 2)))  # fmt: skip
-        poses = []
-        for tilt in np.deg2rad(footprint_tilts):
+        poses, labels = [], []
+        for label, tilt in enumerate(np.deg2rad(footprint_tilts)):
             approach = approach_at(tilt)
             c = closing - (closing @ approach) * approach
             c = c / np.linalg.norm(c) if np.linalg.norm(c) > 1e-6 else across
@@ -217,11 +224,15 @@ class GraspChoice:
                 if at[2] < top and self._footprint_fits(i, grasps, pose, at, way, support,
                                                         approach, cloud):  # fmt: skip
                     poses.append((grasp_pose(approach, way, at), gripper.opening))
+                    labels.append(label)
         planar = planar_grasps(
             grasps, pose.matrix(), base, support, cloud, tuple(tilts), reach,
             self.grasp_config, gripper, self.cfg.grasp_candidates,
         )  # fmt: skip
-        return poses + [(grasp_pose(a, c, p), o) for p, c, a, o in planar]
+        # planar_grasps gives its grasps, then each again the other way
+        first = len(footprint_tilts)
+        labels += [first + k % max(len(planar) // 2, 1) for k in range(len(planar))]
+        return poses + [(grasp_pose(a, c, p), o) for p, c, a, o in planar], labels
 
     def _against_fixed_jaw(self, poses: list, verts: np.ndarray) -> list:
         """``poses`` of a hand with a jaw that stands still (``robots.Hand.fixed_jaw``) moved

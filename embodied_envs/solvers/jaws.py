@@ -50,7 +50,9 @@ class Jaws:
         (``robots.Hand.close_gap``; shut at once, the SO-100's jaw meets the object with 100
         N m and pushes the arm away): at once to the target's width across the jaws plus
         ``close_gap``, then the jaw's target ``close_step`` ahead of the jaw until the jaws
-        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw.
+        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw,
+        the arm held ``settle_steps`` more (none in a mode whose arm holds weakly,
+        ``ModeActions.holds_weakly``: the lift that follows ends the grasp's push on the table).
         In a mode whose drive moves the jaw slower than ``pd_joint_pos``'s, the lead is
         ``ModeActions.lead``'s (the Koch's delta modes: else its jaw, at 0.11 rad/s, stops
         ``close_steps`` short of the block)."""
@@ -84,4 +86,5 @@ class Jaws:
             held = closing & self._grasping()
             self.gripper[held] = jaw()[held] + way * hand.squeeze
             closing &= ~held & (self.gripper != hand.action_closed)
-        self._execute([None] * self.num_envs, self.cfg.settle_steps)
+        if not self.mode_actions.holds_weakly:
+            self._execute([None] * self.num_envs, self.cfg.settle_steps)

@@ -57,6 +57,11 @@ EE_ARRIVED = 0.005
 # control steps more at most toward the same targets while the mode's action had to be
 # clipped (a jump one step of the controller cannot make: the SO-100's jaw closing at once)
 CATCH_UP = 4
+# each while a clipped joint still closes on its target by this much of the action's bound a
+# step (a free joint of the SO-100 closes 0.18 of it): a joint a load holds off its target
+# (the SO-100's wrist while its jaw squeezes, 0.1-0.2 rad) is not waited for, which made each
+# step of its lift five in pd_joint_delta_pos
+CATCH_UP_GAIN = 0.05
 
 
 class ModeError(ValueError):
@@ -122,6 +127,7 @@ class ModeActions:
             self.lead_bound = action_bound(own, dof)
         self.robot = agent.robot
         self.clipped = False  # whether the last action had to be clipped, in any env
+        self.excess = None  # |its action| per env and joint before clipping (joint modes)
         if mode in EE_MODES:
             self.model = agent.robot.create_pinocchio_model()
             self.arm_joints = self.arm.active_joint_indices.cpu().numpy()
@@ -130,6 +136,15 @@ class ModeActions:
     def joint_targets(self) -> bool:
         """Whether the mode's controller drives the arm's joints to targets (not the hand)."""
         return self.mode not in EE_MODES
+
+    @property
+    def holds_weakly(self) -> bool:
+        """Whether the mode's arm holds its joints with at most its stiffness times the
+        action's bound (its targets are the joints now plus the action: ``pd_joint_delta_pos``,
+        50 N m on the SO-100's): a block wedged between its jaws and the table, pressed harder
+        each step, pushed the arm off (SO-100 seed 7: 17 N on the table at the grasp, 110 N six
+        steps later, the wrist 2.6 rad off)."""
+        return self.joint_targets and RELATIVE_TO.get(self.mode) == "qpos"
 
     @property
     def keeps_orientation(self) -> bool:
@@ -167,6 +182,15 @@ class ModeActions:
             far |= bool((2 * np.arccos(dot)).max() > EE_ARRIVED)
         return not far
 
+    def gaining(self, excess: np.ndarray | None) -> bool:
+        """Whether the last action, against ``excess`` (``self.excess`` one step before, for
+        the same targets), brings a joint then clipped ``CATCH_UP_GAIN`` nearer its target
+        (always where the mode gives none: the end-effector modes)."""
+        if excess is None or self.excess is None:
+            return True
+        was = excess > 1 + 1e-6
+        return bool(((excess - self.excess) > CATCH_UP_GAIN)[was].any())
+
     def __call__(self, action: np.ndarray) -> np.ndarray:
         """The mode's actions; ``clipped`` says whether one had to be clipped."""
         if self.mode == RECORDED_MODE:
@@ -186,7 +210,8 @@ class ModeActions:
             out = gym_utils.inv_scale_action(qvel, low, high)
         else:
             out = mode_action(controller, targets, self.mode)
-        self.clipped = bool(np.abs(out).max() > 1 + 1e-6)
+        self.excess = np.abs(out)
+        self.clipped = bool(self.excess.max() > 1 + 1e-6)
         return np.clip(out, -1, 1).astype(np.float32)
 
     def _hand(self, qpos: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -232,6 +232,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         open and back off to where they came from."""
         cfg = self.cfg
         up = sapien.Pose([0, 0, -cfg.approach_offset])
+        self._leave_start(todo)
         candidates = self.grasp_poses()
         planned_at = self.target.pose.p.cpu().numpy().copy()  # where the grasps were planned
         targets = [
@@ -252,7 +253,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
             "approach", targets, ("rrt", "screw"), settle=cfg.settle_steps,
             option_steps=cfg.option_steps, rank_first=cfg.consistent,
             then=lambda i, k, q: None if (p := descent(i, k, q)) is None else len(p),
-            on_choice=take,
+            on_choice=take, twins=self.grasp_twins,
         )  # fmt: skip
         moved = self._moved(planned_at) & todo  # re-observed: no descent onto where it was
         grasps = [None if p is None or moved[i] else p * up.inv() for i, p in enumerate(pre)]
@@ -303,6 +304,32 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         half = np.deg2rad(np.asarray(self.cfg.planar_lift_turns)) / 2
         turns = [sapien.Pose(q=[np.cos(h), *(np.sin(h) * across)]) for h in half]
         return [grasp.q, *((t * sapien.Pose(q=grasp.q)).q for t in turns)]
+
+    def _start_collides(self, i: int, qpos: np.ndarray) -> bool:
+        """Whether env i's robot at ``qpos`` (every joint) meets its obstacle points (their
+        spheres: ``obstacle_radius`` past the objects)."""
+        motion = self.motion[i]
+        motion.mp.planning_world.set_use_point_cloud(True)
+        motion.mp.planning_world.set_use_attach(False)
+        motion.mp.robot.set_qpos(qpos, True)
+        return not motion.free(qpos[motion.idx])
+
+    def _leave_start(self, envs: np.ndarray) -> None:
+        """Where the robot of ``envs`` stands among the obstacle points before an approach
+        (an object against its hand at rest: so100_block seed 10, a can under the SO-100's
+        moving jaw, 9 mm from its tip), the hand first rises ``approach_offset`` straight up,
+        without them: no path leaves a start that collides (``motion.START_COLLIDES``), and
+        none is planned from one."""
+        qpos, tcp = self._plan_start(), self._hand_pose()
+        up = np.array([0.0, 0.0, self.cfg.approach_offset])
+        targets = [
+            sapien.Pose(tcp[i, :3] + up, tcp[i, 3:])
+            if envs[i] and not self.reports[i].plan_failures
+            and self._start_collides(i, qpos[i]) else None
+            for i in range(self.num_envs)
+        ]  # fmt: skip
+        if any(t is not None for t in targets):
+            self._per_env("leave the start", targets, obstacles=False)
 
     def solve(self) -> SolveResult:
         """Run the whole task in every env: each mover in turn (``pick``: the one, held at the
