@@ -364,3 +364,13 @@ def test_rendered_frames_show_other_placements_with_their_labels(dataset):
     points, there = perceive.keypoint_points(labels, slices)
     _, inside = perceive.pixel_targets(points, cameras, (SIDE, SIDE))
     assert inside[:, 0].all() and there[:, 0].all() and not there[:, 1].any()
+
+
+def test_room_error_measures_the_estimator_in_each_room(dataset):
+    import room_error
+
+    demos, out = dataset
+    errors = room_error.room_errors(out / "policy.pt", demos, ["shipped"], frames=3)
+    assert list(errors) == ["own", "shipped"]
+    for e in errors.values():  # one can per frame; a policy trained for seconds is off, not lost
+        assert e["frames"] == 3 and 0 < e["median"] <= e["p90"] < 1.0 and 0 < e["mean"] < 1.0

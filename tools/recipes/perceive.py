@@ -307,10 +307,11 @@ def constant_template(flats: list[np.ndarray], slices: dict[str, slice], path: P
 
 
 def rendered_frames(
-    camera_env, state_env, seconds: float, joints: np.ndarray, sigma: float, rng, least: int = 1
+    camera_env, state_env, seconds: float, joints: np.ndarray, sigma: float, rng, least: int = 1,
+    first: int = RENDER_SEED,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """More frames for the estimator, rendered for ``seconds`` of wall clock: ``camera_env``
-    (the dataset's env and camera flags) reset by seeds from ``RENDER_SEED`` up (a placement and
+    (the dataset's env and camera flags) reset by seeds from ``first`` up (a placement and
     a room no demonstration or evaluation draws), the arm set to a demonstrated configuration
     (a row of ``joints``, moved by Gaussian offsets of ``sigma`` radians, within the joints'
     limits), its camera's frame, and the state observation ``state_env`` computes there; at
@@ -324,7 +325,7 @@ def rendered_frames(
     limits = cam.agent.robot.get_qlimits()[0].cpu().numpy()
     start = time.perf_counter()
     while len(frames) < least or time.perf_counter() - start < seconds:
-        camera_env.reset(seed=RENDER_SEED + len(frames))
+        camera_env.reset(seed=first + len(frames))
         q = joints[rng.integers(len(joints))] + rng.normal(0.0, sigma, joints.shape[1])
         q = np.clip(q, limits[:, 0], limits[:, 1])
         cam.agent.robot.set_qpos(torch.as_tensor(q[None], dtype=torch.float32))
