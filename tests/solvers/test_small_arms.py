@@ -189,3 +189,47 @@ def test_the_koch_takes_a_thin_domino_between_its_jaws_faces():
     assert tips < height / 2  # the tips in its lower half, not 3 mm off its top
     assert tips > -SCREW_END_TOLERANCE  # the descent ends at most that far low
     env.close()
+
+
+SO100_BLOCK = ROOT / "embodied_envs" / "data" / "layouts" / "so100_block.json"
+
+
+def so100_block_episode(seed: int, mode: str = "pd_joint_pos"):
+    """so100_block's episode ``seed`` by the expert in ``mode``: (success, solver, the wrist
+    roll's joint position per control step)."""
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(SO100_BLOCK), control_mode=mode)
+    env.reset(seed=seed)
+    solver = PickPlaceSolver(env, seed=seed)
+    rolls, step = [], solver._step_once
+
+    def watched(action):
+        step(action)
+        rolls.append(solver._qpos()[0, 4])
+
+    solver._step_once = watched
+    solver.solve()
+    success = bool(env.unwrapped.evaluate()["success"][0])
+    env.close()
+    return success, solver, np.array(rolls)
+
+
+def test_the_wrist_rolls_the_short_way_to_a_two_jaw_grasp():
+    """A two-jaw grasp turned by pi about its approach is the same grasp: of the two the
+    expert takes the one its arm reaches in fewer steps (so100_block seed 5 turned the SO-100's
+    wrist roll 4.4 rad the long way, 10 s in pd_joint_delta_pos; the other way 1.1 rad)."""
+    success, _, rolls = so100_block_episode(5)
+    assert success
+    assert np.abs(np.diff(rolls)).sum() < 1.6  # rad over the episode
+
+
+def test_the_hand_rises_out_of_a_start_among_the_obstacle_points():
+    """so100_block seed 10: the can stands under the SO-100's moving jaw at rest, inside the
+    obstacle points' 1 cm spheres (no contact in the simulation), where no path may start: the
+    hand first rises straight up, then plans, and the episode succeeds."""
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(SO100_BLOCK))
+    env.reset(seed=10)
+    solver = PickPlaceSolver(env, seed=10)
+    assert solver._start_collides(0, solver._qpos()[0])
+    env.close()
+    success, solver, _ = so100_block_episode(10)
+    assert success and not solver.reports[0].plan_failures
