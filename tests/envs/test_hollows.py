@@ -2,13 +2,15 @@
 as a bare surface, a mug written as two objects (a concave body and a handle), a tray with a
 1 cm recess in a 3 cm base. Each is loaded as a user's asset (its collision mesh its visual
 mesh's shape), and a 2 cm block is dropped in it in SAPIEN on the collision parts the loader
-chose; kept as written (``EMBODIED_ENVS_DECOMPOSE=0``) the simulator's hulls fill the hollow."""
+chose; kept as written (``EMBODIED_ENVS_DECOMPOSE=0``) the simulator's hulls fill the hollow.
+The shipped mug, whose collision is made hollow, is dropped into as shipped."""
 
 import warnings
 
 import numpy as np
 import pytest
 import sapien
+from conftest import DATA
 from shapes import mug_objects, open_box, tray, write_asset
 
 from embodied_envs.layout import asset_geometry, parse_urdf
@@ -88,3 +90,16 @@ def test_a_block_set_in_the_hollow_rests_on_its_visual_floor(assets, name, monke
     assert kept.collision.source is None
     assert resting_gap(kept, xy) == pytest.approx(depth, abs=HOLLOW_TOLERANCE)
     col._convex_collision.cache_clear()
+
+
+def test_a_block_set_in_the_shipped_mug_rests_on_its_visual_floor():
+    """The shipped mug's collision (a base, wall pieces and the handle) leaves its hollow open:
+    kept as shipped, a block dropped at the cup's centre rests on the visual floor, and the
+    mug is loaded without a word about a filled hollow."""
+    urdf = DATA / "assets" / "mug" / "mug.urdf"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        spec = parse_urdf(urdf)
+    assert spec.collision.source is None  # its own collision file, not decomposed
+    cup = (asset_geometry(spec).vertices[:, 0].min() + 0.038, 0.0)  # its axis, 38 mm in
+    assert resting_gap(spec, cup) == pytest.approx(0.0, abs=HOLLOW_TOLERANCE)

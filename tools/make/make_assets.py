@@ -218,15 +218,24 @@ def bottle() -> Asset:
 
 
 def mug() -> Asset:
-    r, h = 0.038, 0.09
-    body = revolve([[0, 0], [r, 0], [r, h], [r - 0.005, h], [r - 0.005, 0.008], [0, 0.008]])
+    """A mug whose collision is hollow as its visual mesh: a base the floor's thickness, one
+    convex wall piece per section of the revolved wall (so it follows the visual wall
+    exactly) and the handle's three boxes; an object set inside rests on the visual floor."""
+    r, h, t, floor, n = 0.038, 0.09, 0.005, 0.008, 32
+    body = revolve([[0, 0], [r, 0], [r, h], [r - t, h], [r - t, floor], [0, floor]], sections=n)
     handle = [
         box([0.03, 0.012, 0.012], [r + 0.012, 0, 0.072]),
         box([0.012, 0.012, 0.056], [r + 0.027, 0, 0.045]),
         box([0.03, 0.012, 0.012], [r + 0.012, 0, 0.018]),
     ]
     parts = [Part(body, (0.95, 0.55, 0.1))] + [Part(m, (0.95, 0.55, 0.1)) for m in handle]
-    return Asset("mug", parts, collision=[cylinder(r, h, [0, 0, h / 2])] + handle, mass=0.3)
+    collision = [cylinder(r, floor, [0, 0, floor / 2], sections=n)]
+    for k in range(n):
+        a0, a1 = 2 * np.pi * k / n, 2 * np.pi * (k + 1) / n
+        pts = [[rr * np.cos(a), rr * np.sin(a), zz] for a in (a0, a1)
+               for rr, zz in ((r, 0), (r, h), (r - t, h), (r - t, floor))]
+        collision.append(trimesh.Trimesh(vertices=np.array(pts)).convex_hull)
+    return Asset("mug", parts, collision=collision + handle, mass=0.3)
 
 
 def bowl() -> Asset:
