@@ -161,7 +161,11 @@ class GraspChoice:
             if planar:
                 options, labels = self._planar(checked, closing, support, gripper)
                 poses.append(self._against_fixed_jaw(options, verts))
-                self.grasp_twins[i] = labels
+                # the two ways are one grasp where a still jaw's shift places the object
+                # against it either way (the SO-100); the Koch's slanted moving jaw takes them
+                # differently (its zoo ball, battery and pen: 4/6, 5/6, 4/6 with twins against
+                # 5/6, 6/6, 6/6 without)
+                self.grasp_twins[i] = labels if self.robot_hand.fixed_jaw else None
                 continue
             down = np.array([0, 0, -1.0])
             footprint = [
