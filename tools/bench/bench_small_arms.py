@@ -3,12 +3,14 @@
 object, with each failed episode's stage.
 
 Each layout runs ``--episodes`` seeded episodes as ``embodied-envs collect`` runs them (reset
-with the seed, the solver seeded by it, ``pd_joint_pos``). A failure is named by its first
-unplanned stage, else by its misses (``grasp``: the object did not rise with the hand;
-``carry``: it left the hand), else ``execution`` (everything ran, the task did not succeed:
-``place``/``held`` say where the object ended). Prints a line per layout, then a table per arm.
+with the seed, the solver seeded by it, ``--control-mode``, default ``pd_joint_pos``). A
+failure is named by its first unplanned stage, else by its misses (``grasp``: the object did
+not rise with the hand; ``carry``: it left the hand), else ``execution`` (everything ran, the
+task did not succeed: ``place``/``held`` say where the object ended). Prints a line per layout,
+then a table per arm.
 
 Usage: python tools/bench/bench_small_arms.py [--episodes 6] [--layout FILE ...]
+       [--control-mode pd_joint_pos]
 """
 
 from __future__ import annotations
@@ -49,10 +51,11 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=6)
     ap.add_argument("--seed", type=int, default=0, help="first episode seed")
     ap.add_argument("--layout", type=Path, nargs="+", default=None)
+    ap.add_argument("--control-mode", default="pd_joint_pos", help="the env's control mode")
     args = ap.parse_args()
     table = defaultdict(dict)
     for path in args.layout or sorted(ZOO.glob("*.json")):
-        env = gym.make("PickEmbodiedGen-v1", layout_file=str(path), control_mode="pd_joint_pos")
+        env = gym.make("PickEmbodiedGen-v1", layout_file=str(path), control_mode=args.control_mode)
         ok, fails, t0 = 0, [], time.perf_counter()
         for seed in range(args.seed, args.seed + args.episodes):
             env.reset(seed=seed)

@@ -25,6 +25,7 @@ import json
 import math
 import os
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import trimesh
@@ -114,51 +115,77 @@ HIDDEN_RECEPTACLES = {"bowl_11": (bowl(0.055, 0.035, 0.005), 0.15, "the bowl")}
 HIDDEN_PLACES = (("cube_into_bowl", "cube_25", "bowl_11", "Put the cube into the bowl."),)
 
 
+@dataclass(frozen=True)
+class Table:
+    """The table a set's layouts stand on: its node, pose and description, the robot's spot on
+    its edge (facing its centre, at the top's height ``top``) and whether its asset is shipped
+    (else it lies in the set's own assets folder)."""
+
+    node: str
+    pose: list[float]
+    desc: str
+    spot: list[float]
+    top: float
+    shipped: bool = True
+
+
+ROUND_TABLE = Table("round_table", ROUND["position"]["round_table"],
+                    ROUND["objs_desc"]["round_table"], SPOT, TABLE_TOP)  # fmt: skip
+OFFSETS = ((0.19, 0.05), (0.19, -0.09))  # the file's poses: (out from the spot, to its left)
+
+
 def layout(robot: str, movers: dict[str, str], receptacle: str | None, task: str,
-           assets: Path, out: Path) -> dict:
-    """A layout in EmbodiedGen's form on the round table (``movers``: node -> description)."""
+           assets: Path, out: Path, table: Table = ROUND_TABLE,
+           others: dict[str, str] | None = None,
+           offsets: tuple[tuple[float, float], ...] = OFFSETS,
+           ships_at: Path = SMALL_ZOO / "layouts") -> dict:
+    """A layout in EmbodiedGen's form on ``table`` (``movers``: node -> description; ``others``:
+    the distractors' nodes -> descriptions, default the receptacle's; ``offsets``: each node's
+    file pose, movers first, ahead of the spot and to its left; ``ships_at``: the folder the
+    shipped assets' paths start from)."""
     rel_assets = Path(os.path.relpath(assets, out))
     # the shipped assets relative to where the layouts ship, wherever --out is (as
     # make_layouts.py does): the files do not depend on the folder they were written to
-    shipped = Path(os.path.relpath(DATA / "assets", SMALL_ZOO / "layouts"))
-    nodes = list(movers) + ([receptacle] if receptacle else [])
+    shipped = Path(os.path.relpath(DATA / "assets", ships_at))
+    if others is None:
+        receptacles = {**RECEPTACLES, **HIDDEN_RECEPTACLES}
+        others = {receptacle: receptacles[receptacle][2]} if receptacle else {}
+    nodes = list(movers) + list(others)
+    ctx, spot = table.node, table.spot
     position = {
         "background": ROUND["position"]["background"],
-        "round_table": ROUND["position"]["round_table"],
-        robot: SPOT,
+        ctx: table.pose,
+        robot: spot,
     }
     # the file's own poses: in front of the spot, on the top (the env draws each episode's)
-    heading = 2 * math.atan2(SPOT[5], SPOT[6])
-    for k, node in enumerate(nodes):
-        d, side = (0.19, 0.05) if k == 0 else (0.19, -0.09)
-        x = SPOT[0] + d * math.cos(heading) - side * math.sin(heading)
-        y = SPOT[1] + d * math.sin(heading) + side * math.cos(heading)
-        position[node] = [round(x, 4), round(y, 4), TABLE_TOP + 0.001, 0.0, 0.0, 0.0, 1.0]
-    desc = {"background": ROUND["objs_desc"]["background"],
-            "round_table": ROUND["objs_desc"]["round_table"], **movers}
-    if receptacle:
-        desc[receptacle] = {**RECEPTACLES, **HIDDEN_RECEPTACLES}[receptacle][2]
+    heading = 2 * math.atan2(spot[5], spot[6])
+    for node, (d, side) in zip(nodes, offsets[: len(nodes)], strict=True):
+        x = spot[0] + d * math.cos(heading) - side * math.sin(heading)
+        y = spot[1] + d * math.sin(heading) + side * math.cos(heading)
+        position[node] = [round(x, 4), round(y, 4), table.top + 0.001, 0.0, 0.0, 0.0, 1.0]
+    desc = {"background": ROUND["objs_desc"]["background"], ctx: table.desc, **movers,
+            **others}  # fmt: skip
     return {
         "tree": {
-            "background": [["round_table", "FLOOR"], [robot, "IN"]],
-            "round_table": [[n, "ON"] for n in nodes],
+            "background": [[ctx, "FLOOR"], [robot, "IN"]],
+            ctx: [[n, "ON"] for n in nodes],
         },
         "relation": {
             "background": "background",
-            "context": "round_table",
-            "distractor_objs": [receptacle] if receptacle else [],
+            "context": ctx,
+            "distractor_objs": list(others),
             "manipulated_objs": list(movers),
             "robot": robot,
             "task_desc": task,
         },
         "objs_mapping": {
-            "background": "background", "round_table": "context",
+            "background": "background", ctx: "context",
             **{n: "manipulated_objs" for n in movers},
-            **({receptacle: "distractor_objs"} if receptacle else {}),
+            **{n: "distractor_objs" for n in others},
         },
         "assets": {
             "background": str(shipped / "background"),
-            "round_table": str(shipped / "round_table"),
+            ctx: str((shipped if table.shipped else rel_assets) / ctx),
             **{n: str(rel_assets / n) for n in nodes},
         },
         "position": position,
