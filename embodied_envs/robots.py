@@ -133,6 +133,11 @@ class Hand:
     close_gap: float = 0.0  # m: first at once to the object's width plus this (0: shut at once)
     close_step: float = 0.0  # then its target leads the jaw by this (action) until it grasps
     squeeze: float = 0.0  # and stays this far (action) past where the jaw stands
+    lift_heights: tuple[float, ...] = (0.05, 0.10)  # m, lifts after grasping, tried in order
+    # (the carry plans from there: 5 cm before 10 saves the Panda 3-7 steps an episode on the
+    # shipped layouts and the zoo); the SO-100's first is 2 cm, its carry rising the rest
+    # while its base turns (in pd_joint_delta_pos the lift cost 40-90 of 500 steps); not the
+    # Koch's (its arm gives way under the squeeze: at 2 cm it lost the zoo's battery 3 times in 6)
     drifts: bool = False  # its arm gives way while its jaw squeezes an object (the Koch: 0.05-0.3
     # rad off its targets, mostly the wrist): it plans from its joint targets and the hand
     # where they put it, and corrects at the goal while the object is off it (solvers/)
@@ -261,8 +266,11 @@ PANDA_HAND = Hand(
 # object), the palm behind them (0.02 m across: the jaws' roots; the jaw's motor, 0.048 m
 # across, is 0.045 m back): objects are taken 0.02 m below their top, from 0.04 m back, against
 # the still jaw (grasp_choice.py). Its pd_joint_pos drives the jaw's angle: 0 open, -1.1 shut,
-# with the arm's gains (stiffness 1e3, 100 N m), so it closes gently; holding an object against
-# the still jaw its wrist gives way 0.1-0.26 rad (drifts: docs/robots.md, "Small objects")
+# with the arm's gains (stiffness 1e3, 100 N m), so it closes gently, and holds with its target
+# 2 mrad past the jaw (2 N m; with none, the jaw's target where it stood when it met the block,
+# a block held by the drive's residual slipped at the lift: so100_block seed 2 in
+# pd_joint_delta_pos); holding an object against the still jaw its wrist gives way 0.1-0.26 rad
+# (drifts: docs/robots.md, "Small objects")
 SO100_HAND = Hand(
     link="Fixed_Jaw", grasp_in_link=(-0.0306, -0.0873, 0.0, 0.5, 0.5, 0.5, -0.5),
     boxes=(("opening", 0.06), ("finger_width", 0.02), ("finger_thickness", 0.015),
@@ -273,8 +281,8 @@ SO100_HAND = Hand(
     action_openings=((0.005, -1.1), (0.0121, -1.0), (0.0187, -0.9), (0.0251, -0.8),
                      (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
-    close_gap=0.004, close_step=0.02, squeeze=0.0, max_path_steps=300, convertible=False,
-    fixed_jaw=0.0385, drifts=True,
+    close_gap=0.004, close_step=0.02, squeeze=0.002, max_path_steps=300, convertible=False,
+    fixed_jaw=0.0385, drifts=True, lift_heights=(0.02, 0.05, 0.10),
     tilt_reach=((0.14, 0.0, 0.0), (0.18, 0.0, 15.0), (0.22, 0.0, 15.0), (0.26, 0.0, 30.0),
                 (0.30, 0.0, 30.0), (0.34, 15.0, 45.0)),
 )  # fmt: skip

@@ -103,6 +103,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
             cfg,
             grasp_depth=hand.grasp_depth if cfg.grasp_depth is None else cfg.grasp_depth,
             approach_offset=cfg.approach_offset or hand.approach_offset,
+            lift_heights=cfg.lift_heights or hand.lift_heights,
             max_path_steps=cfg.max_path_steps or hand.max_path_steps,
             convertible=cfg.convertible and hand.convertible,
             joint_vel_limits=cfg.joint_vel_limits or hand.joint_vel,

@@ -19,9 +19,8 @@ class SolverConfig:
     grasp_depth: float | None = None  # m, grasp centre below the object's top (None: the
     # robot's hand entry's, robots.py)
     min_tcp_height: float = 0.015  # m, lowest grasp centre above the support surface
-    lift_heights: tuple[float, ...] = (0.05, 0.10)  # m, lifts after grasping, tried in order
-    # (the carry plans from there: 5 cm before 10 saves 3-7 steps an episode on the shipped
-    # layouts and the zoo, with the same successes)
+    lift_heights: tuple[float, ...] | None = None  # m, lifts after grasping, tried in order
+    # (None: the robot's hand entry's, robots.py)
     gripper_steps: int = 8  # control steps to open the gripper, and at most to close it
     close_steps: int = 40  # control steps at most to close a jaw gently (``_close_gently``)
     finger_rest: float = 1e-4  # m per step: fingers moving less are at rest (closed on the

@@ -233,3 +233,15 @@ def test_the_hand_rises_out_of_a_start_among_the_obstacle_points():
     env.close()
     success, solver, _ = so100_block_episode(10)
     assert success and not solver.reports[0].plan_failures
+
+
+@pytest.mark.parametrize("seed", [2, 5])
+def test_the_so100_takes_its_block_in_pd_joint_delta_pos(seed):
+    """In pd_joint_delta_pos each SO-100 joint moves at most 0.45 rad/s: seed 5 turns its base
+    2.8 rad and ended at the 500th step with its 5 cm lift (90 steps); lifted 2 cm first
+    (``Hand.lift_heights``), the carry rises the rest while the base turns. Seed 2's jaw held
+    its target where it stood when it met the block, and the block slipped at the lift: the
+    jaw's target stays ``squeeze`` (2 mrad) past it."""
+    success, solver, _ = so100_block_episode(seed, "pd_joint_delta_pos")
+    assert success and not solver.reports[0].misses
+    assert solver.steps < 490
