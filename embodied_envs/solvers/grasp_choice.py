@@ -23,10 +23,12 @@ from embodied_envs.layout.assets import (
     parse_urdf,
 )
 from embodied_envs.layout.pose import LayoutPose
+from embodied_envs.solvers.grasp_types import GraspConfig
 from embodied_envs.solvers.grasps import (
     GraspError,
     asset_grasps,
     grasp_is_valid,
+    hull_points,
     posed_clearance,
     posed_grasps,
     widest_height,
@@ -98,8 +100,26 @@ def _held_so(grasps, object_to_world: np.ndarray, hand_y: np.ndarray) -> np.ndar
     return down & (np.abs(grasps.closing @ rot.T @ hand_y) >= cos)
 
 
+# the part of the friction cone of the jaws' pads against an object that a grasp found on
+# tilted rays may use (``GraspConfig.tilted_cone_deg``): the SO-100's pads (ManiSkill's
+# friction 2) on a block (0.6) give 35 degrees, the Koch's (0.3) 16
+TILTED_SHARE = 2 / 3
+
+
 class GraspChoice:
     """The grasps to try per env (a mixin of the solver)."""
+
+    def asset_config(self, spec) -> GraspConfig:
+        """The grasp synthesis' numbers for an asset (``spec``): ``tilted_cone_deg``,
+        ``TILTED_SHARE`` of the friction cone of the jaws' pads on it (PhysX averages the
+        two materials' friction: the robot's ManiSkill ``gripper`` material and the asset's
+        mu2); none where the robot names no pad material."""
+        pads = getattr(self.base.agent, "urdf_config", {}).get("_materials", {}).get("gripper")
+        if not pads:
+            return self.grasp_config
+        mu = (pads["dynamic_friction"] + spec.dynamic_friction) / 2
+        cone = TILTED_SHARE * np.degrees(np.arctan(mu))
+        return dataclasses.replace(self.grasp_config, tilted_cone_deg=float(cone))
 
     def grasp_poses(self) -> list[list[tuple[sapien.Pose, float]]]:
         """Per env, the grasps to try where its target lies now, best first, each with the
@@ -123,7 +143,7 @@ class GraspChoice:
             pose = LayoutPose.from_raw(actor.pose.raw_pose[0].cpu().numpy())
             support = float(self.base.layout_scene.top_z[i])
             try:
-                grasps = asset_grasps(spec, self.grasp_config, gripper)
+                grasps = asset_grasps(spec, self.asset_config(spec), gripper)
             except GraspError as e:  # this hand takes the object nowhere: said per episode
                 if not self.reports[i].plan_failures:
                     self.reports[i].plan_failures.append(f"grasp: {e}")
@@ -160,11 +180,10 @@ class GraspChoice:
                 continue
             if planar:
                 options, labels = self._planar(checked, closing, support, gripper)
-                poses.append(self._against_fixed_jaw(options, verts))
+                surface = pose.transform_points(hull_points(spec, self.cfg.obstacle_points))
+                poses.append(self._against_fixed_jaw(options, np.concatenate([verts, surface])))
                 # the two ways are one grasp where a still jaw's shift places the object
-                # against it either way (the SO-100); the Koch's slanted moving jaw takes them
-                # differently (its zoo ball, battery and pen: 4/6, 5/6, 4/6 with twins against
-                # 5/6, 6/6, 6/6 without)
+                # against it either way (the SO-100's, the Koch's)
                 self.grasp_twins[i] = labels if self.robot_hand.fixed_jaw else None
                 continue
             down = np.array([0, 0, -1.0])
@@ -240,13 +259,17 @@ class GraspChoice:
 
     def _against_fixed_jaw(self, poses: list, verts: np.ndarray) -> list:
         """``poses`` of a hand with a jaw that stands still (``robots.Hand.fixed_jaw``) moved
-        along their closing line so that the object (``verts``, world) lies the arm's precision
+        along their closing line so that the object (``verts``, world: its vertices and surface
+        points, ``grasps.hull_points``) lies the arm's precision
         (``GraspConfig.margin``) from that jaw's inner face, the other jaw at its widest
         (``Hand.action_openings``' last): it then presses the object that far onto the still
         jaw, not across the gap between the open jaws (the SO-100's still jaw stands 3.85 cm
         from the grasp origin: a 2 cm marker centred there lay 2.9 cm from it, and was pushed
-        1.4-2 cm and missed). The checks the grasp passed were the hand model's, about the
-        unmoved centre. Unchanged without one."""
+        1.4-2 cm and missed). The object's extent is its points between the jaws
+        (``GripperModel.between``): an L-shaped block's other leg, out past the fingers' side,
+        had put the still jaw 2.9 cm from the bar it closed on. The checks
+        the grasp passed were the hand model's, about the unmoved centre. Unchanged without
+        one."""
         face = self.robot_hand.fixed_jaw
         if not face:
             return poses
@@ -255,9 +278,10 @@ class GraspChoice:
         out = []
         for pose, _ in poses:
             m = pose.to_transformation_matrix()
-            c = way * m[:3, 1]  # toward the still jaw
-            shift = (verts @ c).max() - m[:3, 3] @ c + self.grasp_config.margin - abs(face)
-            out.append((sapien.Pose(m[:3, 3] + shift * c, pose.q), wide_open))
+            local = (verts - m[:3, 3]) @ m[:3, :3]  # the grasp frame
+            between = self.gripper_model.between(local)
+            shift = (way * local[between, 1]).max() + self.grasp_config.margin - abs(face)
+            out.append((sapien.Pose(m[:3, 3] + shift * way * m[:3, 1], pose.q), wide_open))
         return out
 
     def _footprint_fits(

@@ -20,6 +20,10 @@ class GraspConfig:
     surface_samples: int = 1500  # points sampled on the outer surface
     check_points: int = 3000  # object points the gripper boxes are checked against
     cone_deg: float = 15.0  # friction cone half-angle kept (mu 0.6 allows 31)
+    tilted_cone_deg: float = 0.0  # where no pair is within cone_deg, pairs on rays tilted from
+    # the inward normal, both normals within this of the closing line (a triangular prism
+    # lying: its faces 120 degrees apart, each 30 off the line across; 0: none). The solver
+    # sets it from the jaws' and the object's friction (``GraspChoice.asset_config``)
     width_margin: float = 0.012  # m, contact width at most opening - margin
     min_width: float = 0.004  # m
     approaches: int = 12  # approach directions around each closing line

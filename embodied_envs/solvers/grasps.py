@@ -155,6 +155,38 @@ def _exit_points(hulls, points: np.ndarray, normals: np.ndarray):
     return out, out_n
 
 
+def _spans(points: np.ndarray, exits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each pair's unit closing line (from the point to its exit) and width; zero where the
+    ray found no exit (NaN: its width fits nothing)."""
+    span = exits - points
+    width = np.linalg.norm(span, axis=1)
+    closing = np.nan_to_num(span / np.maximum(width, 1e-9)[:, None])
+    return closing, width
+
+
+TILTS = (1 / 3, 2 / 3, 1.0)  # parts of the tilted cone the tilted rays lean at
+AZIMUTHS = 12  # and the directions around each inward normal they lean toward
+
+
+def _tilted_rays(points: np.ndarray, normals: np.ndarray, cone: float):
+    """Rays into the material from each surface point, leaning from its inward normal by
+    ``TILTS`` of ``cone`` (rad) toward ``AZIMUTHS`` directions: ``(points, rays)``, each point
+    repeated per ray."""
+    inward = -normals
+    ref = np.where(np.abs(inward[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(inward, ref)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(inward, u)
+    az = np.arange(AZIMUTHS) * 2 * np.pi / AZIMUTHS
+    lean = np.asarray(TILTS) * cone
+    a, b = np.meshgrid(lean, az, indexing="ij")
+    a, b = a.ravel(), b.ravel()  # (k,)
+    rays = (np.cos(a)[None, :, None] * inward[:, None]
+            + (np.sin(a) * np.cos(b))[None, :, None] * u[:, None]
+            + (np.sin(a) * np.sin(b))[None, :, None] * v[:, None])  # fmt: skip
+    return np.repeat(points, len(a), 0), rays.reshape(-1, 3)
+
+
 def _frames(closing: np.ndarray, count: int) -> np.ndarray:
     """``count`` unit approach directions perpendicular to each closing line ``(n, 3)``:
     ``(n, count, 3)``, starting from the one nearest to -z of the object's frame."""
@@ -182,19 +214,16 @@ def _compute(spec: AssetSpec, cfg: GraspConfig, gripper: GripperModel) -> Grasps
     rng = np.random.default_rng(_seed(spec))
     points, normals, hulls = _outer_surface(geom.parts, cfg.surface_samples, rng)
     mesh = trimesh.util.concatenate(hulls)
+    fits = lambda width: (width >= cfg.min_width) & (width <= gripper.opening - cfg.width_margin)  # noqa: E731
     exits, exit_n = _exit_points(hulls, points, normals)
-    found = ~np.isnan(exits[:, 0])
-    span = exits - points
-    width = np.linalg.norm(span, axis=1)
-    closing = np.zeros_like(span)
-    closing[found] = span[found] / np.maximum(width[found, None], 1e-9)
-    cos_cone = np.cos(np.radians(cfg.cone_deg))
-    ok = (
-        found
-        & (width >= cfg.min_width)
-        & (width <= gripper.opening - cfg.width_margin)
-        & (np.einsum("ij,ij->i", np.nan_to_num(exit_n), closing) >= cos_cone)
-    )
+    closing, width = _spans(points, exits)
+    ok = fits(width) & (np.einsum("ij,ij->i", exit_n, closing) >= np.cos(np.radians(cfg.cone_deg)))
+    if not ok.any() and cfg.tilted_cone_deg > cfg.cone_deg:
+        points, rays = _tilted_rays(points, normals, np.radians(cfg.tilted_cone_deg))
+        exits, exit_n = _exit_points(hulls, points, -rays)
+        closing, width = _spans(points, exits)
+        cos_cone = np.cos(np.radians(cfg.tilted_cone_deg))
+        ok = fits(width) & (np.einsum("ij,ij->i", exit_n, closing) >= cos_cone)
     vols = np.array([h.volume for h in hulls])
     com = (np.array([h.center_mass for h in hulls]) * vols[:, None]).sum(0) / vols.sum()
     if not ok.any():

@@ -58,6 +58,15 @@ class GripperModel:
         )
         return np.stack([left, right, palm], -3)  # fmt: skip
 
+    def between(self, points: np.ndarray) -> np.ndarray:
+        """Which of ``points`` (..., 3; the grasp frame) stand between the jaws: within the
+        fingers' width and their length back from the tips, at any gap; every point where
+        none does (the jaws close on the whole object)."""
+        x, z = points[..., 0], points[..., 2]
+        inside = (np.abs(x) <= self.finger_width / 2) & (z <= self.finger_tip)
+        inside &= z >= self.finger_tip - self.finger_length
+        return inside if inside.any() else np.ones_like(inside)
+
 
 def to_tcp(points: np.ndarray, centre, closing, approach) -> np.ndarray:
     """World (or object) points in the TCP frames of grasps: ``(g, p, 3)``."""

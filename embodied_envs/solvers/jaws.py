@@ -10,6 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from embodied_envs.layout.assets import asset_geometry
+from embodied_envs.solvers.grasp_choice import asset_spec
+from embodied_envs.solvers.grasps import hull_points
+
 
 class Jaws:
     """Opening and closing the hand in every env (a mixin of the solver)."""
@@ -55,7 +59,8 @@ class Jaws:
         ``ModeActions.holds_weakly``: the lift that follows ends the grasp's push on the table).
         In a mode whose drive moves the jaw slower than ``pd_joint_pos``'s, the lead is
         ``ModeActions.lead``'s (the Koch's delta modes: else its jaw, at 0.11 rad/s, stops
-        ``close_steps`` short of the block)."""
+        ``close_steps`` short of the block). The first target is for the object's width
+        between the jaws (``_width_between_jaws``)."""
         hand, grip = self.robot_hand, self.gripper_entry
         way = np.sign(hand.action_closed - hand.action_open)
         per_qpos = (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)
@@ -66,9 +71,7 @@ class Jaws:
         def jaw() -> np.ndarray:  # the jaw's position as an action
             return hand.action_open + (self._fingers()[:, 0] - grip.open_qpos) * per_qpos
 
-        # the mover's extent along the closing axis (TCP y): its hull points in the TCP frame
-        held = self._held_points()
-        width = held[..., 1].max(1) - held[..., 1].min(1)
+        width = self._width_between_jaws()
         near = np.array([hand.action(w + hand.close_gap) for w in width])
         self.gripper[envs] = near[envs]
         there = lambda: bool(np.all(np.abs(jaw() - self.gripper)[envs] < step))  # noqa: E731
@@ -88,3 +91,22 @@ class Jaws:
             closing &= ~held & (self.gripper != hand.action_closed)
         if not self.mode_actions.holds_weakly:
             self._execute([None] * self.num_envs, self.cfg.settle_steps)
+
+    def _width_between_jaws(self) -> np.ndarray:
+        """Per env, the mover's extent along the closing axis (the TCP's y) over its vertices
+        and surface points between the jaws (``GripperModel.between``; ``grasps.hull_points``,
+        sampled once per asset): an L-shaped block's extent across the jaws is its other leg's
+        3.8 cm, and a jaw closing from there at its gentle pace stopped 1.6 cm short of the
+        1.6 cm bar."""
+        tcp = self._tcp().to_transformation_matrix().cpu().numpy()
+        obj = self.target.pose.to_transformation_matrix().cpu().numpy()
+        rel = np.linalg.inv(tcp) @ obj  # (n, 4, 4) the mover in the TCP frame
+        width = np.zeros(self.num_envs)
+        for i, layout in enumerate(self.base.layouts):  # assets differ in their point counts
+            spec = asset_spec(layout, self._node(i))
+            points = np.concatenate([asset_geometry(spec).vertices,
+                                     hull_points(spec, self.cfg.obstacle_points)])  # fmt: skip
+            local = points @ rel[i, :3, :3].T + rel[i, :3, 3]
+            y = local[self.gripper_model.between(local), 1]
+            width[i] = y.max() - y.min()
+        return width

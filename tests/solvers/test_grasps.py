@@ -9,6 +9,7 @@ from scipy.spatial import ConvexHull
 
 import embodied_envs  # noqa: F401
 from embodied_envs.layout import LayoutPose, asset_geometry, parse_urdf
+from embodied_envs.robots import ROBOTS
 from embodied_envs.solvers.grasps import (
     GraspConfig,
     GraspError,
@@ -157,6 +158,30 @@ def test_an_asset_wider_than_the_gripper_everywhere_is_refused(tmp_path):
     with pytest.raises(GraspError) as e:
         asset_grasps(parse_urdf(folder / "crate.urdf"))
     assert str(folder / "crate.urdf") in str(e.value) and "opening" in str(e.value)
+
+
+def test_a_lying_triangular_prism_is_taken_on_rays_tilted_within_the_pads_friction():
+    """A triangular prism lying on a face (the development set's, 3.8 cm side, 6.9 cm long):
+    its faces stand 120 degrees apart, so no pair is within the 15-degree cone; with a tilted
+    cone (the SO-100's pads: 35 degrees) its grasps close across the two slanted faces, both
+    contacts on the surface, each face's normal within the cone of the closing line."""
+    urdf = ROOT / "tests" / "data" / "small_sets" / "dev1" / "assets" / "tri_prism"
+    spec = parse_urdf(urdf / "tri_prism.urdf")
+    gripper = GripperModel(**dict(ROBOTS["so100"].hand.boxes))
+    with pytest.raises(GraspError):
+        asset_grasps(spec, GraspConfig(), gripper)
+    cfg = GraspConfig(tilted_cone_deg=35.0)
+    grasps = asset_grasps(spec, cfg, gripper)
+    geom = asset_geometry(spec)
+    assert len(grasps) >= 10
+    cos = np.cos(np.radians(cfg.tilted_cone_deg)) - 1e-6
+    for k in range(0, len(grasps), max(1, len(grasps) // 25)):
+        c, a, w = grasps.centre[k], grasps.closing[k], grasps.width[k]
+        assert cfg.min_width <= w <= gripper.opening - cfg.width_margin
+        for q, sign in ((c + a * w / 2, 1.0), (c - a * w / 2, -1.0)):
+            depth, normals = surface_state(geom.parts, q)
+            assert abs(depth) < 1e-4, (k, depth)
+            assert (sign * normals @ a >= cos).any(), (k, sign * normals @ a)
 
 
 def solve(name: str, seed: int, patch=None, **kwargs):

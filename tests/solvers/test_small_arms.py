@@ -148,13 +148,21 @@ def test_where_no_options_descent_plans_the_consistent_expert_still_approaches()
 
 @pytest.mark.parametrize("uid", ["so100", "koch-v1.1", "panda"])
 def test_a_hand_with_a_still_jaw_takes_the_object_against_it(uid):
+    """The grasp moved along its closing line so that the object between the jaws lies the
+    arm's precision from the still jaw's face: a 2 cm cube, and the same cube with a leg (an
+    L-shaped block) out past the fingers' side, which does not count."""
     hand, cfg = ROBOTS[uid].hand, GraspConfig()
-    solver = SimpleNamespace(robot_hand=hand, grasp_config=cfg)
+    model = GripperModel(**dict(hand.boxes))
+    solver = SimpleNamespace(robot_hand=hand, grasp_config=cfg, gripper_model=model)
     cube = np.array([[x, y, z] for x in (-0.01, 0.01) for y in (-0.01, 0.01)
                      for z in (0.74, 0.76)])  # fmt: skip
-    for closing in ([0.0, 1.0, 0.0], [1.0, 0.0, 0.0]):
+    out = model.finger_width / 2 + 0.005  # the leg's near side, past the fingers' side
+    leg = np.array([[x, y, z] for x in (out, out + 0.01) for y in (-0.04, 0.04)
+                    for z in (0.74, 0.76)])  # fmt: skip
+    for closing, points in (([0.0, 1.0, 0.0], cube), ([1.0, 0.0, 0.0], cube),
+                            ([0.0, 1.0, 0.0], np.concatenate([cube, leg]))):  # fmt: skip
         pose = grasp_pose(np.array([0.0, 0.0, -1.0]), np.array(closing), np.array([0, 0, 0.75]))
-        [(moved, opening)] = GraspChoice._against_fixed_jaw(solver, [(pose, 0.05)], cube)
+        [(moved, opening)] = GraspChoice._against_fixed_jaw(solver, [(pose, 0.05)], points)
         if not hand.fixed_jaw:  # jaws that close together: the grasp as it was
             assert moved is pose and opening == 0.05
             continue
@@ -245,3 +253,36 @@ def test_the_so100_takes_its_block_in_pd_joint_delta_pos(seed):
     success, solver, _ = so100_block_episode(seed, "pd_joint_delta_pos")
     assert success and not solver.reports[0].misses
     assert solver.steps < 490
+
+
+DEV1 = ROOT / "tests" / "data" / "small_sets" / "dev1" / "layouts"
+
+
+@pytest.mark.parametrize("arm", ["so100", "koch"])
+def test_a_flat_l_shaped_block_is_taken_by_its_bar(arm):
+    """The development set's L-shaped block (bars 1.6 cm wide and 1.1 cm high, the other leg
+    3.8 cm out): the hand measured it across its whole extent, the leg's, and missed every
+    seed (the SO-100's still jaw 2.9 cm off the bar, its jaw stopping short; the Koch's moving
+    jaw pushing it 1.4 cm across the table). Its extent between the jaws is the bar's."""
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(DEV1 / f"{arm}_l_block.json"),
+                   control_mode="pd_joint_pos")  # fmt: skip
+    env.reset(seed=0)
+    solver = PickPlaceSolver(env, seed=0)
+    solver.solve()
+    assert bool(env.unwrapped.evaluate()["success"][0]) and not solver.reports[0].misses
+    env.close()
+
+
+def test_the_tilted_cone_follows_the_pads_friction():
+    """A lying triangular prism needs each face's normal 30 degrees off the closing line: the
+    SO-100's pads (ManiSkill's friction 2) allow it on a block's 0.6, the Koch's (0.3) do not,
+    and the Panda's (2) do."""
+    spec = SimpleNamespace(dynamic_friction=0.6)
+    cones = {}
+    for uid in ("so100", "koch-v1.1", "panda"):
+        env = gym.make("PickEmbodiedGen-v1", layout_file=str(DEV1 / "so100_cube.json"),
+                       robot_uids=uid)  # fmt: skip
+        solver = SimpleNamespace(base=env.unwrapped, grasp_config=GraspConfig())
+        cones[uid] = GraspChoice.asset_config(solver, spec).tilted_cone_deg
+        env.close()
+    assert cones["so100"] > 30 and cones["panda"] > 30 and 15 < cones["koch-v1.1"] < 30
