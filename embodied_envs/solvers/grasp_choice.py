@@ -260,16 +260,16 @@ class GraspChoice:
     def _against_fixed_jaw(self, poses: list, verts: np.ndarray) -> list:
         """``poses`` of a hand with a jaw that stands still (``robots.Hand.fixed_jaw``) moved
         along their closing line so that the object (``verts``, world: its vertices and surface
-        points, ``grasps.hull_points``) lies the arm's precision
-        (``GraspConfig.margin``) from that jaw's inner face, the other jaw at its widest
-        (``Hand.action_openings``' last): it then presses the object that far onto the still
-        jaw, not across the gap between the open jaws (the SO-100's still jaw stands 3.85 cm
-        from the grasp origin: a 2 cm marker centred there lay 2.9 cm from it, and was pushed
-        1.4-2 cm and missed). The object's extent is its points between the jaws
+        points, ``grasps.hull_points``) lies the arm's precision (``GraspConfig.margin``) from
+        that jaw's inner face, the other jaw ``preshape`` past the object's far side (at most
+        its widest, ``Hand.action_openings``' last: opened wide, the Koch's jaw took 3 s to
+        close in its delta modes): it then presses the object that far onto the still jaw, not
+        across the gap between the open jaws (the SO-100's still jaw stands 3.85 cm from the
+        grasp origin: a 2 cm marker centred there lay 2.9 cm from it, and was pushed 1.4-2 cm
+        and missed). The object's extent is its points between the jaws
         (``GripperModel.between``): an L-shaped block's other leg, out past the fingers' side,
-        had put the still jaw 2.9 cm from the bar it closed on. The checks
-        the grasp passed were the hand model's, about the unmoved centre. Unchanged without
-        one."""
+        had put the still jaw 2.9 cm from the bar it closed on. The checks the grasp passed
+        were the hand model's, about the unmoved centre. Unchanged without one."""
         face = self.robot_hand.fixed_jaw
         if not face:
             return poses
@@ -281,7 +281,9 @@ class GraspChoice:
             local = (verts - m[:3, 3]) @ m[:3, :3]  # the grasp frame
             between = self.gripper_model.between(local)
             shift = (way * local[between, 1]).max() + self.grasp_config.margin - abs(face)
-            out.append((sapien.Pose(m[:3, 3] + shift * way * m[:3, 1], pose.q), wide_open))
+            cfg, across = self.grasp_config, np.ptp(local[between, 1])
+            gap = min(wide_open, cfg.margin + across + cfg.preshape)
+            out.append((sapien.Pose(m[:3, 3] + shift * way * m[:3, 1], pose.q), gap))
         return out
 
     def _footprint_fits(
