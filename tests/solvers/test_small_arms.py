@@ -257,14 +257,17 @@ def test_the_so100_takes_its_block_in_pd_joint_delta_pos(seed):
 DEV1 = ROOT / "tests" / "data" / "small_sets" / "dev1" / "layouts"
 
 
-@pytest.mark.parametrize("arm", ["so100", "koch"])
-def test_a_flat_l_shaped_block_is_taken_by_its_bar(arm):
+@pytest.mark.parametrize("folder, arm", [("dev1", "so100"), ("dev1", "koch"), ("accept2", "so100")])
+def test_a_flat_l_shaped_block_is_taken(folder, arm):
     """The development set's L-shaped block (bars 1.6 cm wide and 1.1 cm high, the other leg
     3.8 cm out): the hand measured it across its whole extent, the leg's, and missed every
     seed (the SO-100's still jaw 2.9 cm off the bar, its jaw stopping short; the Koch's moving
-    jaw pushing it 1.4 cm across the table). Its extent between the jaws is the bar's."""
-    env = gym.make("PickEmbodiedGen-v1", layout_file=str(DEV1 / f"{arm}_l_block.json"),
-                   control_mode="pd_joint_pos")  # fmt: skip
+    jaw pushing it 1.4 cm across the table). Its extent between the jaws is the bar's. The
+    acceptance set's (a 2.2 cm bar 1.5 cm high) is closed on along its 4.5 cm leg, where the
+    SO-100's jaw pushes it 6 mm onto its still jaw: 40 steps of its gentle close ended 3 mm
+    into that push (``SolverConfig.close_steps``)."""
+    layout = DEV1.parents[1] / folder / "layouts" / f"{arm}_l_block.json"
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
     env.reset(seed=0)
     solver = PickPlaceSolver(env, seed=0)
     solver.solve()
@@ -285,3 +288,4 @@ def test_the_tilted_cone_follows_the_pads_friction():
         cones[uid] = GraspChoice.asset_config(solver, spec).tilted_cone_deg
         env.close()
     assert cones["so100"] > 30 and cones["panda"] > 30 and 15 < cones["koch-v1.1"] < 30
+
