@@ -180,6 +180,10 @@ class GraspChoice:
                 continue
             if planar:
                 options, labels = self._planar(checked, closing, support, gripper)
+                if not options:  # none in the arm's plane: the pairs on tilted rays too
+                    also = dataclasses.replace(self.asset_config(spec), tilted_too=True)
+                    checked = (i, asset_grasps(spec, also, gripper), pose, centre)
+                    options, labels = self._planar(checked, closing, support, gripper)
                 surface = pose.transform_points(hull_points(spec, self.cfg.obstacle_points))
                 poses.append(self._against_fixed_jaw(options, np.concatenate([verts, surface])))
                 # the two ways are one grasp where a still jaw's shift places the object

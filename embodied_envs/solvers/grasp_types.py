@@ -24,6 +24,9 @@ class GraspConfig:
     # the inward normal, both normals within this of the closing line (a triangular prism
     # lying: its faces 120 degrees apart, each 30 off the line across; 0: none). The solver
     # sets it from the jaws' and the object's friction (``GraspChoice.asset_config``)
+    tilted_too: bool = False  # the tilted pairs besides the others (a planar arm that takes
+    # none of the others: a hex pencil lying on a face, its pairs closing 30 degrees off
+    # vertical or vertically)
     width_margin: float = 0.012  # m, contact width at most opening - margin
     min_width: float = 0.004  # m
     approaches: int = 12  # approach directions around each closing line

@@ -218,12 +218,19 @@ def _compute(spec: AssetSpec, cfg: GraspConfig, gripper: GripperModel) -> Grasps
     exits, exit_n = _exit_points(hulls, points, normals)
     closing, width = _spans(points, exits)
     ok = fits(width) & (np.einsum("ij,ij->i", exit_n, closing) >= np.cos(np.radians(cfg.cone_deg)))
-    if not ok.any() and cfg.tilted_cone_deg > cfg.cone_deg:
-        points, rays = _tilted_rays(points, normals, np.radians(cfg.tilted_cone_deg))
-        exits, exit_n = _exit_points(hulls, points, -rays)
-        closing, width = _spans(points, exits)
+    if (cfg.tilted_too or not ok.any()) and cfg.tilted_cone_deg > cfg.cone_deg:
+        t_points, rays = _tilted_rays(points, normals, np.radians(cfg.tilted_cone_deg))
+        t_exits, t_exit_n = _exit_points(hulls, t_points, -rays)
+        t_closing, t_width = _spans(t_points, t_exits)
         cos_cone = np.cos(np.radians(cfg.tilted_cone_deg))
-        ok = fits(width) & (np.einsum("ij,ij->i", exit_n, closing) >= cos_cone)
+        t_ok = fits(t_width) & (np.einsum("ij,ij->i", t_exit_n, t_closing) >= cos_cone)
+        keep = ok if cfg.tilted_too else np.zeros_like(ok)  # the straight pairs first
+        points, exits, closing, width = (
+            np.concatenate([a[keep], b])
+            for a, b in ((points, t_points), (exits, t_exits), (closing, t_closing),
+                         (width, t_width))
+        )  # fmt: skip
+        ok = np.concatenate([np.ones(int(keep.sum()), bool), t_ok])
     vols = np.array([h.volume for h in hulls])
     com = (np.array([h.center_mass for h in hulls]) * vols[:, None]).sum(0) / vols.sum()
     if not ok.any():

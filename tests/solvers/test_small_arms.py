@@ -289,3 +289,18 @@ def test_the_tilted_cone_follows_the_pads_friction():
         env.close()
     assert cones["so100"] > 30 and cones["panda"] > 30 and 15 < cones["koch-v1.1"] < 30
 
+
+
+def test_a_hex_pencil_lying_on_a_face_is_taken_across_its_slanted_faces():
+    """The second acceptance set's hex pencil (2.3 cm across its corners) lies on a face: its
+    pairs of faces close vertically or 30 degrees off vertical, which the SO-100's hand,
+    approaching within its arm's plane at most 45 degrees off straight down, cannot take (no
+    option: "approach" failed every seed). Its grasps then include pairs on rays tilted within
+    its pads' friction, across the two upper slanted faces."""
+    layout = DEV1.parents[1] / "accept3" / "layouts" / "so100_hex_pencil.json"
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
+    env.reset(seed=2)
+    solver = PickPlaceSolver(env, seed=2)
+    solver.solve()
+    assert bool(env.unwrapped.evaluate()["success"][0]) and not solver.reports[0].plan_failures
+    env.close()
