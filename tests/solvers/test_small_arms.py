@@ -257,6 +257,19 @@ def test_the_so100_takes_its_block_in_pd_joint_delta_pos(seed):
 DEV1 = ROOT / "tests" / "data" / "small_sets" / "dev1" / "layouts"
 
 
+def drawn_episode(folder: str, name: str, seed: int):
+    """The expert's episode ``seed`` in ``pd_joint_pos`` on the drawn set ``folder``'s layout
+    ``name`` (``tests/data/small_sets``, ``tools/make/make_small_sets.py``): (success, solver)."""
+    layout = DEV1.parents[1] / folder / "layouts" / f"{name}.json"
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
+    env.reset(seed=seed)
+    solver = PickPlaceSolver(env, seed=seed)
+    solver.solve()
+    success = bool(env.unwrapped.evaluate()["success"][0])
+    env.close()
+    return success, solver
+
+
 @pytest.mark.parametrize("folder, arm", [("dev1", "so100"), ("dev1", "koch"), ("accept2", "so100")])
 def test_a_flat_l_shaped_block_is_taken(folder, arm):
     """The development set's L-shaped block (bars 1.6 cm wide and 1.1 cm high, the other leg
@@ -266,13 +279,8 @@ def test_a_flat_l_shaped_block_is_taken(folder, arm):
     acceptance set's (a 2.2 cm bar 1.5 cm high) is closed on along its 4.5 cm leg, where the
     SO-100's jaw pushes it 6 mm onto its still jaw: 40 steps of its gentle close ended 3 mm
     into that push (``SolverConfig.close_steps``)."""
-    layout = DEV1.parents[1] / folder / "layouts" / f"{arm}_l_block.json"
-    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
-    env.reset(seed=0)
-    solver = PickPlaceSolver(env, seed=0)
-    solver.solve()
-    assert bool(env.unwrapped.evaluate()["success"][0]) and not solver.reports[0].misses
-    env.close()
+    success, solver = drawn_episode(folder, f"{arm}_l_block", 0)
+    assert success and not solver.reports[0].misses
 
 
 def test_the_tilted_cone_follows_the_pads_friction():
@@ -290,17 +298,11 @@ def test_the_tilted_cone_follows_the_pads_friction():
     assert cones["so100"] > 30 and cones["panda"] > 30 and 15 < cones["koch-v1.1"] < 30
 
 
-
 def test_a_hex_pencil_lying_on_a_face_is_taken_across_its_slanted_faces():
-    """The second acceptance set's hex pencil (2.3 cm across its corners) lies on a face: its
+    """The drawn set accept3's hex pencil (2.3 cm across its corners) lies on a face: its
     pairs of faces close vertically or 30 degrees off vertical, which the SO-100's hand,
     approaching within its arm's plane at most 45 degrees off straight down, cannot take (no
     option: "approach" failed every seed). Its grasps then include pairs on rays tilted within
     its pads' friction, across the two upper slanted faces."""
-    layout = DEV1.parents[1] / "accept3" / "layouts" / "so100_hex_pencil.json"
-    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
-    env.reset(seed=2)
-    solver = PickPlaceSolver(env, seed=2)
-    solver.solve()
-    assert bool(env.unwrapped.evaluate()["success"][0]) and not solver.reports[0].plan_failures
-    env.close()
+    success, solver = drawn_episode("accept3", "so100_hex_pencil", 2)
+    assert success and not solver.reports[0].plan_failures
