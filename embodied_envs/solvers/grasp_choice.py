@@ -28,7 +28,7 @@ from embodied_envs.solvers.grasps import (
     GraspError,
     asset_grasps,
     grasp_is_valid,
-    hull_points,
+    object_points,
     posed_clearance,
     posed_grasps,
     widest_height,
@@ -114,7 +114,7 @@ class GraspChoice:
         ``TILTED_SHARE`` of the friction cone of the jaws' pads on it (PhysX averages the
         two materials' friction: the robot's ManiSkill ``gripper`` material and the asset's
         mu2); none where the robot names no pad material."""
-        pads = getattr(self.base.agent, "urdf_config", {}).get("_materials", {}).get("gripper")
+        pads = self.base.agent.urdf_config.get("_materials", {}).get("gripper")
         if not pads:
             return self.grasp_config
         mu = (pads["dynamic_friction"] + spec.dynamic_friction) / 2
@@ -184,8 +184,8 @@ class GraspChoice:
                     also = dataclasses.replace(self.asset_config(spec), tilted_too=True)
                     checked = (i, asset_grasps(spec, also, gripper), pose, centre)
                     options, labels = self._planar(checked, closing, support, gripper)
-                surface = pose.transform_points(hull_points(spec, self.cfg.obstacle_points))
-                poses.append(self._against_fixed_jaw(options, np.concatenate([verts, surface])))
+                points = pose.transform_points(object_points(spec, self.cfg.obstacle_points))
+                poses.append(self._against_fixed_jaw(options, points))
                 # the two ways are one grasp where a still jaw's shift places the object
                 # against it either way (the SO-100's, the Koch's)
                 self.grasp_twins[i] = labels if self.robot_hand.fixed_jaw else None
@@ -264,7 +264,7 @@ class GraspChoice:
     def _against_fixed_jaw(self, poses: list, verts: np.ndarray) -> list:
         """``poses`` of a hand with a jaw that stands still (``robots.Hand.fixed_jaw``) moved
         along their closing line so that the object (``verts``, world: its vertices and surface
-        points, ``grasps.hull_points``) lies the arm's precision (``GraspConfig.margin``) from
+        points, ``grasps.object_points``) lies the arm's precision (``GraspConfig.margin``) from
         that jaw's inner face, the other jaw ``preshape`` past the object's far side (at most
         its widest, ``Hand.action_openings``' last: opened wide, the Koch's jaw took 3 s to
         close in its delta modes): it then presses the object that far onto the still jaw, not
@@ -284,9 +284,9 @@ class GraspChoice:
             m = pose.to_transformation_matrix()
             local = (verts - m[:3, 3]) @ m[:3, :3]  # the grasp frame
             between = self.gripper_model.between(local)
-            shift = (way * local[between, 1]).max() + self.grasp_config.margin - abs(face)
-            cfg, across = self.grasp_config, np.ptp(local[between, 1])
-            gap = min(wide_open, cfg.margin + across + cfg.preshape)
+            y, cfg = local[between, 1], self.grasp_config
+            shift = (way * y).max() + cfg.margin - abs(face)
+            gap = min(wide_open, cfg.margin + np.ptp(y) + cfg.preshape)
             out.append((sapien.Pose(m[:3, 3] + shift * way * m[:3, 1], pose.q), gap))
         return out
 

@@ -82,6 +82,13 @@ def hull_points(spec: AssetSpec, n: int) -> np.ndarray:
     return ASSET_FILES.get(key, lambda: cached(name(), sample, np.ndarray))
 
 
+def object_points(spec: AssetSpec, n: int) -> np.ndarray:
+    """An asset's collision vertices and about ``n`` points on its parts' hulls
+    (:func:`hull_points`), in its own frame: its extremes exactly and its surface between them
+    (the part of an object between a hand's jaws, ``GripperModel.between``)."""
+    return np.concatenate([asset_geometry(spec).vertices, hull_points(spec, n)])
+
+
 def _outer_surface(parts, n: int, rng: np.random.Generator):
     """Points and outward normals on the union of convex parts, none inside another part."""
     import trimesh  # only where grasps are computed (the CLI starts without it)

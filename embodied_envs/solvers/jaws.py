@@ -10,9 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.solvers.grasp_choice import asset_spec
-from embodied_envs.solvers.grasps import hull_points
+from embodied_envs.solvers.grasps import object_points
 
 
 class Jaws:
@@ -94,7 +93,7 @@ class Jaws:
 
     def _width_between_jaws(self) -> np.ndarray:
         """Per env, the mover's extent along the closing axis (the TCP's y) over its vertices
-        and surface points between the jaws (``GripperModel.between``; ``grasps.hull_points``,
+        and surface points between the jaws (``GripperModel.between``; ``grasps.object_points``,
         sampled once per asset): an L-shaped block's extent across the jaws is its other leg's
         3.8 cm, and a jaw closing from there at its gentle pace stopped 1.6 cm short of the
         1.6 cm bar."""
@@ -103,9 +102,7 @@ class Jaws:
         rel = np.linalg.inv(tcp) @ obj  # (n, 4, 4) the mover in the TCP frame
         width = np.zeros(self.num_envs)
         for i, layout in enumerate(self.base.layouts):  # assets differ in their point counts
-            spec = asset_spec(layout, self._node(i))
-            points = np.concatenate([asset_geometry(spec).vertices,
-                                     hull_points(spec, self.cfg.obstacle_points)])  # fmt: skip
+            points = object_points(asset_spec(layout, self._node(i)), self.cfg.obstacle_points)
             local = points @ rel[i, :3, :3].T + rel[i, :3, 3]
             y = local[self.gripper_model.between(local), 1]
             width[i] = y.max() - y.min()
