@@ -64,8 +64,8 @@ def grasp_frame(
 
     The closing direction is the narrow side of the minimum-area rectangle around the object's
     XY footprint; its sign is the one closest to the gripper's current closing axis. Its height
-    is ``grasp_depth`` below the top, or a round body's widest section above that
-    (``grasps.widest_height``).
+    is ``grasp_depth`` below the top, or a round body's widest section
+    (``grasps.widest_height``), not under ``min_tcp_height`` above the support.
     """
     hull = convex_hull_2d(vertices_world[:, :2])
     best = None
@@ -85,9 +85,9 @@ def grasp_frame(
     if np.dot(closing, current_y) < 0:
         closing = -closing
     top = vertices_world[:, 2].max()
-    z = max(top - cfg.grasp_depth, support_z + cfg.min_tcp_height)
-    z = min(z, top - 0.005)
-    z = widest_height(vertices_world, closing, z, top - 0.005)  # a round body: its equator
+    lowest = support_z + cfg.min_tcp_height
+    z = min(max(top - cfg.grasp_depth, lowest), top - 0.005)
+    z = widest_height(vertices_world, closing, z, top - 0.005, lowest)  # a round body: its equator
     return np.array([centre2[0], centre2[1], z]), closing
 
 

@@ -243,8 +243,9 @@ SHAPE_DROPPED, SEED_DROPPED = "slab", 0  # a seed whose plans repeat run to run
 
 
 def test_widest_height_closes_round_bodies_at_their_equator():
-    """A ball and a cylinder lying on its side are grasped at their widest section, whatever
-    their pose; a box or an upright can at the height asked for."""
+    """A ball, a cylinder and a hex prism lying on their side are grasped at their widest
+    section, whatever their pose, raised to it or (given ``lowest``) lowered; a box, an upright
+    can and a bottle's neck at the height asked for."""
     import trimesh  # shapes for this test only
 
     rng = np.random.default_rng(3)
@@ -264,6 +265,27 @@ def test_widest_height_closes_round_bodies_at_their_equator():
         can = trimesh.creation.cylinder(0.03, 0.12, sections=48).vertices + [0, 0, 0.06]
         assert widest_height(can, closing, 0.03, 0.11) == 0.03
     assert widest_height(ball, closing, 0.05, 0.04) == 0.05  # top below z
+    # above the equator (a hand that grasps near the top): lowered to it, not under lowest
+    for _ in range(5):
+        centre = rng.uniform(0.02, 0.05)
+        ball = trimesh.creation.icosphere(3, 0.03).vertices + [0, 0, centre]
+        z, top = centre + 0.02, centre + 0.025
+        assert widest_height(ball, closing, z, top) == z  # no lowest: only raised
+        assert abs(widest_height(ball, closing, z, top, lowest=0.0) - centre) < 0.002
+        assert widest_height(ball, closing, z, top, lowest=centre + 0.01) == centre + 0.01
+        hexagon = trimesh.creation.cylinder(0.014, 0.1, sections=6)  # a hex pencil on a face
+        pencil = hexagon.vertices @ turn.T  # its axis along x, two corners at the axis' height
+        pencil = pencil @ trimesh.transformations.rotation_matrix(np.pi / 6, [1, 0, 0])[:3, :3].T
+        pencil = pencil - [0, 0, pencil[:, 2].min()]
+        mid, high = pencil[:, 2].max() / 2, pencil[:, 2].max() - 0.005
+        across = np.array([0.0, 1.0, 0.0])
+        assert abs(widest_height(pencil, across, high, high, lowest=0.0) - mid) < 0.002
+        # an upright bottle: its body is as wide over most of its height, its neck is grasped
+        body = trimesh.creation.cylinder(0.035, 0.15, sections=48).vertices + [0, 0, 0.075]
+        neck = trimesh.creation.cylinder(0.012, 0.06, sections=48).vertices + [0, 0, 0.18]
+        bottle = np.concatenate([body, neck])
+        assert widest_height(bottle, closing, 0.2, 0.205, lowest=0.015) == 0.2
+        assert widest_height(box, closing, 0.06, 0.07, lowest=0.015) == 0.06
     # a flat (upright, zero-thickness) plate: qhull's degenerate case, retried joggled
     plate = np.array([[x, 0.0, z] for x in (-0.03, 0.03) for z in (0.0, 0.1)] + [[0, 0, 0.05]])
     assert widest_height(plate, closing, 0.02, 0.09) == 0.02
