@@ -306,3 +306,27 @@ def test_a_hex_pencil_lying_on_a_face_is_taken_across_its_slanted_faces():
     its pads' friction, across the two upper slanted faces."""
     success, solver = drawn_episode("accept3", "so100_hex_pencil", 2)
     assert success and not solver.reports[0].plan_failures
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_the_koch_takes_a_ball_at_its_equator(seed, monkeypatch):
+    """The Koch grasps 5 mm under an object's top (its knuckle): a 2.9 cm ball taken there
+    was squeezed down out of its jaws (accept4, seeds 1 and 4: three grasp misses each). A
+    body that bulges is taken at its widest section (``grasps.widest_height``), here the
+    equator, which lies less than 1.5 cm (``min_tcp_height``) above the table."""
+    import embodied_envs.solvers.grasp_choice as choice
+
+    heights = []
+    frame = choice.grasp_frame
+
+    def recorded(vertices, support, cfg, current_y):
+        centre, closing = frame(vertices, support, cfg, current_y)
+        heights.append((centre[2], vertices[:, 2].min(), vertices[:, 2].max()))
+        return centre, closing
+
+    monkeypatch.setattr(choice, "grasp_frame", recorded)
+    success, solver = drawn_episode("accept4", "koch_ball", seed)
+    assert success and not solver.reports[0].misses, solver.reports[0]
+    z, bottom, top = heights[0]
+    assert abs(z - (bottom + top) / 2) < 0.002, (z, bottom, top)
+    assert top - z > 0.012  # not 5 mm under the top
