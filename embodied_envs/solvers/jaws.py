@@ -13,6 +13,8 @@ import numpy as np
 from embodied_envs.solvers.grasp_choice import asset_spec
 from embodied_envs.solvers.grasps import object_points
 
+JAW_REST = 1e-3  # action per control step: a jaw moving less is at rest on what it holds
+
 
 class Jaws:
     """Opening and closing the hand in every env (a mixin of the solver)."""
@@ -53,7 +55,11 @@ class Jaws:
         (``robots.Hand.close_gap``; shut at once, the SO-100's jaw meets the object with 100
         N m and pushes the arm away): at once to the target's width across the jaws plus
         ``close_gap``, then the jaw's target ``close_step`` ahead of the jaw until the jaws
-        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw,
+        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw (in
+        an env whose grip slipped before, ``firm``: ``squeeze`` ahead of the jaw until the jaw
+        rests, ``JAW_REST``: the grasp is seen at the first touch, and a squeeze set there is
+        spent as the jaw closes on; pressing from the first grasp cost more episodes than it
+        saved, its arm giving way under the squeeze: docs/robots.md, "Small objects"),
         the arm held ``settle_steps`` more (none in a mode whose arm holds weakly,
         ``ModeActions.holds_weakly``: the lift that follows ends the grasp's push on the table).
         In a mode whose drive moves the jaw slower than ``pd_joint_pos``'s, the lead is
@@ -76,8 +82,10 @@ class Jaws:
         there = lambda: bool(np.all(np.abs(jaw() - self.gripper)[envs] < step))  # noqa: E731
         self._execute([None] * self.num_envs, self.cfg.close_steps, until=there)
         closing = envs & ~self._grasping()
+        pressing = np.zeros_like(closing)  # firm envs: grasping, the jaw not yet at rest
+        before = jaw()
         for _ in range(self.cfg.close_steps):
-            if not closing.any() or self.ended:
+            if not (closing | pressing).any() or self.ended:
                 break
             shut = jaw() + way * step  # from where the jaw stands: no wind-up
             shut = np.minimum(shut, hand.action_closed) if way > 0 else np.maximum(
@@ -85,9 +93,12 @@ class Jaws:
             )
             self.gripper[closing] = shut[closing]
             self._execute([None] * self.num_envs, 1)
+            now = jaw()
             held = closing & self._grasping()
-            self.gripper[held] = jaw()[held] + way * hand.squeeze
+            pressing = (pressing & (np.abs(now - before) >= JAW_REST)) | (held & self.firm)
+            self.gripper[held | pressing] = now[held | pressing] + way * hand.squeeze
             closing &= ~held & (self.gripper != hand.action_closed)
+            before = now
         if not self.mode_actions.holds_weakly:
             self._execute([None] * self.num_envs, self.cfg.settle_steps)
 

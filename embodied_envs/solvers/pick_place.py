@@ -133,6 +133,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
             planner.joint_acc_limits = np.asarray(self.cfg.joint_acc_limits, dtype=np.float64)
         self.motion = [SeededPlanner(p, self.cfg.motion, levers(self.base)) for p in self.planners]
         self.reports = [EnvReport(i) for i in range(self.num_envs)]
+        self.firm = np.zeros(self.num_envs, bool)  # per env: it lost a grip; it presses (jaws.py)
         self.steps = 0
         self.ended = False  # every env was truncated, failed, or succeeded hold_steps ago
         self.succeeded = np.zeros(self.num_envs, dtype=int)  # per env, steps in success so far
@@ -281,6 +282,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         missed = todo & ~held & np.array([not r.plan_failures for r in self.reports])
         for i in np.flatnonzero(missed):
             self.reports[i].misses.append(f"{'moved' if moved[i] else 'grasp'} (attempt {attempt})")
+        self.firm |= missed & ~moved
         if missed.any():  # open and back off upwards, for the next attempt
             self._set_gripper(missed, self.robot_hand.action_open)
             tcp = self._hand_pose()
@@ -374,6 +376,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
                 self._release(done & self.releases)
             placed |= done
             dropped = carry & ~still
+            self.firm |= dropped
             holding &= ~dropped
             if dropped.any():  # grasp again from where the object lies
                 self._set_gripper(dropped, self.robot_hand.action_open)
