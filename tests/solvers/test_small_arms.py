@@ -257,13 +257,13 @@ def test_the_so100_takes_its_block_in_pd_joint_delta_pos(seed):
 DEV1 = ROOT / "tests" / "data" / "small_sets" / "dev1" / "layouts"
 
 
-def drawn_episode(folder: str, name: str, seed: int):
+def drawn_episode(folder: str, name: str, seed: int, solver_class=PickPlaceSolver):
     """The expert's episode ``seed`` in ``pd_joint_pos`` on the drawn set ``folder``'s layout
     ``name`` (``tests/data/small_sets``, ``tools/make/make_small_sets.py``): (success, solver)."""
     layout = DEV1.parents[1] / folder / "layouts" / f"{name}.json"
     env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
     env.reset(seed=seed)
-    solver = PickPlaceSolver(env, seed=seed)
+    solver = solver_class(env, seed=seed)
     solver.solve()
     success = bool(env.unwrapped.evaluate()["success"][0])
     env.close()
@@ -330,3 +330,29 @@ def test_the_koch_takes_a_ball_at_its_equator(seed, monkeypatch):
     z, bottom, top = heights[0]
     assert abs(z - (bottom + top) / 2) < 0.002, (z, bottom, top)
     assert top - z > 0.012  # not 5 mm under the top
+
+
+class NeverFirm(PickPlaceSolver):
+    """The expert as it was: a retry closes as the first attempt did."""
+
+    @property
+    def firm(self):
+        return np.zeros(self.num_envs, bool)
+
+    @firm.setter
+    def firm(self, value):
+        pass
+
+
+def test_a_grip_that_slipped_presses_on_the_retry():
+    """accept4's hex pencil on the Koch (seed 0): the first close sets its squeeze while the
+    jaw still closes, the pencil held by 0.7 N slips at the lift; the retry presses until the
+    jaw rests (``PickPlaceSolver.firm``) and carries it. Retrying as the first attempt closed,
+    every attempt slips."""
+    success, solver = drawn_episode("accept4", "koch_hex_pencil", 0)
+    assert success and solver.reports[0].misses == ["grasp (attempt 0)"], solver.reports[0]
+    assert solver.firm[0]
+    success, solver = drawn_episode("accept4", "koch_hex_pencil", 0, NeverFirm)
+    assert not success
+    misses = solver.reports[0].misses
+    assert misses[:2] == ["grasp (attempt 0)", "grasp (attempt 1)"], misses
