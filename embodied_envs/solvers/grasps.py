@@ -355,9 +355,9 @@ def widest_height(
     band of sections when that lies above ``z`` (fingers closing below the equator of a ball
     or of a cylinder on its side squeeze it up and out), or below ``z`` down to ``lowest``
     for a body within ``ROUND_BULGE`` of that width over less than half its height (above
-    the equator fingers squeeze it down
-    and out: the Koch, which grasps 5 mm under the top, held a 2.9 cm ball 4 times in 6 so,
-    6 in 6 at the equator); else ``z`` (a box, a can, a bottle's neck, a cone)."""
+    the equator fingers squeeze it down and out: the Koch, which grasps 5 mm under the top,
+    held a 2.9 cm ball 4 times in 6 so, 6 in 6 at the equator); else ``z`` (a box, a can, a
+    bottle's neck, a cone)."""
     from scipy.spatial import ConvexHull, QhullError  # only where grasps are posed
 
     if top <= (z if lowest is None else lowest):

@@ -87,7 +87,7 @@ class Jaws:
         for _ in range(self.cfg.close_steps):
             if not (closing | pressing).any() or self.ended:
                 break
-            shut = jaw() + way * step  # from where the jaw stands: no wind-up
+            shut = before + way * step  # from where the jaw stands: no wind-up
             shut = np.minimum(shut, hand.action_closed) if way > 0 else np.maximum(
                 shut, hand.action_closed
             )

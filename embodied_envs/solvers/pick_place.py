@@ -355,6 +355,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         """Grasp the current mover in ``envs``, carry it, and release it where its task says."""
         cfg = self.cfg
         self.hand = np.zeros((self.num_envs, 3))
+        self.firm[:] = False  # a slip on another mover says nothing of this one
         holding = np.zeros(self.num_envs, bool)
         placed = ~envs.copy()
         for attempt in range(cfg.grasp_attempts):
