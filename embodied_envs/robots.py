@@ -36,6 +36,10 @@ DOWNLOAD_COMMAND = "python -m mani_skill.utils.download_asset {uid}"
 GRAVITY = 9.81  # m/s^2
 MANISKILL_FORCE_LIMIT = 100.0  # N m: ManiSkill 3.0.1's arm drives (panda.py arm_force_limit,
 # so_100.py and koch.py force_limit)
+# m: the SO-100's and the Koch's movers stand this far from other objects, room for a jaw
+# (1.5 cm thick, tools/make/measure_jaws.py) and the grasps' 3 mm obstacle margin beside them:
+# at 1 cm a 2 cm ball beside an 8 cm tin had no grasp for either hand (accept6 seed 1)
+SMALL_ROOM = 0.02
 
 
 @dataclass(frozen=True)
@@ -194,9 +198,19 @@ class Robot:
     in_wheel: bool = True  # False: its model is a separate ManiSkill download
     hand: Hand | None = None  # what the scripted expert (solvers/) needs; None: it does not
     # drive this robot
+    # m: the least gap placement keeps between the task's movers and every other object
+    # (PlacementLimits.mover_clearance); None: the placement clearance, 1 cm (the Panda's)
+    mover_clearance: float | None = None
     arm_force_limit: float | None = None  # N m, the most its arm joints' drives exert
     # (ManiSkill 3.0.1's controller configs: force_limit=100 for the Panda, SO-100 and Koch; their
     # URDFs give none: so100.urdf's effort="0", the Koch's no effort); None: not read, unchecked
+
+    @property
+    def placement(self) -> dict:
+        """The placement limits that follow the robot (``PlacementLimits``' fields): its reach
+        band and its movers' clearance."""
+        return dict(reach_min=self.reach[0], reach_max=self.reach[1],
+                    mover_clearance=self.mover_clearance)  # fmt: skip
 
     @property
     def payload(self) -> float | None:
@@ -354,7 +368,7 @@ ROBOTS: dict[str, Robot] = {
             tcp_link=None, grasp_check=JAW_GRASP, camera_mount="Base",
             camera_eye=(0.55, 0.0, 0.40), camera_target=(0.18, 0.0, 0.0), base_yaw=math.pi / 2,
             tcp_tips=("Fixed_Jaw_tip", "Moving_Jaw_tip"),
-            hand=SO100_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT,
+            hand=SO100_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT, mover_clearance=SMALL_ROOM,
         ),
         # Koch v1.1: turned +90 deg as ManiSkill's keyframes; its hand pointing down, the jaws'
         # tips 0.10 m above the table 0.12 m out (ManiSkill's rest keyframe, folded, holds
@@ -370,7 +384,7 @@ ROBOTS: dict[str, Robot] = {
                             action_index=5, action_kind="delta"),
             tcp_link="gripper_tcp", grasp_check=JAW_GRASP, camera_mount="base_link",
             camera_eye=(0.50, 0.0, 0.38), camera_target=(0.16, 0.0, 0.0), base_yaw=math.pi / 2,
-            hand=KOCH_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT,
+            hand=KOCH_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT, mover_clearance=SMALL_ROOM,
         ),
         # Fetch: ManiSkill's table-scene joints (torso up), fingers open (0.05 m each); on the
         # floor 0.345 m behind the spot (ManiSkill: 0.325 m behind the table's edge; the spot

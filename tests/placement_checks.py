@@ -69,8 +69,9 @@ def check_constraints(layout, limits: PlacementLimits | None = None):
             bad.append(f"{node} footprint leaves the shrunk table top")
         if abs(pts[:, 2].min() - top_z) > 1e-6:
             bad.append(f"{node} does not rest on the table top ({pts[:, 2].min() - top_z:+.4f})")
-        for other, f in feet.items():
-            if foot.distance(f) < lim.clearance - 1e-6:
+        for other, f in feet.items():  # wider beside a mover (PlacementLimits.gap)
+            gap = lim.gap(node, None if other == "robot" else other, layout.task.objects)
+            if foot.distance(f) < gap - 1e-6:
                 bad.append(f"{node} overlaps {other}")
         feet[node] = foot
         if shift is not None and node in layout.task.objects:  # where the move takes it
@@ -95,10 +96,12 @@ def check_constraints(layout, limits: PlacementLimits | None = None):
                 bad.append(f"{node} at {ang:.1f} deg off the robot heading")
     for node, there in destinations.items():  # a move's destination is free
         for other, f in feet.items():
-            if other != node and there.distance(f) < lim.clearance - 1e-6:
+            gap = lim.gap(node, None if other == "robot" else other, layout.task.objects)
+            if other != node and there.distance(f) < gap - 1e-6:
                 bad.append(f"{node}'s destination overlaps {other}")
         for other, f in destinations.items():
-            if other < node and there.distance(f) < lim.clearance - 1e-6:
+            gap = lim.gap(node, other, layout.task.objects)
+            if other < node and there.distance(f) < gap - 1e-6:
                 bad.append(f"{node}'s destination overlaps {other}'s")
     return bad
 

@@ -114,9 +114,9 @@ def validate_problems(path: Path, check_placement: bool = True) -> list[str]:
     except OSError as e:  # unreadable file, permission, a folder given as file, ...
         return [f"{path}: {e.strerror or e} ({e.filename or path}). Fix: check the path."]
     problems, limits = [], PlacementLimits()
-    try:  # the robot's reach, as the env places objects for it
-        reach = ROBOTS[resolve_robot(layout.robot, None, str(path))].reach
-        limits = PlacementLimits(reach_min=reach[0], reach_max=reach[1])
+    try:  # the robot's reach and movers' clearance, as the env places objects for it
+        entry = ROBOTS[resolve_robot(layout.robot, None, str(path))]
+        limits = PlacementLimits(**entry.placement)
     except LayoutError as e:
         problems.extend(e.problems)
     problems += annotation_lines(layout)[1]

@@ -134,8 +134,9 @@ def check_rest_limits(rest: np.ndarray, agent, uid: str) -> None:
 
 def robot_defaults(entry: robots.Robot) -> tuple[dict, dict]:
     """The placement-limit and goal-region fields that follow the robot (its entry's reach,
-    goal inset and heights), as ``placement_limits`` and ``goal_region`` dicts."""
-    limits = dict(reach_min=entry.reach[0], reach_max=entry.reach[1])
+    movers' clearance, goal inset and heights), as ``placement_limits`` and ``goal_region``
+    dicts."""
+    limits = entry.placement
     return limits, dict(inset=entry.goal_inset, height=tuple(entry.goal_height))
 
 

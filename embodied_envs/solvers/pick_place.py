@@ -236,6 +236,12 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         up = sapien.Pose([0, 0, -cfg.approach_offset])
         self._leave_start(todo)
         candidates = self.grasp_poses()
+        for i in np.flatnonzero(todo):  # said here: the approach has no option to fail on
+            if not candidates[i] and not self.reports[i].plan_failures:
+                self.reports[i].plan_failures.append(
+                    "grasp: none clears the table and the other objects (the hand's boxes, "
+                    "GraspConfig's margins)"
+                )
         planned_at = self.target.pose.p.cpu().numpy().copy()  # where the grasps were planned
         targets = [
             [g * up for g, _ in candidates[i]] if todo[i] else None for i in range(self.num_envs)

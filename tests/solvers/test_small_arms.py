@@ -257,11 +257,13 @@ def test_the_so100_takes_its_block_in_pd_joint_delta_pos(seed):
 DEV1 = ROOT / "tests" / "data" / "small_sets" / "dev1" / "layouts"
 
 
-def drawn_episode(folder: str, name: str, seed: int, solver_class=PickPlaceSolver):
+def drawn_episode(folder: str, name: str, seed: int, solver_class=PickPlaceSolver, **make):
     """The expert's episode ``seed`` in ``pd_joint_pos`` on the drawn set ``folder``'s layout
-    ``name`` (``tests/data/small_sets``, ``tools/make/make_small_sets.py``): (success, solver)."""
+    ``name`` (``tests/data/small_sets``, ``tools/make/make_small_sets.py``), the env made with
+    ``make`` too: (success, solver)."""
     layout = DEV1.parents[1] / folder / "layouts" / f"{name}.json"
-    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos")
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout), control_mode="pd_joint_pos",
+                   **make)  # fmt: skip
     env.reset(seed=seed)
     solver = solver_class(env, seed=seed)
     solver.solve()
@@ -356,3 +358,19 @@ def test_a_grip_that_slipped_presses_on_the_retry():
     assert not success
     misses = solver.reports[0].misses
     assert misses[:2] == ["grasp (attempt 0)", "grasp (attempt 1)"], misses
+
+
+def test_a_small_arm_has_room_beside_its_mover_and_says_when_it_has_none():
+    """accept6's 2.1 cm ball, seed 1: placed 1 cm from an 8.2 cm tin (the placement clearance),
+    no grasp of the Koch's hand cleared the tin, and the solver approached nothing and said
+    nothing ("approach: "). Now the episode says why in one line; with the small arms' movers'
+    clearance (2 cm, the default) the ball stands clear and is taken."""
+    crowded, solver = drawn_episode("accept6", "koch_ball", 1,
+                                    placement_limits=dict(mover_clearance=None))  # fmt: skip
+    assert not crowded
+    assert solver.reports[0].plan_failures == [
+        "grasp: none clears the table and the other objects (the hand's boxes, GraspConfig's "
+        "margins)"
+    ]
+    success, solver = drawn_episode("accept6", "koch_ball", 1)
+    assert success and not solver.reports[0].plan_failures

@@ -78,11 +78,11 @@ class _Placer:
         radii = np.linalg.norm(padded - centres[:, :, None], axis=-1).max(-1)[0]
         return padded, inward_normals(padded), centres, radii
 
-    def draws(self, node: str, region, placed, reach, shift, fails, xy_draw):
+    def draws(self, node: str, region, placed, reach, shift, fails, xy_draw, gaps=None):
         """Candidates of ``node`` in batches until one meets every rule (``candidates_fit``);
         its ``(x, y, yaw)`` and world footprint, or None after ``max_attempts``. Rejections
         are added to ``fails`` (per rule; the clearance among the candidates meeting the
-        others)."""
+        others). ``gaps``: the least gap to each of ``placed`` (None: the clearance)."""
         lim = self.limits
         foot = self.foot[node]
         radius = float(np.linalg.norm(foot, axis=1).max())
@@ -94,7 +94,7 @@ class _Placer:
             xy = xy_draw(b)
             masks = candidates_fit(
                 xy[None], yaw[None], foot, self.foot_normals[node], radius, region, placed,
-                lim.clearance, reach, shift,
+                lim.clearance if gaps is None else gaps, reach, shift,
             )  # fmt: skip
             ok = np.ones(b, bool)
             for rule in ("inside", "in_band", "facing", "destination"):
@@ -130,6 +130,7 @@ class _Placer:
         found = self.draws(
             it.node, (normals[None], offsets[None]), placed, reach, shift, fails,
             lambda b: self.rng.uniform(lo, hi, (b, 2)),
+            None if set(it.gaps) <= {lim.clearance} else np.array(it.gaps),
         )  # fmt: skip
         if found is None:
             names = {

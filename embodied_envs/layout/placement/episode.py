@@ -150,6 +150,9 @@ class EpisodeSampler:
         self.slots = n + 1 + (n if any(it.shift is not None for it in self.items) else 0)
         self.avoid = [a.index(it.avoid + tuple(n + i for i in it.avoid_destinations))
                       for it in self.items]  # fmt: skip
+        # the least gap to each: one number where all are the clearance
+        self.gaps = [limits.clearance if set(it.gaps) <= {limits.clearance} else a(it.gaps)
+                     for it in self.items]  # fmt: skip
         radii = self.shapes.radii
         self.radii = radii if self.slots == n + 1 else a.xp.concatenate([radii, radii[1:]])
         self.tops = [a(it.top.shrunk) if it.supports else None for it in self.items]
@@ -433,7 +436,7 @@ class EpisodeSampler:
             xy, yaw = region.candidates(u[..., lo:hi])
             masks = candidates_fit(
                 xy, yaw, shapes.vertices[shape], shapes.normals[shape], shapes.radii[shape],
-                (region.normals, region.offsets), keep_clear, lim.clearance, reach,
+                (region.normals, region.offsets), keep_clear, self.gaps[j], reach,
                 it.shift if reach is not None else None,
             )  # fmt: skip
             ok = masks.pop("clear")

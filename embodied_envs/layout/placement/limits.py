@@ -27,6 +27,9 @@ class PlacementLimits:
     max_heading_deg: float = 60.0  # in (0, 180]: manipulated objects within this of the heading
     hull_margin: float = 0.02  # m in [0, 0.5], the parent's top hull is shrunk by this much
     clearance: float = 0.01  # m in [0, 0.5], minimum gap between footprints
+    # m in [0, 0.5] or None: the least gap between a task's mover and any other object, room
+    # for the hand's jaws beside it (the env's default is its robot's, robots.py; None: clearance)
+    mover_clearance: float | None = None
     robot_footprint: float = 0.12  # m in (0, 1], side of the robot base's square footprint
     top_band: float = 0.05  # m in (0, 0.5], vertices this close to the highest point: the top
     bottom_percentile: float = 1.0  # in [0, 100]: the context's lowest point, a z percentile
@@ -35,6 +38,16 @@ class PlacementLimits:
     batch: int = 96  # in [1, 1e5], candidates drawn per vectorised batch
     episode_candidates: int = 128  # in [1, 4096], per object and env in each episode's draw
 
+    def gap(self, node: str, other: str | None, movers) -> float:
+        """The least gap (m) between the footprints of ``node`` and ``other`` (None: the
+        robot base, kept ``clearance`` from all): ``mover_clearance`` where either is one of
+        the task's ``movers``, at least ``clearance``."""
+        if self.mover_clearance is None or other is None:
+            return self.clearance
+        if node in movers or other in movers:
+            return max(self.clearance, self.mover_clearance)
+        return self.clearance
+
     def __post_init__(self):
         w = "placement_limits."
         check_number(w + "reach_min", self.reach_min, 0.0, 2.0, hi_open=True)
@@ -42,6 +55,8 @@ class PlacementLimits:
         check_number(w + "max_heading_deg", self.max_heading_deg, 0.0, 180.0, lo_open=True)
         check_number(w + "hull_margin", self.hull_margin, 0.0, 0.5)
         check_number(w + "clearance", self.clearance, 0.0, 0.5)
+        if self.mover_clearance is not None:
+            check_number(w + "mover_clearance", self.mover_clearance, 0.0, 0.5)
         check_number(w + "robot_footprint", self.robot_footprint, 0.0, 1.0, lo_open=True)
         check_number(w + "top_band", self.top_band, 0.0, 0.5, lo_open=True)
         check_number(w + "bottom_percentile", self.bottom_percentile, 0.0, 100.0)

@@ -111,13 +111,14 @@ def inside(vertices, normals, offsets):
     return ok.reshape(*ok.shape[:-2], -1).all(-1)  # one reduction over (m, e)
 
 
-def overlap(p, q, clearance: float, p_normals, q_normals):
+def overlap(p, q, clearance, p_normals, q_normals):
     """Separating-axis test of convex polygons (the footprints clear of each other).
 
     Args:
         p: ``(..., m, 2)`` polygons.
         q: ``(..., k, 2)`` polygons, paired with p (leading dims broadcast).
-        clearance: polygons closer than this along every axis count as overlapping.
+        clearance: polygons closer than this along every axis count as overlapping (a
+            float, or an array broadcasting against ``(..., a)``).
         p_normals, q_normals: their :func:`inward_normals`; zero (padding) normals are
             never separating axes.
 
@@ -172,7 +173,7 @@ def first_true(mask):
 
 
 def candidates_fit(
-    xy, yaw, foot, foot_normals, radius, region, placed, clearance: float, reach=None,
+    xy, yaw, foot, foot_normals, radius, region, placed, clearance, reach=None,
     shift=None,
 ):
     """Which candidate poses of one object meet every rule, in each env; the one test both
@@ -188,7 +189,8 @@ def candidates_fit(
         placed: ``(polys (b, o, k, 2), normals (b, o, k, 2), origins (b, o, 2), radii (o,))``:
             the footprints to keep clear of (padded edges have zero normals) with their
             bounding circles.
-        clearance: the minimum gap between footprints.
+        clearance: the minimum gap between footprints: a float, or ``(o,)`` one per placed
+            footprint (``Standing.gaps``).
         reach: None, or ``(robot_xy (b, 2), robot_yaw (b,), band, max_heading_deg)`` for a
             manipulated object (:func:`within_reach`).
         shift: None, or ``(dx, dy)`` in the robot's frame: where a move task takes the object
@@ -245,9 +247,10 @@ def move_offset(shift, robot_yaw):
     return rotate(vec, robot_yaw)
 
 
-def _clear(xy, yaw, poly, foot_normals, radius, placed, clearance: float, where=None):
+def _clear(xy, yaw, poly, foot_normals, radius, placed, clearance, where=None):
     """``(b, c)``: whether each candidate footprint ``poly (b, c, m, 2)`` centred at ``xy`` is
-    no closer than ``clearance`` to every ``placed`` footprint; tested only ``where`` (True
+    no closer than ``clearance`` (m, or ``(o,)``: one per placed footprint) to every ``placed``
+    footprint; tested only ``where`` (True
     elsewhere), and only against footprints whose bounding circles it meets."""
     xp = array_module(xy)
     polys, normals, origins, radii = placed
@@ -257,6 +260,7 @@ def _clear(xy, yaw, poly, foot_normals, radius, placed, clearance: float, where=
     clear = all_true(yaw)
     if len(e):
         pair_normals = rotate(foot_normals, yaw[e, c])
-        hit = overlap(poly[e, c], polys[e, o], clearance, pair_normals, normals[e, o])
+        gap = clearance if np.ndim(clearance) == 0 else clearance[o][:, None]
+        hit = overlap(poly[e, c], polys[e, o], gap, pair_normals, normals[e, o])
         clear[e[hit], c[hit]] = False
     return clear

@@ -49,6 +49,8 @@ class Standing:
             those it stands on (its parent's chain down to the context).
         avoid_destinations: the movers of a ``move`` task among ``avoid`` (the same indices):
             it keeps clear of their destination footprints too (``rules``).
+        gaps: the least gap (m) to each of ``avoid + avoid_destinations``
+            (``PlacementLimits.gap``: wider beside the task's movers).
     """
 
     node: str
@@ -62,6 +64,7 @@ class Standing:
     avoid: tuple[int, ...]
     shift: tuple[float, float] | None = None
     avoid_destinations: tuple[int, ...] = ()
+    gaps: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -122,6 +125,9 @@ def support_tree(layout: LayoutInfo, limits: PlacementLimits) -> SupportTree:
         ancestors[node] = ancestors[parent] | {node}
         avoid = tuple(i for i, o in enumerate(obstacles) if o not in ancestors[parent])
         moving = tuple(i for i in avoid if i and items[i - 1].shift is not None)
+        movers = layout.task.objects
+        gaps = tuple(limits.gap(node, obstacles[i] if i else None, movers)
+                     for i in avoid + moving)  # fmt: skip
         obstacles.append(node)
         items.append(
             Standing(
@@ -136,6 +142,7 @@ def support_tree(layout: LayoutInfo, limits: PlacementLimits) -> SupportTree:
                 avoid=avoid,
                 shift=layout.task.shift() if node in layout.task.objects else None,
                 avoid_destinations=moving,
+                gaps=gaps,
             )
         )
     first_child = {ctx: layout.robot}  # the first to stand on each support
