@@ -129,8 +129,7 @@ class _Placer:
         fails = dict.fromkeys(rules + (["destination"] if shift else []) + ["clear"], 0)
         found = self.draws(
             it.node, (normals[None], offsets[None]), placed, reach, shift, fails,
-            lambda b: self.rng.uniform(lo, hi, (b, 2)),
-            None if set(it.gaps) <= {lim.clearance} else np.array(it.gaps),
+            lambda b: self.rng.uniform(lo, hi, (b, 2)), np.array(it.gaps),
         )  # fmt: skip
         if found is None:
             names = {

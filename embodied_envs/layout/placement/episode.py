@@ -150,9 +150,7 @@ class EpisodeSampler:
         self.slots = n + 1 + (n if any(it.shift is not None for it in self.items) else 0)
         self.avoid = [a.index(it.avoid + tuple(n + i for i in it.avoid_destinations))
                       for it in self.items]  # fmt: skip
-        # the least gap to each: one number where all are the clearance
-        self.gaps = [limits.clearance if set(it.gaps) <= {limits.clearance} else a(it.gaps)
-                     for it in self.items]  # fmt: skip
+        self.gaps = [a(it.gaps) for it in self.items]  # the least gap to each avoided
         radii = self.shapes.radii
         self.radii = radii if self.slots == n + 1 else a.xp.concatenate([radii, radii[1:]])
         self.tops = [a(it.top.shrunk) if it.supports else None for it in self.items]

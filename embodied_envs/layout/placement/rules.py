@@ -250,8 +250,8 @@ def move_offset(shift, robot_yaw):
 def _clear(xy, yaw, poly, foot_normals, radius, placed, clearance, where=None):
     """``(b, c)``: whether each candidate footprint ``poly (b, c, m, 2)`` centred at ``xy`` is
     no closer than ``clearance`` (m, or ``(o,)``: one per placed footprint) to every ``placed``
-    footprint; tested only ``where`` (True
-    elsewhere), and only against footprints whose bounding circles it meets."""
+    footprint; tested only ``where`` (True elsewhere), and only against footprints whose
+    bounding circles it meets."""
     xp = array_module(xy)
     polys, normals, origins, radii = placed
     rel = xy[:, :, None] - origins[:, None]  # (b, c, o, 2)

@@ -125,8 +125,7 @@ def support_tree(layout: LayoutInfo, limits: PlacementLimits) -> SupportTree:
         ancestors[node] = ancestors[parent] | {node}
         avoid = tuple(i for i, o in enumerate(obstacles) if o not in ancestors[parent])
         moving = tuple(i for i in avoid if i and items[i - 1].shift is not None)
-        movers = layout.task.objects
-        gaps = tuple(limits.gap(node, obstacles[i] if i else None, movers)
+        gaps = tuple(limits.gap(node, obstacles[i] if i else None, layout.task.objects)
                      for i in avoid + moving)  # fmt: skip
         obstacles.append(node)
         items.append(
