@@ -216,8 +216,9 @@ class GraspChoice:
         wrist roll either way, within its range), of which the solver takes the one its arm
         reaches soonest (``ArmDriver._choose``'s ``twins``)."""
         i, grasps, pose, centre = checked
-        base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
-        out = centre[:2] - base
+        base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()  # tilt_reach's origin
+        axis = self._pan_axis()[i]
+        out = centre[:2] - axis
         out = np.array([*(out / max(np.linalg.norm(out), 1e-9)), 0.0])
         across = np.array([-out[1], out[0], 0.0])  # the plane's normal
         top = float(pose.transform_points(asset_geometry(asset_spec(
@@ -253,7 +254,7 @@ class GraspChoice:
                     poses.append((grasp_pose(approach, way, at), gripper.opening))
                     labels.append(label)
         planar = planar_grasps(
-            grasps, pose.matrix(), base, support, cloud, tuple(tilts), reach,
+            grasps, pose.matrix(), axis, support, cloud, tuple(tilts), reach,
             self.grasp_config, gripper, self.cfg.grasp_candidates,
         )  # fmt: skip
         # planar_grasps gives its grasps, then each again the other way
@@ -319,7 +320,7 @@ class GraspChoice:
         reaches without turning (a can's footprint has no narrow side, and a turn of the last
         joint by up to 90 degrees took 2 s at the convertible speeds); None where the hand's
         closing direction is vertical."""
-        base = self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
+        base = self._pan_axis()[i]
         y = tcp[:2, 1]
         if np.linalg.norm(y) < 0.5:
             return None

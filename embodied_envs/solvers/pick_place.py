@@ -308,7 +308,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         took a block tilted cannot always rise keeping the tilt: SO-100 seeds 21 and 46)."""
         if not self.robot_hand.planar:
             return [grasp.q]
-        out = grasp.p[:2] - self.base.agent.robot.pose.raw_pose[i, :2].cpu().numpy()
+        out = grasp.p[:2] - self._pan_axis()[i]
         across = np.array([-out[1], out[0], 0.0]) / max(np.linalg.norm(out), 1e-9)
         half = np.deg2rad(np.asarray(self.cfg.planar_lift_turns)) / 2
         turns = [sapien.Pose(q=[np.cos(h), *(np.sin(h) * across)]) for h in half]

@@ -87,7 +87,7 @@ class PlaceFlow:
         held = [h if r else None for h, r in zip(self._held_points(), self.releases, strict=True)]
         over = lambda i, path: self._over_table(i, path, hand[i], held[i])  # noqa: E731
 
-        base = self.base.agent.robot.pose.raw_pose[:, :2].cpu().numpy()
+        base = self._pan_axis()  # the base joint turns the hand about it
 
         def targets(yaws, todo, pitches=(), turn=False):
             tcp = self._hand_pose()

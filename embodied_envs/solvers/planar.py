@@ -1,5 +1,5 @@
 """Grasps a planar hand can make: an arm of five joints (base turn, three pitches, wrist roll;
-``robots.Hand.planar``) points its hand only within its vertical plane through the base, and
+``robots.Hand.planar``) points its hand only within its vertical plane through the base joint, and
 turns it freely about the approach (the wrist roll).
 
 So a grasp's approach is fixed by its closing line: perpendicular to the closing direction and

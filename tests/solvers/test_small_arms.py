@@ -374,3 +374,34 @@ def test_a_small_arm_has_room_beside_its_mover_and_says_when_it_has_none():
     ]
     success, solver = drawn_episode("accept6", "koch_ball", 1)
     assert success and not solver.reports[0].plan_failures
+
+
+def test_a_five_joint_arms_plane_passes_through_its_base_joint():
+    """A five-joint arm points its hand in a vertical plane through its base joint's axis,
+    which stands 4.5 cm (SO-100) and 5.6 cm (Koch) ahead of its base link's origin. The
+    planner's plane went through the origin: accept7's cube, seed 2, 0.229 m out and 54
+    degrees off the Koch's heading, lay 13 degrees out of that plane, and the IK reached none
+    of its 14 grasps ("approach: ... IK failed"). ``_pan_axis`` is the joint's axis (the
+    simulator's joint pose, at any base turn), the Panda's exactly its base's origin."""
+
+    for layout in (DEV1.parents[1] / "accept7" / "layouts" / "so100_cube.json",
+                   DEV1.parents[1] / "accept7" / "layouts" / "koch_cube.json",
+                   ROOT / "embodied_envs" / "data" / "layouts" / "default.json"):  # fmt: skip
+        env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout))
+        env.reset(seed=2)
+        solver = PickPlaceSolver(env, seed=2)
+        robot = env.unwrapped.agent.robot
+        joint = robot.get_active_joints()[0].get_global_pose().p[:, :2].numpy()
+        np.testing.assert_allclose(solver._pan_axis(), joint, atol=1e-5)
+        root = robot.pose.raw_pose[:, :2].numpy()
+        if "default" in layout.name:
+            assert (solver._pan_axis() == root).all()
+        else:
+            assert np.linalg.norm(solver._pan_axis() - root) > 0.04
+            qpos = robot.get_qpos().clone()
+            qpos[0, 0] += 1.0
+            robot.set_qpos(qpos)
+            np.testing.assert_allclose(solver._pan_axis(), joint, atol=1e-5)
+        env.close()
+    success, solver = drawn_episode("accept7", "koch_cube", 2)
+    assert success and not solver.reports[0].plan_failures
