@@ -40,6 +40,28 @@ MANISKILL_FORCE_LIMIT = 100.0  # N m: ManiSkill 3.0.1's arm drives (panda.py arm
 # (1.5 cm thick, tools/make/measure_jaws.py) and the grasps' 3 mm obstacle margin beside them:
 # at 1 cm a 2 cm ball beside an 8 cm tin had no grasp for either hand (accept6 seed 1)
 SMALL_ROOM = 0.02
+# the arms at rest, a box per link but the base's: (x_lo, x_hi, y_lo, y_hi, z_lo) m in the robot
+# spot's frame, z_lo above the table top (tools/make/measure_rest.py; PlacementLimits.rest_arm):
+# objects as tall as a link's lowest point stand clear of its box (accept8 seed 5: a 15 cm globe
+# over the SO-100's jaws at rest, the start colliding and no path leaving it)
+PANDA_REST_ARM = (
+    (-0.055, 0.056, -0.130, 0.056, 0.142), (-0.056, 0.125, -0.056, 0.130, 0.280),
+    (0.024, 0.253, -0.055, 0.112, 0.494), (0.141, 0.322, -0.112, 0.056, 0.540),
+    (0.316, 0.634, -0.056, 0.130, 0.622), (0.533, 0.711, -0.057, 0.044, 0.629),
+    (0.649, 0.743, -0.088, 0.054, 0.640), (0.694, 0.777, -0.101, 0.104, 0.607),
+    (0.752, 0.806, -0.067, -0.039, 0.578), (0.752, 0.806, 0.039, 0.066, 0.578),
+)  # link1 .. link7, hand, left and right fingers
+SO100_REST_ARM = (
+    (0.033, 0.097, -0.027, 0.027, 0.018), (0.063, 0.115, -0.036, 0.035, 0.109),
+    (0.091, 0.249, -0.036, 0.027, 0.218), (0.222, 0.255, -0.036, 0.028, 0.176),
+    (0.214, 0.263, -0.038, 0.031, 0.072), (0.214, 0.263, 0.006, 0.080, 0.094),
+)  # Rotation_Pitch, Upper_Arm, Lower_Arm, Wrist_Pitch_Roll, Fixed_Jaw, Moving_Jaw
+KOCH_REST_ARM = (
+    (0.032, 0.080, -0.014, 0.015, 0.005), (0.029, 0.083, -0.020, 0.021, 0.041),
+    (-0.013, 0.081, -0.022, 0.023, 0.040), (0.007, 0.112, -0.017, 0.018, 0.147),
+    (0.088, 0.115, -0.024, 0.019, 0.168), (0.084, 0.108, -0.013, 0.018, 0.099),
+    (0.104, 0.172, -0.016, 0.021, 0.148),
+)  # link_1 .. link_6, gripper
 
 
 @dataclass(frozen=True)
@@ -201,6 +223,7 @@ class Robot:
     # m: the least gap placement keeps between the task's movers and every other object
     # (PlacementLimits.mover_clearance); None: the placement clearance, 1 cm (the Panda's)
     mover_clearance: float | None = None
+    rest_arm: tuple | None = None  # its links at rest (PlacementLimits.rest_arm); None: unmeasured
     arm_force_limit: float | None = None  # N m, the most its arm joints' drives exert
     # (ManiSkill 3.0.1's controller configs: force_limit=100 for the Panda, SO-100 and Koch; their
     # URDFs give none: so100.urdf's effort="0", the Koch's no effort); None: not read, unchecked
@@ -208,9 +231,9 @@ class Robot:
     @property
     def placement(self) -> dict:
         """The placement limits that follow the robot (``PlacementLimits``' fields): its reach
-        band and its movers' clearance."""
+        band, its movers' clearance and its arm at rest."""
         return dict(reach_min=self.reach[0], reach_max=self.reach[1],
-                    mover_clearance=self.mover_clearance)  # fmt: skip
+                    mover_clearance=self.mover_clearance, rest_arm=self.rest_arm)  # fmt: skip
 
     @property
     def payload(self) -> float | None:
@@ -340,7 +363,7 @@ PANDA = Robot(
     noise_joints=tuple(range(7)), reach=(0.30, 0.78), goal_inset=0.10, goal_height=(0.05, 0.25),
     gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
     camera_mount="panda_link0", camera_eye=(0.95, 0.0, 0.55), camera_target=(0.30, 0.0, 0.0),
-    hand=PANDA_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT,
+    hand=PANDA_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT, rest_arm=PANDA_REST_ARM,
 )  # fmt: skip
 ROBOTS: dict[str, Robot] = {
     r.uid: r
@@ -352,7 +375,7 @@ ROBOTS: dict[str, Robot] = {
             gripper=PANDA_GRIPPER, tcp_link="panda_hand_tcp", grasp_check=PANDA_GRASP,
             camera_mount="panda_link0", camera_eye=PANDA.camera_eye,
             camera_target=PANDA.camera_target, hand=PANDA_HAND,
-            arm_force_limit=MANISKILL_FORCE_LIMIT,
+            arm_force_limit=MANISKILL_FORCE_LIMIT, rest_arm=PANDA_REST_ARM,
         ),
         # ManiSkill's table scene: base at the table's edge turned +90 deg, these joints;
         # its so100 motion planner opens the jaw at 0 rad (0.084 m between the tips) and
@@ -369,6 +392,7 @@ ROBOTS: dict[str, Robot] = {
             camera_eye=(0.55, 0.0, 0.40), camera_target=(0.18, 0.0, 0.0), base_yaw=math.pi / 2,
             tcp_tips=("Fixed_Jaw_tip", "Moving_Jaw_tip"),
             hand=SO100_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT, mover_clearance=SMALL_ROOM,
+            rest_arm=SO100_REST_ARM,
         ),
         # Koch v1.1: turned +90 deg as ManiSkill's keyframes; its hand pointing down, the jaws'
         # tips 0.10 m above the table 0.12 m out (ManiSkill's rest keyframe, folded, holds
@@ -385,6 +409,7 @@ ROBOTS: dict[str, Robot] = {
             tcp_link="gripper_tcp", grasp_check=JAW_GRASP, camera_mount="base_link",
             camera_eye=(0.50, 0.0, 0.38), camera_target=(0.16, 0.0, 0.0), base_yaw=math.pi / 2,
             hand=KOCH_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT, mover_clearance=SMALL_ROOM,
+            rest_arm=KOCH_REST_ARM,
         ),
         # Fetch: ManiSkill's table-scene joints (torso up), fingers open (0.05 m each); on the
         # floor 0.345 m behind the spot (ManiSkill: 0.325 m behind the table's edge; the spot

@@ -56,6 +56,11 @@ def check_constraints(layout, limits: PlacementLimits | None = None):
         [(rx + c * a - s * b, ry + s * a + c * b) for a in (-half, half) for b in (-half, half)]
     ).convex_hull
     feet = {"robot": robot_sq}
+    # the arm at rest, a box per link (PlacementLimits.rest_arm), in the world
+    def world(xs, ys):  # a box in the robot's frame, in the world
+        return MultiPoint([(rx + c * a - s * b, ry + s * a + c * b) for a in xs for b in ys])
+
+    rest = [(world(box[:2], box[2:4]).convex_hull, box[4]) for box in lim.rest_arm or ()]
     destinations = {}
     shift = layout.task.shift()  # a move's destination from each mover's start, robot frame
     if shift is not None:
@@ -73,6 +78,12 @@ def check_constraints(layout, limits: PlacementLimits | None = None):
             gap = lim.gap(node, None if other == "robot" else other, layout.task.objects)
             if foot.distance(f) < gap - 1e-6:
                 bad.append(f"{node} overlaps {other}")
+        for k, (box, z0) in enumerate(rest):  # as tall as a link at rest: clear of its box
+            if pts[:, 2].max() - top_z + lim.rest_clearance > z0 and (
+                foot.distance(box) < lim.rest_clearance - 1e-6
+            ):
+                tall = pts[:, 2].max() - top_z
+                bad.append(f"{node} ({tall:.3f} m tall) under the arm's link {k}")
         feet[node] = foot
         if shift is not None and node in layout.task.objects:  # where the move takes it
             there = MultiPoint((pts[:, :2] + [dx, dy]).tolist()).convex_hull

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 
 import numpy as np
 
@@ -183,12 +184,24 @@ def robot_arms(layout_set: LayoutSet, robot_uids) -> tuple[str | tuple, tuple[ro
 
 
 def limits_and_goals(
-    entry: robots.Robot, placement_limits, goal_region
+    entry: robots.Robot, placement_limits, goal_region, rest: np.ndarray | None = None
 ) -> tuple[PlacementLimits, GoalRegion]:
     """The ``placement_limits`` and ``goal_region`` keywords as dataclasses, the robot's reach
     and goal band (:func:`robot_defaults`) under each field the user did not set; the goal band
-    checked to lie within the reach."""
+    checked to lie within the reach. ``rest``: the arm's rest joints where the user gave them
+    (``robot_init_qpos``): the robot's ``rest_arm`` boxes were measured at its own rest, which
+    is warned about where they differ and the user did not set ``rest_arm``."""
     limits, goals = robot_defaults(entry)
+    own = isinstance(placement_limits, PlacementLimits) or "rest_arm" in (placement_limits or {})
+    if (rest is not None and entry.rest_arm is not None and not own
+            and not np.allclose(rest, agents.default_rest(entry), atol=1e-6)):  # fmt: skip
+        warnings.warn(
+            f"robot_init_qpos: placement keeps objects clear of the {entry.uid}'s links at its "
+            "own rest (robots.py rest_arm), not at robot_init_qpos. Fix: measure yours (python "
+            "tools/make/measure_rest.py LAYOUT --qpos ...) and pass placement_limits="
+            "dict(rest_arm=...)",
+            stacklevel=3,
+        )
     placement = dataclass_arg(
         PlacementLimits, with_defaults(placement_limits, limits), "placement_limits"
     )

@@ -105,6 +105,27 @@ def test_other_robots_are_checked_against_their_own_joints():
     assert str([round(v, 4) for v in ROBOTS["so100"].rest_qpos]) in str(e.value)
 
 
+def test_placement_warns_that_its_rest_boxes_are_the_arms_own_rest():
+    """Placement keeps tall objects clear of the arm's links at its entry's rest
+    (``Robot.rest_arm``): started elsewhere, the env says so and how to measure the arm there;
+    not where the start is the rest, nor where the user set ``rest_arm``."""
+    import warnings
+
+    from embodied_envs.envs.keywords import limits_and_goals
+
+    entry = ROBOTS["panda"]
+    with pytest.warns(UserWarning, match=r"panda's links at its own rest .* --qpos .*rest_arm"):
+        limits, _ = limits_and_goals(entry, None, None, np.array(HAND_DOWN))
+    assert limits.rest_arm == entry.rest_arm  # kept: objects still avoid where the rest is
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for user, rest in ((None, PANDA_REST), (dict(rest_arm=None), HAND_DOWN)):
+            limits, _ = limits_and_goals(entry, user, None, np.array(rest))
+        assert limits.rest_arm is None
+        with pytest.raises(ValueError, match=r"rest_arm\[0\]\[1\]=0.1 is outside \(0.2, 2.0\]"):
+            limits_and_goals(entry, dict(rest_arm=[[0.2, 0.1, 0, 1, 0]]), None)
+
+
 def test_two_arms_the_first_takes_it_the_second_keeps_its_rest():
     e = gym.make(ENV_ID, obs_mode="state", robot_uids=("panda", "panda"),
                  robot_init_qpos=HAND_DOWN, robot_init_qpos_noise=0.0)  # fmt: skip

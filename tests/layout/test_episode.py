@@ -17,6 +17,7 @@ from embodied_envs.layout import GoalRegion, LayoutPose, PlacementLimits, load_l
 from embodied_envs.layout.placement import place, rules
 from embodied_envs.layout.placement.batch import uniforms
 from embodied_envs.layout.placement.episode import EpisodeSampler
+from embodied_envs.layout.placement.tree import support_tree
 
 OFFSET = 0.002  # objs_z_offset of the sampler under test
 # the sampler's arrays: numpy (CPU envs) and torch (GPU envs; here on the CPU)
@@ -437,3 +438,41 @@ def test_a_small_arms_mover_keeps_room_for_a_jaw_beside_it(uid, backend):
     assert with_room.min() >= 0.02 - 1e-6
     without = nearest(PlacementLimits(reach_min=limits.reach_min, reach_max=limits.reach_max))
     assert without.min() < 0.02 and without.min() >= 0.01 - 1e-6
+
+
+@BACKENDS
+@pytest.mark.parametrize("uid", ["so100", "koch-v1.1"])
+def test_an_object_as_tall_as_the_resting_arm_stands_clear_of_it(uid, backend):
+    """accept8's 15 cm globe stood over the SO-100's jaws at rest (seed 5: the start collided,
+    no path left it). With the robot's ``rest_arm`` (its links at rest, measured from its model)
+    the globe keeps ``rest_clearance`` (2 cm) from every link box whose lowest point its top
+    comes within 2 cm of, in every configuration and episode (``check_constraints`` checks it
+    with shapely); the 2-3 cm cube keeps clear of the links near the table only. Without the
+    boxes the globe stands under the arm in some episodes: the rule is what keeps it away."""
+    from embodied_envs.envs.keywords import robot_defaults
+    from embodied_envs.robots import ROBOTS
+
+    arm = "so100" if uid == "so100" else "koch"
+    layout = load_layout(SMALL.parent.parent / "accept8" / "layouts" / f"{arm}_cube.json")
+    fields, goals = robot_defaults(ROBOTS[uid])
+    limits, goals = PlacementLimits(**fields), GoalRegion(**goals)
+    tree = support_tree(layout, limits)
+    rest = {it.node: it.avoid_rest for it in tree.items}
+    lows = [box[4] for box in limits.rest_arm]  # its links' lowest points above the table
+    assert rest["globe"] == tuple(k for k, z in enumerate(lows) if z < 0.154 + 0.02)
+    assert rest["cube"] == tuple(k for k, z in enumerate(lows) if z < 0.024 + 0.02)
+    configs = [place(layout, 1000 + k, limits) for k in range(4)]
+    env_idx = torch.arange(4).repeat(50)
+
+    def under_arm(lim):  # per episode drawn with ``lim``, its violations of the robot's rules
+        sampler = EpisodeSampler(configs, lim, goals, objs_z_offset=OFFSET, backend=backend)
+        starts = sampler.objects(env_idx, torch.arange(200) * 7919)
+        return np.array([
+            len(check_constraints(episode_layout(configs[env], starts, row), limits))
+            for row, env in enumerate(env_idx.tolist())
+        ])  # fmt: skip
+
+    assert all(check_constraints(c, limits) == [] for c in configs)
+    assert under_arm(limits).max() == 0
+    without = PlacementLimits(**{**fields, "rest_arm": None})
+    assert (under_arm(without) > 0).sum() >= 2  # episodes with the globe under the arm

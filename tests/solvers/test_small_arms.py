@@ -204,10 +204,10 @@ def test_the_koch_takes_a_thin_domino_between_its_jaws_faces():
 SO100_BLOCK = ROOT / "embodied_envs" / "data" / "layouts" / "so100_block.json"
 
 
-def so100_block_episode(seed: int, mode: str = "pd_joint_pos"):
-    """so100_block's episode ``seed`` by the expert in ``mode``: (success, solver, the wrist
-    roll's joint position per control step)."""
-    env = gym.make("PickEmbodiedGen-v1", layout_file=str(SO100_BLOCK), control_mode=mode)
+def so100_block_episode(seed: int, mode: str = "pd_joint_pos", **make):
+    """so100_block's episode ``seed`` by the expert in ``mode`` (the env made with ``make``
+    too): (success, solver, the wrist roll's joint position per control step)."""
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(SO100_BLOCK), control_mode=mode, **make)
     env.reset(seed=seed)
     solver = PickPlaceSolver(env, seed=seed)
     rolls, step = [], solver._step_once
@@ -233,15 +233,19 @@ def test_the_wrist_rolls_the_short_way_to_a_two_jaw_grasp():
 
 
 def test_the_hand_rises_out_of_a_start_among_the_obstacle_points():
-    """so100_block seed 10: the can stands under the SO-100's moving jaw at rest, inside the
-    obstacle points' 1 cm spheres (no contact in the simulation), where no path may start: the
-    hand first rises straight up, then plans, and the episode succeeds."""
-    env = gym.make("PickEmbodiedGen-v1", layout_file=str(SO100_BLOCK))
-    env.reset(seed=10)
-    solver = PickPlaceSolver(env, seed=10)
-    assert solver._start_collides(0, solver._qpos()[0])
-    env.close()
-    success, solver, _ = so100_block_episode(10)
+    """so100_block seed 10 placed without the arm's rest boxes (``rest_arm=None``, as an arm
+    started elsewhere than its rest may meet): the can stands under the SO-100's moving jaw,
+    inside the obstacle points' 1 cm spheres (no contact in the simulation), where no path may
+    start: the hand first rises straight up, then plans, and the episode succeeds. With the
+    boxes (the default) the can stands clear of the jaws and the start is free."""
+    for rest_arm, collides in ((None, True), (ROBOTS["so100"].rest_arm, False)):
+        env = gym.make("PickEmbodiedGen-v1", layout_file=str(SO100_BLOCK),
+                       placement_limits=dict(rest_arm=rest_arm))  # fmt: skip
+        env.reset(seed=10)
+        solver = PickPlaceSolver(env, seed=10)
+        assert solver._start_collides(0, solver._qpos()[0]) == collides
+        env.close()
+    success, solver, _ = so100_block_episode(10, placement_limits=dict(rest_arm=None))
     assert success and not solver.reports[0].plan_failures
 
 

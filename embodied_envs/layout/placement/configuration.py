@@ -65,6 +65,7 @@ class _Placer:
         self.poses: dict[str, LayoutPose] = {}
         self.obstacles: list[np.ndarray] = []  # world footprints: robot base, then the items
         self.destinations: dict[int, np.ndarray] = {}  # a move's movers' there, by obstacle
+        self.rest: list[np.ndarray] = []  # the arm at rest: a world box per link
         # each node's asset resolved once per call (file lookups are the slow part)
         self.foot = {n: key_footprint(k) for n, k in self.tree.keys.items()}
         self.foot_normals = {n: inward_normals(f) for n, f in self.foot.items()}
@@ -123,7 +124,8 @@ class _Placer:
                 (lim.reach_min, lim.reach_max), lim.max_heading_deg,
             )  # fmt: skip
         placed = self.placed([self.obstacles[i] for i in it.avoid]
-                             + [self.destinations[i] for i in it.avoid_destinations])  # fmt: skip
+                             + [self.destinations[i] for i in it.avoid_destinations]
+                             + [self.rest[k] for k in it.avoid_rest])  # fmt: skip
         rules = ["inside", "in_band", "facing"] if reach else ["inside"]
         shift = it.shift if reach else None
         fails = dict.fromkeys(rules + (["destination"] if shift else []) + ["clear"], 0)
@@ -185,6 +187,9 @@ class _Placer:
         robot = robot_base_pose(surfaces[ctx], rng.uniform(0, 1))
         self.poses[layout.robot] = robot
         self.obstacles.append(square(np.array(robot.p), lim.robot_footprint, robot.yaw))
+        # the arm at rest, a box per link (PlacementLimits.rest_arm), in the world
+        self.rest = [rotate(box, np.float64(robot.yaw)) + np.array(robot.p[:2])
+                     for box in lim.rest_polygons()]  # fmt: skip
         # 4. objects, breadth first from the table, larger footprints first
         for it in tree.items:
             self.poses[it.node] = pose = self.sample_object(it, surfaces[it.parent])

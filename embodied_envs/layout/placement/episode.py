@@ -91,7 +91,7 @@ class _Rows:
     goal_table: Region
     robot_xy: object
     robot_yaw: object
-    robot_foot: object
+    robot_foot: object  # (b, 1 + links, M, 2): the base's square, the arm's links at rest
     robot_foot_normals: object
     goal_lo: object
     goal_hi: object
@@ -143,16 +143,22 @@ class EpisodeSampler:
         tree = support_tree(base, limits)  # the objects in placement order (as ``place``)
         self.items = tree.items  # item j's footprint is shape 1 + j (0: the robot base)
         robot_square = square(np.zeros(2), limits.robot_footprint, 0.0)  # in its own frame
-        self.shapes = Shapes.of([robot_square, *(it.footprint for it in self.items)], a)
+        rest = limits.rest_polygons()  # the arm at rest, a box per link, in the robot's frame
+        self.shapes = Shapes.of([robot_square, *(it.footprint for it in self.items), *rest], a)
         n = len(self.items)
-        # the footprints each keeps clear of: shape i (0: the robot base, 1 + j: item j) and,
-        # where a move task's movers are, n + i: where the move takes shape i (``rules``)
-        self.slots = n + 1 + (n if any(it.shift is not None for it in self.items) else 0)
-        self.avoid = [a.index(it.avoid + tuple(n + i for i in it.avoid_destinations))
+        # the footprints each keeps clear of: slot i (0: the robot base, 1 + j: item j), where
+        # a move task's movers are n + i: where the move takes slot i (``rules``), then the
+        # arm's links at rest from slot ``rest0`` (shapes n + 1 ...)
+        moves = any(it.shift is not None for it in self.items)
+        self.rest0 = n + 1 + (n if moves else 0)
+        self.slots = self.rest0 + len(rest)
+        self.avoid = [a.index(it.avoid + tuple(n + i for i in it.avoid_destinations)
+                              + tuple(self.rest0 + k for k in it.avoid_rest))
                       for it in self.items]  # fmt: skip
         self.gaps = [a(it.gaps) for it in self.items]  # the least gap to each avoided
         radii = self.shapes.radii
-        self.radii = radii if self.slots == n + 1 else a.xp.concatenate([radii, radii[1:]])
+        self.radii = a.xp.concatenate([radii[: n + 1], radii[1 : n + 1] if moves else radii[:0],
+                                       radii[n + 1 :]])  # fmt: skip
         self.tops = [a(it.top.shrunk) if it.supports else None for it in self.items]
         if n > MANY_OBJECTS:
             warnings.warn(
@@ -176,9 +182,13 @@ class EpisodeSampler:
         self.top = Region.of(self._posed(ctx_hull, ctx_poses), self.top_z)  # whole top
         self.robot_xy = a([r.p[:2] for r in robots])
         self.robot_yaw = a([r.yaw for r in robots])
-        # the robot base's footprint per env (fixed for the configuration) and its normals
-        self.robot_foot = rotate(self.shapes.vertices[0], self.robot_yaw) + self.robot_xy[:, None]
-        self.robot_foot_normals = rotate(self.shapes.normals[0], self.robot_yaw)
+        # the robot base's footprint per env (fixed for the configuration) and its normals,
+        # with the arm's links at rest after it: (E, 1 + links, M, 2)
+        robot = a.xp.concatenate([self.shapes.vertices[:1], self.shapes.vertices[n + 1 :]])
+        robot_normals = a.xp.concatenate([self.shapes.normals[:1], self.shapes.normals[n + 1 :]])
+        yaw = self.robot_yaw[:, None]
+        self.robot_foot = rotate(robot, yaw) + self.robot_xy[:, None, None]
+        self.robot_foot_normals = rotate(robot_normals, yaw)
         self._kept_rows: dict[bytes, _Rows] = {}  # numpy: row sets' arrays, by their bytes
         self._init_goals(base, ctx, ctx_poses, layouts)
         # prepared starts: per env a block of its next episodes, and which one comes next
@@ -363,8 +373,11 @@ class EpisodeSampler:
         shapes = self.shapes
         polys = a.zeros((b, self.slots, *shapes.vertices.shape[1:]))
         poly_normals, origins = a.zeros(polys.shape), a.zeros((b, self.slots, 2))
-        polys[:, 0], poly_normals[:, 0] = r.robot_foot, r.robot_foot_normals
+        polys[:, 0], poly_normals[:, 0] = r.robot_foot[:, 0], r.robot_foot_normals[:, 0]
+        polys[:, self.rest0 :] = r.robot_foot[:, 1:]
+        poly_normals[:, self.rest0 :] = r.robot_foot_normals[:, 1:]
         origins[:, 0] = robot_xy
+        origins[:, self.rest0 :] = robot_xy[:, None]
         placed = (polys, poly_normals, origins)
         drawn = {}
         ok_env = a.zeros(b, "bool") | True

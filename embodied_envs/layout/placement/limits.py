@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from embodied_envs.layout.errors import check_number
 from embodied_envs.robots import PANDA
 
@@ -31,6 +33,12 @@ class PlacementLimits:
     # for the hand's jaws beside it (the env's default is its robot's, robots.py; None: clearance)
     mover_clearance: float | None = None
     robot_footprint: float = 0.12  # m in (0, 1], side of the robot base's square footprint
+    # the arm at rest, a box per link: ((x_lo, x_hi, y_lo, y_hi, z_lo), ...) m in the robot spot's
+    # frame (x to the table), z_lo its lowest point above the table top; an object whose top
+    # comes within rest_clearance of z_lo keeps rest_clearance from the box (``rest_links``; the
+    # env's default is its robot's, robots.py, this the Panda's; None: the base's square only)
+    rest_arm: tuple[tuple[float, float, float, float, float], ...] | None = PANDA.rest_arm
+    rest_clearance: float = 0.02  # m in [0, 0.5]: the expert's 1 cm obstacle spheres and 1 cm
     top_band: float = 0.05  # m in (0, 0.5], vertices this close to the highest point: the top
     bottom_percentile: float = 1.0  # in [0, 100]: the context's lowest point, a z percentile
     floor_radius: float = 1.5  # m in (0, 20], FLOOR objects stand this close to the origin
@@ -48,8 +56,36 @@ class PlacementLimits:
             return max(self.clearance, self.mover_clearance)
         return self.clearance
 
+    def rest_links(self, top: float) -> tuple[int, ...]:
+        """The rows of ``rest_arm`` an object whose top stands ``top`` m above the table keeps
+        ``rest_clearance`` from: the links whose lowest point is within that of its top."""
+        rows = self.rest_arm or ()
+        return tuple(k for k, box in enumerate(rows) if top + self.rest_clearance > box[4])
+
+    def rest_polygons(self) -> list[np.ndarray]:
+        """``rest_arm``'s boxes as counter-clockwise ``(4, 2)`` polygons in the spot's frame."""
+        return [np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
+                for x0, x1, y0, y1, _ in self.rest_arm or ()]  # fmt: skip
+
     def __post_init__(self):
         w = "placement_limits."
+        if self.rest_arm is not None:
+            rows = self.rest_arm
+            if not isinstance(rows, tuple | list) or not all(
+                isinstance(r, tuple | list) and len(r) == 5 for r in rows
+            ):
+                raise ValueError(
+                    f"{w}rest_arm={rows!r} must be a list of [x_lo, x_hi, y_lo, y_hi, z_lo] "
+                    "boxes in metres (the arm at rest, a row per link), or null"
+                )
+            for k, (x0, x1, y0, y1, z0) in enumerate(rows):
+                check_number(f"{w}rest_arm[{k}][0]", x0, -2.0, 2.0)
+                check_number(f"{w}rest_arm[{k}][1]", x1, float(x0), 2.0, lo_open=True)
+                check_number(f"{w}rest_arm[{k}][2]", y0, -2.0, 2.0)
+                check_number(f"{w}rest_arm[{k}][3]", y1, float(y0), 2.0, lo_open=True)
+                check_number(f"{w}rest_arm[{k}][4]", z0, -2.0, 2.0)
+            object.__setattr__(self, "rest_arm", tuple(tuple(float(v) for v in r) for r in rows))
+        check_number(w + "rest_clearance", self.rest_clearance, 0.0, 0.5)
         check_number(w + "reach_min", self.reach_min, 0.0, 2.0, hi_open=True)
         check_number(w + "reach_max", self.reach_max, float(self.reach_min), 2.0, lo_open=True)
         check_number(w + "max_heading_deg", self.max_heading_deg, 0.0, 180.0, lo_open=True)

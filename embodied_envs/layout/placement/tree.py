@@ -49,8 +49,10 @@ class Standing:
             those it stands on (its parent's chain down to the context).
         avoid_destinations: the movers of a ``move`` task among ``avoid`` (the same indices):
             it keeps clear of their destination footprints too (``rules``).
-        gaps: the least gap (m) to each of ``avoid + avoid_destinations``
-            (``PlacementLimits.gap``: wider beside the task's movers).
+        avoid_rest: the links of the arm at rest it keeps clear of (rows of
+            ``PlacementLimits.rest_arm``: those its top comes near, ``rest_links``).
+        gaps: the least gap (m) to each of ``avoid + avoid_destinations`` (``PlacementLimits.gap``:
+            wider beside the task's movers), then ``rest_clearance`` to each of ``avoid_rest``.
     """
 
     node: str
@@ -64,6 +66,7 @@ class Standing:
     avoid: tuple[int, ...]
     shift: tuple[float, float] | None = None
     avoid_destinations: tuple[int, ...] = ()
+    avoid_rest: tuple[int, ...] = ()
     gaps: tuple[float, ...] = ()
 
 
@@ -119,14 +122,18 @@ def support_tree(layout: LayoutInfo, limits: PlacementLimits) -> SupportTree:
     band, margin = limits.top_band, limits.hull_margin
     context_top = key_top(keys[ctx], band, margin)
     ancestors = {ctx: {ctx}}
+    heights = {ctx: 0.0}  # each support's top above the table top (objects stand on their tops)
     obstacles = [layout.robot]  # the robot base, then the objects in order
     items = []
     for node, parent in order:
         ancestors[node] = ancestors[parent] | {node}
         avoid = tuple(i for i, o in enumerate(obstacles) if o not in ancestors[parent])
         moving = tuple(i for i in avoid if i and items[i - 1].shift is not None)
+        geom = key_geometry(keys[node])
+        heights[node] = heights[parent] + geom.max_z - geom.min_z
+        rest = limits.rest_links(heights[node])
         gaps = tuple(limits.gap(node, obstacles[i] if i else None, layout.task.objects)
-                     for i in avoid + moving)  # fmt: skip
+                     for i in avoid + moving) + (limits.rest_clearance,) * len(rest)  # fmt: skip
         obstacles.append(node)
         items.append(
             Standing(
@@ -134,13 +141,14 @@ def support_tree(layout: LayoutInfo, limits: PlacementLimits) -> SupportTree:
                 parent=parent,
                 key=keys[node],
                 footprint=key_footprint(keys[node]),
-                min_z=key_geometry(keys[node]).min_z,
+                min_z=geom.min_z,
                 top=key_top(keys[node], band, margin),
                 supports=node in parents,
                 manipulated=node in layout.reach_nodes,
                 avoid=avoid,
                 shift=layout.task.shift() if node in layout.task.objects else None,
                 avoid_destinations=moving,
+                avoid_rest=rest,
                 gaps=gaps,
             )
         )
