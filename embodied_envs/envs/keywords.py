@@ -184,7 +184,7 @@ def robot_arms(layout_set: LayoutSet, robot_uids) -> tuple[str | tuple, tuple[ro
 
 
 def limits_and_goals(
-    entry: robots.Robot, placement_limits, goal_region, rest: np.ndarray | None = None
+    entry: robots.Robot, placement_limits, goal_region, rest=None
 ) -> tuple[PlacementLimits, GoalRegion]:
     """The ``placement_limits`` and ``goal_region`` keywords as dataclasses, the robot's reach
     and goal band (:func:`robot_defaults`) under each field the user did not set; the goal band

@@ -131,9 +131,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         self.robot_init_qpos = None if robot_init_qpos is None else self.robot_rests[0].tolist()
         # reach and goals follow the robot, for each field the user did not set
         self.placement_limits, self.goal_region = keywords.limits_and_goals(
-            self.robot_entry, placement_limits, goal_region,
-            None if robot_init_qpos is None else self.robot_rests[0],
-        )  # fmt: skip
+            self.robot_entry, placement_limits, goal_region, self.robot_init_qpos
+        )
         for name, value in dict(
             robot_init_qpos_noise=robot_init_qpos_noise, objs_z_offset=objs_z_offset,
             robot_z_offset=robot_z_offset, replace_objs=replace_objs, enable_grasp=enable_grasp,
