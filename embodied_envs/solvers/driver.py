@@ -76,7 +76,7 @@ class ArmDriver:
         """Per env, ``(n, 2)``: where the arm's first joint (its base turn, a vertical axis)
         stands in the world's xy. A five-joint arm's hand moves in a vertical plane through
         it, and the base turn swings the hand about it: the SO-100's stands 4.5 cm ahead of its
-        base link's origin, the Koch's 5.6 cm; a plane through the origin missed a mover 55
+        base link's origin, the Koch's 6.8 cm; a plane through the origin missed a mover 55
         degrees off the heading by 13 degrees (every grasp out of the Koch's reach)."""
         base = self.base.agent.robot.pose.raw_pose.cpu().numpy().astype(np.float64)
         name = self.base.agent.robot.get_active_joints()[0].child_link.name

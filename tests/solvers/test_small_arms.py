@@ -383,7 +383,7 @@ def test_a_small_arm_has_room_beside_its_mover_and_says_when_it_has_none():
 
 def test_a_five_joint_arms_plane_passes_through_its_base_joint():
     """A five-joint arm points its hand in a vertical plane through its base joint's axis,
-    which stands 4.5 cm (SO-100) and 5.6 cm (Koch) ahead of its base link's origin. The
+    which stands 4.5 cm (SO-100) and 6.8 cm (Koch) ahead of its base link's origin. The
     planner's plane went through the origin: accept7's cube, seed 2, 0.229 m out and 54
     degrees off the Koch's heading, lay 13 degrees out of that plane, and the IK reached none
     of its 14 grasps ("approach: ... IK failed"). ``_pan_axis`` is the joint's axis (the
