@@ -201,7 +201,7 @@ class Robot:
     rest_qpos: tuple[float, ...] | None  # every active joint, gripper open (None: the
     # agent's first keyframe)
     noise_joints: tuple[int, ...]  # joints that get the start noise (at most NOISE_DIMS)
-    reach: tuple[float, float]  # m from the layout's robot spot: placement limits' band
+    reach: tuple[float, float]  # m from its reach centre (reach_origin): placement limits' band
     goal_inset: float  # m, the goal band is the reach band shrunk by this at both ends
     goal_height: tuple[float, float]  # m above the table top, goals' heights
     gripper: Gripper
@@ -223,6 +223,10 @@ class Robot:
     # m: the least gap placement keeps between the task's movers and every other object
     # (PlacementLimits.mover_clearance); None: the placement clearance, 1 cm (the Panda's)
     mover_clearance: float | None = None
+    # m ahead of the spot: the centre of its reach band and heading cone, its pan axis
+    # (PlacementLimits.reach_origin): the arm turns about it, so an object off to the side is as
+    # far for it as one that far from the axis ahead (0: the spot)
+    reach_origin: float = 0.0
     rest_arm: tuple | None = None  # its links at rest (PlacementLimits.rest_arm); None: unmeasured
     arm_force_limit: float | None = None  # N m, the most its arm joints' drives exert
     # (ManiSkill 3.0.1's controller configs: force_limit=100 for the Panda, SO-100 and Koch; their
@@ -233,7 +237,8 @@ class Robot:
         """The placement limits that follow the robot (``PlacementLimits``' fields): its reach
         band, its movers' clearance and its arm at rest."""
         return dict(reach_min=self.reach[0], reach_max=self.reach[1],
-                    mover_clearance=self.mover_clearance, rest_arm=self.rest_arm)  # fmt: skip
+                    reach_origin=self.reach_origin, mover_clearance=self.mover_clearance,
+                    rest_arm=self.rest_arm)  # fmt: skip
 
     @property
     def payload(self) -> float | None:
@@ -242,7 +247,7 @@ class Robot:
         simulator's passive forces); None where ``arm_force_limit`` is not known."""
         if self.arm_force_limit is None:
             return None
-        return self.arm_force_limit / (GRAVITY * self.reach[1])
+        return self.arm_force_limit / (GRAVITY * (self.reach[1] + self.reach_origin))
 
     @property
     def expert(self) -> bool:
@@ -402,7 +407,8 @@ ROBOTS: dict[str, Robot] = {
         Robot(
             uid="koch-v1.1", names=("koch", "koch_v1.1", "koch-v1.1"),
             rest_qpos=(0.0, 2.2, 1.6, 2.0, 0.0, 1.6),
-            noise_joints=tuple(range(5)), reach=(0.12, 0.24), goal_inset=0.03,
+            noise_joints=tuple(range(5)), reach=(0.052, 0.19), reach_origin=0.068,
+            goal_inset=0.03,
             goal_height=(0.04, 0.10),  # the expert reaches these holding a block
             gripper=Gripper(joints=1, open_qpos=1.6, closed_qpos=0.0, max_opening=0.078,
                             action_index=5, action_kind="delta"),

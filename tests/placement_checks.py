@@ -56,6 +56,7 @@ def check_constraints(layout, limits: PlacementLimits | None = None):
         [(rx + c * a - s * b, ry + s * a + c * b) for a in (-half, half) for b in (-half, half)]
     ).convex_hull
     feet = {"robot": robot_sq}
+    cx, cy = rx + c * lim.reach_origin, ry + s * lim.reach_origin  # the reach band's centre
     # the arm at rest, a box per link (PlacementLimits.rest_arm), in the world
     def world(xs, ys):  # a box in the robot's frame, in the world
         return MultiPoint([(rx + c * a - s * b, ry + s * a + c * b) for a in xs for b in ys])
@@ -90,17 +91,17 @@ def check_constraints(layout, limits: PlacementLimits | None = None):
             if not inner.buffer(1e-6).contains(there):
                 bad.append(f"{node}'s destination leaves the shrunk table top")
             ox, oy = np.asarray(layout.position[node][:2]) + [dx, dy]
-            d = math.hypot(ox - rx, oy - ry)
+            d = math.hypot(ox - cx, oy - cy)
             if not lim.reach_min < d < lim.reach_max:
                 bad.append(f"{node}'s destination at {d:.3f} m from the robot")
             destinations[node] = there
         if node in layout.manipulated_objs:
             ox, oy = layout.position[node][:2]
-            d = math.hypot(ox - rx, oy - ry)
+            d = math.hypot(ox - cx, oy - cy)
             if not lim.reach_min < d < lim.reach_max:
                 bad.append(f"{node} at {d:.3f} m from the robot")
             ang = math.degrees(
-                abs(math.atan2(oy - ry, ox - rx) - math.atan2(heading[1], heading[0]))
+                abs(math.atan2(oy - cy, ox - cx) - math.atan2(heading[1], heading[0]))
             )
             ang = min(ang, 360 - ang)
             if ang > lim.max_heading_deg + 1e-6:

@@ -218,8 +218,9 @@ def draw_top_down(layout: LayoutInfo, size: int = 640, limits: PlacementLimits |
     yaw = robot.yaw
     half = math.radians(lim.max_heading_deg)
     arc = np.linspace(yaw - half, yaw + half, 40)
-    outer = np.stack([np.cos(arc), np.sin(arc)], 1) * lim.reach_max + robot.p[:2]
-    inner = (np.stack([np.cos(arc), np.sin(arc)], 1) * lim.reach_min + robot.p[:2])[::-1]
+    centre = lim.reach_centre(np.array(robot.p[:2]), np.float64(yaw))
+    outer = np.stack([np.cos(arc), np.sin(arc)], 1) * lim.reach_max + centre
+    inner = (np.stack([np.cos(arc), np.sin(arc)], 1) * lim.reach_min + centre)[::-1]
     d.polygon(px(np.concatenate([outer, inner])), fill=(215, 235, 215), outline=(120, 170, 120))
     d.polygon(px(top.hull), outline=(120, 80, 40), width=3)
     colours = {"manipulated_objs": (40, 90, 220), "distractor_objs": (200, 110, 40)}

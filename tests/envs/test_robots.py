@@ -91,7 +91,9 @@ def test_robot_resets_reproducibly_and_stands_at_the_layouts_spot(robot_env):
     assert mine.dtype == theirs.raw_pose.dtype and mine.shape == theirs.raw_pose.shape
     np.testing.assert_array_equal(mine.numpy(), theirs.raw_pose.numpy())
     target = u.obj.pose.p[0].cpu().numpy()
-    assert entry.reach[0] < np.linalg.norm(target[:2] - spot[:2]) < entry.reach[1]
+    centre = spot[:2] + entry.reach_origin * ahead  # its pan axis (the Panda's: the spot)
+    assert entry.reach[0] < np.linalg.norm(target[:2] - centre) < entry.reach[1]
+    assert u.placement_limits.reach_origin == entry.reach_origin
     assert (u.placement_limits.reach_min, u.placement_limits.reach_max) == entry.reach
     assert (u.goal_region.inset, tuple(u.goal_region.height)) == (
         entry.goal_inset, tuple(entry.goal_height),

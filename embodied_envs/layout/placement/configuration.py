@@ -119,8 +119,9 @@ class _Placer:
         reach = None
         if it.manipulated:
             robot = self.poses[self.layout.robot]
+            yaw = np.array([robot.yaw])
             reach = (
-                np.array([robot.p[:2]]), np.array([robot.yaw]),
+                lim.reach_centre(np.array([robot.p[:2]]), yaw), yaw,
                 (lim.reach_min, lim.reach_max), lim.max_heading_deg,
             )  # fmt: skip
         placed = self.placed([self.obstacles[i] for i in it.avoid]
@@ -137,7 +138,8 @@ class _Placer:
             names = {
                 "inside": "footprint inside parent top",
                 "clear": "no overlap with placed footprints",
-                "in_band": f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base",
+                "in_band": f"within ({lim.reach_min}, {lim.reach_max}) m of the robot's "
+                "reach centre",
                 "facing": f"within {lim.max_heading_deg:g} deg of the robot heading",
                 "destination": "its move's destination on the top, within reach and clear",
             }

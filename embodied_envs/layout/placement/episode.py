@@ -96,6 +96,7 @@ class _Rows:
     goal_lo: object
     goal_hi: object
     top_z: object
+    reach_xy: object  # where the reach band is centred (PlacementLimits.reach_centre)
 
 
 class EpisodeSampler:
@@ -182,6 +183,7 @@ class EpisodeSampler:
         self.top = Region.of(self._posed(ctx_hull, ctx_poses), self.top_z)  # whole top
         self.robot_xy = a([r.p[:2] for r in robots])
         self.robot_yaw = a([r.yaw for r in robots])
+        self.reach_xy = limits.reach_centre(self.robot_xy, self.robot_yaw)  # the band's centre
         # the robot base's footprint per env (fixed for the configuration) and its normals,
         # with the arm's links at rest after it: (E, 1 + links, M, 2)
         robot = a.xp.concatenate([self.shapes.vertices[:1], self.shapes.vertices[n + 1 :]])
@@ -218,7 +220,7 @@ class EpisodeSampler:
         angle = self.robot_yaw[:, None] + a(np.linspace(-half, half, 361))
         band = g.distance_band(self.limits)
         arcs = xp.concatenate([r * xp.stack([xp.cos(angle), xp.sin(angle)], -1) for r in band], 1)
-        arcs = arcs + self.robot_xy[:, None]
+        arcs = arcs + self.reach_xy[:, None]
         self.goal_lo = xp.maximum(xp.amin(arcs, 1) - 1e-3, self.goal_table.lo)
         self.goal_hi = xp.minimum(xp.amax(arcs, 1) + 1e-3, self.goal_table.hi)
         # the region must not be empty: check on a fine grid, as a layout error
@@ -247,7 +249,7 @@ class EpisodeSampler:
                 self.table.rows(env_idx), self.goal_table.rows(env_idx), self.robot_xy[env_idx],
                 self.robot_yaw[env_idx], self.robot_foot[env_idx],
                 self.robot_foot_normals[env_idx], self.goal_lo[env_idx], self.goal_hi[env_idx],
-                self.top_z[env_idx],
+                self.top_z[env_idx], self.reach_xy[env_idx],
             )  # fmt: skip
             if key is not None:
                 if len(self._kept_rows) >= ROWS_KEPT:
@@ -261,7 +263,7 @@ class EpisodeSampler:
         r = self._rows(env_idx)
         in_band, facing = within_reach(
             xy,
-            r.robot_xy[:, None],
+            r.reach_xy[:, None],
             r.robot_yaw[:, None],
             self.goal_region.distance_band(self.limits),
             self.limits.max_heading_deg,
@@ -384,7 +386,7 @@ class EpisodeSampler:
         u = uniforms(keys, 0, 3 * k * n).reshape(b, n, 3, k)
         for j, it in enumerate(self.items):
             region, shape = regions[it.parent], j + 1
-            first, found = self._first_fit(j, it, region, u[:, j], placed, robot_xy, robot_yaw)
+            first, found = self._first_fit(j, it, region, u[:, j], placed, r.reach_xy, robot_yaw)
             ok_env = ok_env & found
             chosen = u[rows, j, :, first][..., None]  # (b, 3, 1)
             xy, yaw = (x[:, 0] for x in region.candidates(chosen))
@@ -421,7 +423,7 @@ class EpisodeSampler:
             out[node] = raw
         return out
 
-    def _first_fit(self, j: int, it, region: Region, u, placed, robot_xy, robot_yaw):
+    def _first_fit(self, j: int, it, region: Region, u, placed, reach_xy, robot_yaw):
         """The first of item j's candidates (uniforms ``u (b, 3, k)``) that meets every rule
         (``rules.candidates_fit``) in each env, and whether one does: ``(first (b,), found
         (b,))``.
@@ -439,7 +441,7 @@ class EpisodeSampler:
         reach = None
         if it.manipulated:
             band = (lim.reach_min, lim.reach_max)
-            reach = (robot_xy, robot_yaw, band, lim.max_heading_deg)
+            reach = (reach_xy, robot_yaw, band, lim.max_heading_deg)
         first = found = None
         for lo, hi in ((0, min(FIRST_CHUNK, k)), (min(FIRST_CHUNK, k), k)):
             if lo == hi:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from embodied_envs.layout.errors import check_number
+from embodied_envs.layout.placement.rules import array_module
 from embodied_envs.robots import PANDA
 
 
@@ -26,6 +27,10 @@ class PlacementLimits:
     # in (reach_min, 2]; the env's default is its robot's (robots.py), these the Panda's
     reach_min: float = PANDA.reach[0]
     reach_max: float = PANDA.reach[1]
+    # m in [-0.5, 0.5]: the band and the heading cone are centred this far ahead of the spot,
+    # along its heading: the arm's pan axis, about which it turns (the env's default is its
+    # robot's, robots.py; the Panda's 0: its axis stands over the spot)
+    reach_origin: float = 0.0
     max_heading_deg: float = 60.0  # in (0, 180]: manipulated objects within this of the heading
     hull_margin: float = 0.02  # m in [0, 0.5], the parent's top hull is shrunk by this much
     clearance: float = 0.01  # m in [0, 0.5], minimum gap between footprints
@@ -55,6 +60,14 @@ class PlacementLimits:
         if node in movers or other in movers:
             return max(self.clearance, self.mover_clearance)
         return self.clearance
+
+    def reach_centre(self, xy, yaw):
+        """Where the reach band and heading cone are centred for a robot spot at ``xy (..., 2)``
+        facing ``yaw (...)`` (numpy or torch arrays)."""
+        if not self.reach_origin:
+            return xy
+        xp = array_module(yaw)
+        return xy + self.reach_origin * xp.stack([xp.cos(yaw), xp.sin(yaw)], -1)
 
     def rest_links(self, top: float) -> tuple[int, ...]:
         """The rows of ``rest_arm`` an object whose top stands ``top`` m above the table keeps
@@ -88,6 +101,7 @@ class PlacementLimits:
         check_number(w + "rest_clearance", self.rest_clearance, 0.0, 0.5)
         check_number(w + "reach_min", self.reach_min, 0.0, 2.0, hi_open=True)
         check_number(w + "reach_max", self.reach_max, float(self.reach_min), 2.0, lo_open=True)
+        check_number(w + "reach_origin", self.reach_origin, -0.5, 0.5)
         check_number(w + "max_heading_deg", self.max_heading_deg, 0.0, 180.0, lo_open=True)
         check_number(w + "hull_margin", self.hull_margin, 0.0, 0.5)
         check_number(w + "clearance", self.clearance, 0.0, 0.5)
