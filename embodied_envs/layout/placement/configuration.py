@@ -138,8 +138,8 @@ class _Placer:
             names = {
                 "inside": "footprint inside parent top",
                 "clear": "no overlap with placed footprints",
-                "in_band": f"within ({lim.reach_min}, {lim.reach_max}) m of the robot's "
-                "reach centre",
+                "in_band": f"within ({lim.reach_min}, {lim.reach_max}) m of the robot base"
+                + (f"'s pan axis, {lim.reach_origin} m ahead" if lim.reach_origin else ""),
                 "facing": f"within {lim.max_heading_deg:g} deg of the robot heading",
                 "destination": "its move's destination on the top, within reach and clear",
             }
