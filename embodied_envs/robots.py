@@ -223,9 +223,11 @@ class Robot:
     # m: the least gap placement keeps between the task's movers and every other object
     # (PlacementLimits.mover_clearance); None: the placement clearance, 1 cm (the Panda's)
     mover_clearance: float | None = None
-    # m ahead of the spot: the centre of its reach band and heading cone, its pan axis
-    # (PlacementLimits.reach_origin): the arm turns about it, so an object off to the side is as
-    # far for it as one that far from the axis ahead (0: the spot)
+    # m ahead of the spot: the centre of its reach band and heading cone
+    # (PlacementLimits.reach_origin). The Koch's is its pan axis (ArmDriver._pan_axis, 6.8 cm
+    # ahead; tested equal): it turns about it, so an object off to the side is as far for it as
+    # one that far from the axis ahead. 0, the spot: the Panda (its axis stands there) and the
+    # SO-100 (axis 4.5 cm ahead, but its band about the spot was measured and kept)
     reach_origin: float = 0.0
     rest_arm: tuple | None = None  # its links at rest (PlacementLimits.rest_arm); None: unmeasured
     arm_force_limit: float | None = None  # N m, the most its arm joints' drives exert
