@@ -159,6 +159,11 @@ class Hand:
     close_gap: float = 0.0  # m: first at once to the object's width plus this (0: shut at once)
     close_step: float = 0.0  # then its target leads the jaw by this (action) until it grasps
     squeeze: float = 0.0  # and stays this far (action) past where the jaw stands
+    grip_lead: float = 0.0  # then, while it holds, its target is kept this far (action) past the
+    # jaw at every control step (PickPlaceSolver._keep_grip): a PD jaw presses only by its lead,
+    # and the SO-100's jaw crept to 0.3 mrad of the target its squeeze set (3 N on a hex pencil,
+    # then none as the carry's turn began: the pencil fell out, accept10 4/12 -> 12/12 at 2
+    # mrad); 0: the target set at the grasp stays (the Panda; the Koch, whose arm gives way)
     lift_heights: tuple[float, ...] = (0.05, 0.10)  # m, lifts after grasping, tried in order
     # (the carry plans from there: 5 cm before 10 saves the Panda 3-7 steps an episode on the
     # shipped layouts and the zoo); the SO-100's first is 2 cm, its carry rising the rest
@@ -326,7 +331,7 @@ SO100_HAND = Hand(
                      (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
     close_gap=0.004, close_step=0.02, squeeze=0.002, max_path_steps=300, convertible=False,
-    fixed_jaw=0.0385, drifts=True, lift_heights=(0.02, 0.05, 0.10),
+    grip_lead=0.002, fixed_jaw=0.0385, drifts=True, lift_heights=(0.02, 0.05, 0.10),
     tilt_reach=((0.14, 0.0, 0.0), (0.18, 0.0, 15.0), (0.22, 0.0, 15.0), (0.26, 0.0, 30.0),
                 (0.30, 0.0, 30.0), (0.34, 15.0, 45.0)),
 )  # fmt: skip

@@ -138,9 +138,11 @@ class ArmDriver:
                 return
             n = self.arm_dof
             action = np.zeros((self.num_envs, n + 1), np.float32)
+            self._keep_grip()
             for i, path in enumerate(paths):
                 if path is not None and open_before and t >= len(path) - open_before:
                     self.gripper[i] = self.robot_hand.action_open
+                    self.gripping[i] = False
                 if path is not None:
                     action[i, :n] = path[min(t, len(path) - 1)]
                 else:  # holds its last targets

@@ -26,6 +26,7 @@ class Jaws:
         a placed mover as soon as the fingers of ``envs`` are open as the release rule counts it
         (``task_scene.open_fraction``)."""
         self.gripper[envs] = value
+        self.gripping[envs] = False
         fingers = [self._fingers()]
 
         def gripped() -> bool:
@@ -43,6 +44,10 @@ class Jaws:
         closing = value == self.robot_hand.action_closed
         if closing and self.robot_hand.close_step:
             self._close_gently(envs)
+            # not where the arm holds weakly: the jaw's lead there pushed the SO-100's arm off
+            # its block (pd_joint_delta_pos: 11/12 -> 7/12; a target relative to the jaw)
+            keeps = self.robot_hand.grip_lead > 0 and not self.mode_actions.holds_weakly
+            self.gripping[envs] = self._grasping()[envs] & keeps
             return
         self._execute(
             [None] * self.num_envs,
@@ -73,17 +78,14 @@ class Jaws:
         step = self.mode_actions.lead(self.arm_dof, hand.close_step / abs(per_qpos))
         step *= abs(per_qpos)
 
-        def jaw() -> np.ndarray:  # the jaw's position as an action
-            return hand.action_open + (self._fingers()[:, 0] - grip.open_qpos) * per_qpos
-
         width = self._width_between_jaws()
         near = np.array([hand.action(w + hand.close_gap) for w in width])
         self.gripper[envs] = near[envs]
-        there = lambda: bool(np.all(np.abs(jaw() - self.gripper)[envs] < step))  # noqa: E731
+        there = lambda: bool(np.all(np.abs(self._jaw_action() - self.gripper)[envs] < step))  # noqa: E731
         self._execute([None] * self.num_envs, self.cfg.close_steps, until=there)
         closing = envs & ~self._grasping()
         pressing = np.zeros_like(closing)  # firm envs: grasping, the jaw not yet at rest
-        before = jaw()
+        before = self._jaw_action()
         for _ in range(self.cfg.close_steps):
             if not (closing | pressing).any() or self.ended:
                 break
@@ -93,7 +95,7 @@ class Jaws:
             )
             self.gripper[closing] = shut[closing]
             self._execute([None] * self.num_envs, 1)
-            now = jaw()
+            now = self._jaw_action()
             held = closing & self._grasping()
             pressing = (pressing & (np.abs(now - before) >= JAW_REST)) | (held & self.firm)
             self.gripper[held | pressing] = now[held | pressing] + way * hand.squeeze
@@ -101,6 +103,24 @@ class Jaws:
             before = now
         if not self.mode_actions.holds_weakly:
             self._execute([None] * self.num_envs, self.cfg.settle_steps)
+
+    def _jaw_action(self) -> np.ndarray:
+        """Per env, the jaw's position as a gripper action."""
+        hand, grip = self.robot_hand, self.gripper_entry
+        per_qpos = (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)
+        return hand.action_open + (self._fingers()[:, 0] - grip.open_qpos) * per_qpos
+
+    def _keep_grip(self) -> None:
+        """Before a control step: in the envs that hold their target (``gripping``), the jaw's
+        target ``Hand.grip_lead`` past the jaw (a PD jaw presses only by its lead)."""
+        if not self.gripping.any():
+            return
+        hand = self.robot_hand
+        way = np.sign(hand.action_closed - hand.action_open)
+        lead = self._jaw_action() + way * hand.grip_lead
+        lead = np.minimum(lead, hand.action_closed) if way > 0 else np.maximum(
+            lead, hand.action_closed)
+        self.gripper[self.gripping] = lead[self.gripping]
 
     def _width_between_jaws(self) -> np.ndarray:
         """Per env, the mover's extent along the closing axis (the TCP's y) over its vertices

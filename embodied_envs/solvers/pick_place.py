@@ -140,6 +140,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         self.last_info: dict = {}
         self._batched_actions = len(self.env.action_space.shape) == 2
         self.gripper = np.full(self.num_envs, self.robot_hand.action_open)
+        self.gripping = np.zeros(self.num_envs, bool)  # per env: its jaw holds on (jaws.py)
         self.clouds: list[np.ndarray] = []  # per env, the obstacle surface points (world)
         self._trees: dict[int, cKDTree] = {}  # their KD-trees, made where asked (cloud_tree)
         self.slot = 0  # the mover slot being taken (``env.task_scene.movers``)

@@ -415,3 +415,36 @@ def test_a_five_joint_arms_plane_passes_through_its_base_joint():
         env.close()
     success, solver = drawn_episode("accept7", "koch_cube", 2)
     assert success and not solver.reports[0].plan_failures
+
+
+class LetsGo(PickPlaceSolver):
+    """The expert as it was: the jaw's target stays where the grasp set it."""
+
+    def _keep_grip(self):
+        pass
+
+
+class Watched(PickPlaceSolver):
+    """The expert, the jaw's target's lead on the jaw (action) seen at the episode's end."""
+
+    def solve(self):
+        out = super().solve()
+        self.lead_at_end = float(self._jaw_action()[0] - self.gripper[0])  # the jaw closes to -
+        return out
+
+
+def test_a_held_jaw_keeps_pressing_through_the_carry():
+    """accept10's 2.4 cm hex pencil on the SO-100 (seed 0), held at its side edges: the jaw's
+    target, set 2 mrad past the jaw at the grasp, was reached as the contacts settled (0.3
+    mrad left: 3 N, then 0 N as the carry's base turn began) and the pencil fell out, at every
+    attempt. Kept ``Hand.grip_lead`` past the jaw at every step, the jaw presses on and the
+    pencil is carried."""
+    hand = ROBOTS["so100"].hand
+    assert hand.grip_lead > 0 and ROBOTS["panda"].hand.grip_lead == 0
+    success, solver = drawn_episode("accept10", "so100_hex_pencil", 0, Watched)
+    assert success and not solver.reports[0].misses, solver.reports[0]
+    assert solver.gripping[0]  # still holding on at the goal, its target leading the jaw
+    assert solver.lead_at_end == pytest.approx(hand.grip_lead, abs=5e-4)
+    success, solver = drawn_episode("accept10", "so100_hex_pencil", 0, LetsGo)
+    assert not success
+    assert solver.reports[0].misses[:2] == ["carry (attempt 0)", "carry (attempt 1)"]
