@@ -47,7 +47,7 @@ class Jaws:
             # not where the arm holds weakly: the jaw's lead there pushed the SO-100's arm off
             # its block (pd_joint_delta_pos: 11/12 -> 7/12; a target relative to the jaw)
             keeps = self.robot_hand.grip_lead > 0 and not self.mode_actions.holds_weakly
-            self.gripping[envs] = self._grasping()[envs] & keeps
+            self.gripping[envs] = self._pressing()[envs] & keeps
             return
         self._execute(
             [None] * self.num_envs,
@@ -83,7 +83,7 @@ class Jaws:
         self.gripper[envs] = near[envs]
         there = lambda: bool(np.all(np.abs(self._jaw_action() - self.gripper)[envs] < step))  # noqa: E731
         self._execute([None] * self.num_envs, self.cfg.close_steps, until=there)
-        closing = envs & ~self._grasping()
+        closing = envs & ~self._pressing()
         pressing = np.zeros_like(closing)  # firm envs: grasping, the jaw not yet at rest
         before = self._jaw_action()
         for _ in range(self.cfg.close_steps):
@@ -96,7 +96,7 @@ class Jaws:
             self.gripper[closing] = shut[closing]
             self._execute([None] * self.num_envs, 1)
             now = self._jaw_action()
-            held = closing & self._grasping()
+            held = closing & self._pressing()
             pressing = (pressing & (np.abs(now - before) >= JAW_REST)) | (held & self.firm)
             self.gripper[held | pressing] = now[held | pressing] + way * hand.squeeze
             closing &= ~held & (self.gripper != hand.action_closed)

@@ -448,3 +448,23 @@ def test_a_held_jaw_keeps_pressing_through_the_carry():
     success, solver = drawn_episode("accept10", "so100_hex_pencil", 0, LetsGo)
     assert not success
     assert solver.reports[0].misses[:2] == ["carry (attempt 0)", "carry (attempt 1)"]
+
+
+class AngleRule(PickPlaceSolver):
+    """The expert as it was: a gentle close stops at ManiSkill's grasp rule, its angle too."""
+
+    def _pressing(self):
+        return self._grasping()
+
+
+def test_a_close_stops_where_both_jaws_press_at_any_angle():
+    """accept9's lying triangular prism on the SO-100 (seed 0): its faces, 30 degrees off the
+    closing line, push the moving jaw 116-121 degrees off its opening direction, past the
+    110 of ManiSkill's rule (the env's ``is_grasped``). Waiting for that rule the close squeezed
+    on, the prism wedged under the jaws and every attempt missed; stopping where both jaws
+    press (``PickPlaceSolver._pressing``) the prism is carried."""
+    success, solver = drawn_episode("accept9", "so100_tri_prism", 0)
+    assert success and not solver.reports[0].misses, solver.reports[0]
+    success, solver = drawn_episode("accept9", "so100_tri_prism", 0, AngleRule)
+    assert not success
+    assert solver.reports[0].misses[:2] == ["grasp (attempt 0)", "grasp (attempt 1)"]
