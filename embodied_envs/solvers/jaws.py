@@ -59,8 +59,8 @@ class Jaws:
         """Close the jaws of ``envs`` as a hand whose jaw the arm's PD gains drive must
         (``robots.Hand.close_gap``; shut at once, the SO-100's jaw meets the object with 100
         N m and pushes the arm away): at once to the target's width across the jaws plus
-        ``close_gap``, then the jaw's target ``close_step`` ahead of the jaw until the jaws
-        grasp the target (the env's ``is_grasped``), where it stays ``squeeze`` past the jaw (in
+        ``close_gap``, then the jaw's target ``close_step`` ahead of the jaw until both jaws
+        press on the target (``_pressing``), where it stays ``squeeze`` past the jaw (in
         an env whose grip slipped before, ``firm``: ``squeeze`` ahead of the jaw until the jaw
         rests, ``JAW_REST``: the grasp is seen at the first touch, and a squeeze set there is
         spent as the jaw closes on; pressing from the first grasp cost more episodes than it
@@ -70,7 +70,8 @@ class Jaws:
         In a mode whose drive moves the jaw slower than ``pd_joint_pos``'s, the lead is
         ``ModeActions.lead``'s (the Koch's delta modes: else its jaw, at 0.11 rad/s, stops
         ``close_steps`` short of the block). The first target is for the object's width
-        between the jaws (``_width_between_jaws``)."""
+        between the jaws (``_width_between_jaws``). Then, where the hand has a ``grip_lead``,
+        its target keeps that lead on the jaw while it holds (``_keep_grip``)."""
         hand, grip = self.robot_hand, self.gripper_entry
         way = np.sign(hand.action_closed - hand.action_open)
         per_qpos = (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)

@@ -26,7 +26,6 @@ import torch
 from mani_skill.utils.structs.pose import Pose
 from scipy.spatial import cKDTree
 
-from embodied_envs.envs.contacts import is_grasping
 from embodied_envs.internals import px_articulations
 from embodied_envs.layout.pose import LayoutPose
 from embodied_envs.robots import ROBOTS
@@ -238,8 +237,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         wedged under the jaws (accept11: 1 in 6 taken)."""
         if self.press_rule is None:
             return self._grasping()
-        pressed = is_grasping(self.base.agent, self.target, self.press_rule)
-        return np.asarray(pressed.cpu()).reshape(-1)
+        return self.base.task_reader.presses(self.target, self.press_rule)
 
     def _steps_left(self) -> int:
         limit = getattr(getattr(self.env, "spec", None), "max_episode_steps", None) or 10**9

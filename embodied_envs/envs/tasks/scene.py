@@ -14,6 +14,7 @@ from scipy.spatial import ConvexHull
 from embodied_envs.envs import fast_reads
 from embodied_envs.envs.agents import is_grasping, tcp_pose, tcp_position_cpu
 from embodied_envs.envs.contacts import grasped_cpu
+from embodied_envs.envs.contacts import is_grasping as grasped_by
 from embodied_envs.envs.fast_reads import raw_poses
 from embodied_envs.envs.tasks import KIND_IDS, RULES, place
 from embodied_envs.envs.tasks.state import OPEN_FRACTION, TaskState
@@ -447,6 +448,11 @@ class TaskReader:
         present kind's rule results (``RULES[kind].evaluate``), kind -> dict."""
         state = self.state(goal, full=self.kinds != ["pick"])
         return state, {k: RULES[k].evaluate(state) for k in self.kinds}
+
+    def presses(self, obj, rule) -> np.ndarray:
+        """Per env (bool): the robot's fingers hold ``obj`` by ``rule`` (a ``robots.FingerGrasp``,
+        not the robot's own: the expert's close checks the press at any angle) now."""
+        return np.asarray(grasped_by(self.env.agent, obj, rule).cpu()).reshape(-1)
 
     def goal(self):
         """The goal marker's position now, as this reader's arrays hold it."""
