@@ -234,7 +234,7 @@ class PickPlaceSolver(GraspChoice, PlaceFlow, Jaws, ArmDriver):
         faces push a jaw off its opening direction: a lying triangular prism's, 30 degrees off
         the closing line, pushed the SO-100's moving jaw 116-121 degrees off it, past
         ManiSkill's 110, and a close waiting for that rule squeezed on to 20 N, the prism
-        wedged under the jaws (accept11: 1 in 6 taken)."""
+        wedged under the jaws (accept9's prism: 3 of 6 taken, now 6 of 6)."""
         if self.press_rule is None:
             return self._grasping()
         return self.base.task_reader.presses(self.target, self.press_rule)
