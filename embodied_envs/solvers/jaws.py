@@ -72,9 +72,9 @@ class Jaws:
         ``close_steps`` short of the block). The first target is for the object's width
         between the jaws (``_width_between_jaws``). Then, where the hand has a ``grip_lead``,
         its target keeps that lead on the jaw while it holds (``_keep_grip``)."""
-        hand, grip = self.robot_hand, self.gripper_entry
+        hand = self.robot_hand
         way = np.sign(hand.action_closed - hand.action_open)
-        per_qpos = (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)
+        per_qpos = self._per_qpos
         # the jaw's lead (action), as the jaw's joint (after the arm's) leads in the mode
         step = self.mode_actions.lead(self.arm_dof, hand.close_step / abs(per_qpos))
         step *= abs(per_qpos)
@@ -105,11 +105,16 @@ class Jaws:
         if not self.mode_actions.holds_weakly:
             self._execute([None] * self.num_envs, self.cfg.settle_steps)
 
+    @property
+    def _per_qpos(self) -> float:
+        """The gripper action per radian (or metre) of the jaw's joint."""
+        hand, grip = self.robot_hand, self.gripper_entry
+        return (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)
+
     def _jaw_action(self) -> np.ndarray:
         """Per env, the jaw's position as a gripper action."""
-        hand, grip = self.robot_hand, self.gripper_entry
-        per_qpos = (hand.action_closed - hand.action_open) / (grip.closed_qpos - grip.open_qpos)
-        return hand.action_open + (self._fingers()[:, 0] - grip.open_qpos) * per_qpos
+        moved = self._fingers()[:, 0] - self.gripper_entry.open_qpos
+        return self.robot_hand.action_open + moved * self._per_qpos
 
     def _keep_grip(self) -> None:
         """Before a control step: in the envs that hold their target (``gripping``), the jaw's
