@@ -32,6 +32,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 DOWNLOAD_COMMAND = "python -m mani_skill.utils.download_asset {uid}"
 GRAVITY = 9.81  # m/s^2
 MANISKILL_FORCE_LIMIT = 100.0  # N m: ManiSkill 3.0.1's arm drives (panda.py arm_force_limit,
@@ -177,13 +179,14 @@ class Hand:
     # drives every joint, which ManiSkill 3.0.1's converter cannot convert anyway (the SO-100:
     # at 0.4 rad/s 8 of 20 episodes ran out of steps; docs/robots.md)
 
-    def tilts_at(self, distance: float) -> tuple[float, float]:
+    def tilts_at(self, distance):
         """The approach tilts (deg, lowest and highest) this hand reaches an object at
-        ``distance`` m from its base with (``tilt_reach``'s nearest row; (0, 90) without)."""
+        ``distance`` m from its base with (``tilt_reach``'s rows interpolated, its ends beyond
+        them; (0, 90) without); ``distance`` a float or an array (then arrays)."""
         if not self.tilt_reach:
-            return 0.0, 90.0
-        row = min(self.tilt_reach, key=lambda r: abs(r[0] - distance))
-        return row[1], row[2]
+            return np.zeros_like(distance) + 0.0, np.zeros_like(distance) + 90.0
+        at, lo, hi = np.asarray(self.tilt_reach, dtype=float).T
+        return np.interp(distance, at, lo), np.interp(distance, at, hi)
 
     def action(self, opening: float) -> float:
         """The ``pd_joint_pos`` gripper action that opens the jaws ``opening`` m apart

@@ -254,7 +254,8 @@ class GraspChoice:
                     poses.append((grasp_pose(approach, way, at), gripper.opening))
                     labels.append(label)
         planar = planar_grasps(
-            grasps, pose.matrix(), axis, support, cloud, tuple(tilts), reach,
+            grasps, pose.matrix(), axis, support, cloud, tuple(tilts),
+            lambda xy: self.robot_hand.tilts_at(np.linalg.norm(xy - base, axis=1)),
             self.grasp_config, gripper, self.cfg.grasp_candidates,
         )  # fmt: skip
         # planar_grasps gives its grasps, then each again the other way

@@ -90,7 +90,7 @@ def planar_grasps(
     support_z: float,
     obstacles: np.ndarray | None,
     tilts: tuple[float, ...],
-    reach: tuple[float, float],
+    reach,
     cfg: GraspConfig,
     gripper: GripperModel,
     limit: int,
@@ -99,10 +99,12 @@ def planar_grasps(
     docstring), best first, at most ``limit``: world ``(centre, closing, approach, opening)``.
     ``base_xy``: the arm's base in the world; ``tilts``: the approach tilts (deg) from
     straight down toward the far side tried for a closing line across the plane; ``reach``:
-    the tilts (deg, lowest and highest) its arm reaches the object with
-    (``robots.Hand.tilts_at``): grasps tilted outside rank after the others, by how far; an
-    empty list when none passes. The ``limit`` best, then each with its closing the other way
-    (the same grasp at the wrist roll's other half-turn)."""
+    the tilts (deg, lowest and highest) its arm reaches, ``(lo, hi)``, or per grasp centre
+    ``reach(xy (n, 2)) -> (lo, hi)`` (``robots.Hand.tilts_at`` at each centre's distance: an
+    L block's far leg lay 2 cm further out than its centre, where only tilted grasps reach):
+    grasps tilted outside rank after the others, by how far; an empty list when none passes.
+    The ``limit`` best, then each with its closing the other way (the same grasp at the wrist
+    roll's other half-turn)."""
     rot, t = object_to_world[:3, :3], object_to_world[:3, 3]
     centre_o, closing_o, width = contact_pairs(grasps)
     centre, closing = centre_o @ rot.T + t, closing_o @ rot.T
@@ -127,8 +129,11 @@ def planar_grasps(
     approach.append(a)
     tilt.append(np.arctan2(np.einsum("ij,ij->i", a, out[k]), -a[:, 2]))
     rows, approach, tilt = np.concatenate(rows), np.concatenate(approach), np.concatenate(tilt)
-    keep = (tilt >= -BACK_TILT) & (tilt <= np.deg2rad(max(*tilts, reach[1])) + 1e-9)
-    rows, approach, tilt = rows[keep], approach[keep], tilt[keep]
+    lo, hi = reach(centre[rows, :2]) if callable(reach) else reach
+    reach_deg = np.stack(np.broadcast_arrays(lo, hi, tilt)[:2], 1)  # per row: (lo, hi) deg
+    highest = np.deg2rad(np.maximum(max(tilts), reach_deg[:, 1])) + 1e-9
+    keep = (tilt >= -BACK_TILT) & (tilt <= highest)
+    rows, approach, tilt, reach_deg = rows[keep], approach[keep], tilt[keep], reach_deg[keep]
     if not len(rows):
         return []
     lean = np.abs(np.einsum("ij,ij->i", closing[rows], approach))  # sine of the turn
@@ -143,8 +148,8 @@ def planar_grasps(
     rise = support_z + tip_floor(cfg, height) + low - centre[rows, 2]
     back = np.maximum(rise, 0.0) / np.maximum(-approach[:, 2], 1e-9)
     within = back <= gripper.finger_tip + TIP_HOLD
-    rows, approach, tilt, close, opening, back, lean = (
-        x[within] for x in (rows, approach, tilt, close, opening, back, lean))  # fmt: skip
+    rows, approach, tilt, close, opening, back, lean, reach_deg = (
+        x[within] for x in (rows, approach, tilt, close, opening, back, lean, reach_deg))
     at = centre[rows] - back[:, None] * approach
     at_o = (at - t) @ rot
     boxes = gripper.boxes(cfg.sweep, opening)
@@ -160,7 +165,7 @@ def planar_grasps(
     score = (
         np.linalg.norm(centre_o[rows[keep]] - grasps.com, axis=1) / 0.05
         + np.abs(width[rows[keep]] - gripper.opening / 2) / 0.08
-        + off_reach(tilt[keep], reach) + 2.0 * ~roomy
+        + off_reach(tilt[keep], reach_deg[keep].T) + 2.0 * ~roomy
         + lean[keep] / cone  # the closing turned off the pair's line: up to one step
     )
     best = keep[np.argsort(score, kind="stable")][:limit]

@@ -70,6 +70,46 @@ def test_planar_grasps_come_the_other_way_after_their_own():
         assert np.allclose(other[0], own[0]) and np.allclose(other[2], own[2])
         assert np.allclose(other[1], -own[1]) and other[3] == own[3]
 
+def test_the_reach_table_is_interpolated_between_its_rows():
+    hand = ROBOTS["koch-v1.1"].hand  # rows (0.26 m: 0-60 deg), (0.29 m: 15-75 deg)
+    lo, hi = hand.tilts_at(0.275)
+    assert lo == pytest.approx(7.5) and hi == pytest.approx(67.5)
+    lo, hi = hand.tilts_at(np.array([0.0, 0.26, 1.0]))  # the ends hold beyond the table
+    assert np.allclose(lo, [0.0, 0.0, 30.0]) and np.allclose(hi, [0.0, 60.0, 75.0])
+
+
+def test_each_planar_grasp_is_ranked_by_the_reach_at_its_own_centre():
+    # accept8's 6.4 x 5.4 cm L block, seed 1: its centre 0.18 m from the Koch's pan axis, the
+    # contact pairs on its far leg 2 cm further out, where the arm reaches only tilted; ranked
+    # by the reach at the object's centre, all 12 options were top-down on that far leg and
+    # none had IK; ranked by the reach at each grasp's centre, the near leg's come first
+    hand = ROBOTS["koch-v1.1"].hand
+    gripper, cfg = GripperModel(**dict(hand.boxes)), GraspConfig(sweep=hand.approach_offset)
+    spec = parse_urdf(ROOT / "tests/data/small_sets/accept8/assets/l_block/l_block.urdf")
+    grasps = asset_grasps(spec, cfg, gripper)
+    base = np.array([0.3584, 0.2851])  # the layout's robot spot; its pan axis 6.8 cm ahead
+    axis = np.array([0.306, 0.242])
+    pose = LayoutPose.from_raw(np.array([0.1749, 0.1162, 0.80, 0.509, 0.0, 0.0, -0.861]))
+    centre = pose.matrix()[:2, 3]
+    tilts = (0.0, 15.0, 30.0)
+
+    def first_offs(reach):
+        found = planar_grasps(grasps, pose.matrix(), axis, 0.798, None, tilts, reach, cfg,
+                              gripper, 6)  # fmt: skip
+        assert found
+        out = []
+        for at, _, approach, _ in found[:6]:
+            lo, hi = hand.tilts_at(np.linalg.norm(at[:2] - base))
+            tilt = np.degrees(np.arctan2(np.linalg.norm(approach[:2]), -approach[2]))
+            out.append(max(lo - tilt, tilt - hi, 0.0))
+        return out
+
+    own = first_offs(lambda xy: hand.tilts_at(np.linalg.norm(xy - base, axis=1)))
+    assert max(own) == pytest.approx(0.0, abs=1e-6)  # every one within the reach at its centre
+    whole = first_offs(hand.tilts_at(float(np.linalg.norm(centre - base))))
+    assert max(whole) > 1.0  # the ablation: ranked at the object's centre, some lie out of reach
+
+
 def edited_cube_layout(tmp_path, old: str, new: str):
     """The SO-100's 3 cm cube layout with its cube's URDF text ``old`` replaced by ``new``."""
     assets = tmp_path / "assets"
