@@ -57,21 +57,22 @@ class Jaws:
 
     def _close_gently(self, envs: np.ndarray) -> None:
         """Close the jaws of ``envs`` as a hand whose jaw the arm's PD gains drive must
-        (``robots.Hand.close_gap``; shut at once, the SO-100's jaw meets the object with 100
-        N m and pushes the arm away): at once to the target's width across the jaws plus
-        ``close_gap``, then the jaw's target ``close_step`` ahead of the jaw until both jaws
-        press on the target (``_pressing``), where it stays ``squeeze`` past the jaw (in
-        an env whose grip slipped before, ``firm``: ``squeeze`` ahead of the jaw until the jaw
-        rests, ``JAW_REST``: the grasp is seen at the first touch, and a squeeze set there is
-        spent as the jaw closes on; pressing from the first grasp cost more episodes than it
-        saved, its arm giving way under the squeeze: docs/robots.md, "Small objects"),
-        the arm held ``settle_steps`` more (none in a mode whose arm holds weakly,
-        ``ModeActions.holds_weakly``: the lift that follows ends the grasp's push on the table).
-        In a mode whose drive moves the jaw slower than ``pd_joint_pos``'s, the lead is
-        ``ModeActions.lead``'s (the Koch's delta modes: else its jaw, at 0.11 rad/s, stops
-        ``close_steps`` short of the block). The first target is for the object's width
-        between the jaws (``_width_between_jaws``). Then, where the hand has a ``grip_lead``,
-        its target keeps that lead on the jaw while it holds (``_keep_grip``)."""
+        (``robots.Hand.close_gap``; shut at once, the SO-100's jaw meets the object with 100 N m and
+        pushes the arm away): at once to the target's width across the jaws plus ``close_gap``, then
+        the jaw's target ``close_step`` ahead of the jaw until both jaws press on the target
+        (``_pressing``), where it stays ``squeeze`` past the jaw (``wedge_squeeze`` where they press
+        at an angle the robot's grasp rule does not count; in an env whose grip slipped before,
+        ``firm``: that far ahead of the jaw until the jaw rests,
+        ``JAW_REST``: the grasp is seen at the first touch, and a squeeze set there is spent as the
+        jaw closes on; pressing from the first grasp cost more episodes than it saved, its arm
+        giving way under the squeeze: docs/robots.md, "Small objects"), the arm held
+        ``settle_steps`` more (none in a mode whose arm holds weakly, ``ModeActions.holds_weakly``:
+        the lift that follows ends the grasp's push on the table). In a mode whose drive moves the
+        jaw slower than ``pd_joint_pos``'s, the lead is ``ModeActions.lead``'s (the Koch's delta
+        modes: else its jaw, at 0.11 rad/s, stops ``close_steps`` short of the block). The first
+        target is for the object's width between the jaws (``_width_between_jaws``). Then, where the
+        hand has a ``grip_lead``, its target keeps that lead on the jaw while it holds
+        (``_keep_grip``)."""
         hand = self.robot_hand
         way = np.sign(hand.action_closed - hand.action_open)
         per_qpos = self._per_qpos
@@ -99,7 +100,10 @@ class Jaws:
             now = self._jaw_action()
             held = closing & self._pressing()
             pressing = (pressing & (np.abs(now - before) >= JAW_REST)) | (held & self.firm)
-            self.gripper[held | pressing] = now[held | pressing] + way * hand.squeeze
+            # a wedge: both jaws press, but at an angle the robot's grasp rule does not count
+            wedge = self._pressing() & ~self._grasping()
+            lead = way * np.where(wedge, hand.wedge_squeeze or hand.squeeze, hand.squeeze)
+            self.gripper[held | pressing] = (now + lead)[held | pressing]
             closing &= ~held & (self.gripper != hand.action_closed)
             before = now
         if not self.mode_actions.holds_weakly:

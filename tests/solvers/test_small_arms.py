@@ -3,6 +3,7 @@ plane, tilted within what it reaches, the fingers off the table), an object wide
 jaws or heavier than the arm holds refused at gym.make in one line, and the expert on the
 small-arm zoo."""
 
+import dataclasses
 import json
 import shutil
 from types import SimpleNamespace
@@ -508,3 +509,27 @@ def test_a_close_stops_where_both_jaws_press_at_any_angle():
     success, solver = drawn_episode("accept9", "so100_tri_prism", 0, AngleRule)
     assert not success
     assert solver.reports[0].misses[:2] == ["grasp (attempt 0)", "grasp (attempt 1)"]
+
+
+class LightSqueeze(PickPlaceSolver):
+    """The expert as it was: a wedge held as any grasp, 2 mrad past where the jaw first pressed."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.robot_hand = dataclasses.replace(self.robot_hand, wedge_squeeze=0.0)
+
+
+def test_a_short_wedge_is_held_by_the_wedge_squeeze():
+    """accept11's 2 cm lying triangular prism (1.7 cm tall) on the SO-100 (seed 0): its faces,
+    30 degrees off the closing line, are pressed at an angle the robot's grasp rule does not
+    count (a wedge). Held 2 mrad past where the jaw first pressed (``Hand.squeeze``: 1-2 N),
+    the hand's first lift steps rocked the still jaw 0.6 mm off its face and the prism stayed
+    on the table at every attempt; held ``Hand.wedge_squeeze`` (8 mrad) past, it is carried
+    (here at the second attempt)."""
+    hand = ROBOTS["so100"].hand
+    assert hand.wedge_squeeze == pytest.approx(0.008) and hand.squeeze == pytest.approx(0.002)
+    success, solver = drawn_episode("accept11", "so100_tri_prism", 0)
+    assert success and len(solver.reports[0].misses) <= 1, solver.reports[0]
+    success, solver = drawn_episode("accept11", "so100_tri_prism", 0, LightSqueeze)
+    assert not success
+    assert solver.reports[0].misses == [f"grasp (attempt {k})" for k in range(3)]
