@@ -161,10 +161,8 @@ class Hand:
     close_gap: float = 0.0  # m: first at once to the object's width plus this (0: shut at once)
     close_step: float = 0.0  # then its target leads the jaw by this (action) until it grasps
     squeeze: float = 0.0  # and stays this far (action) past where the jaw stands
-    wedge_squeeze: float = 0.0  # this far instead where the jaws press at an angle the robot's
-    # grasp rule does not count, a wedge (Jaws._close_gently; 0: squeeze). The SO-100's 8 mrad
-    # held accept11's 1.7 cm tall lying prism (0/6 -> 6/6: its 2 mrad's 1-2 N lost it as the
-    # lift began), but as its squeeze it lost balls and a cone (a6, a9, a12: 11 of 18, not 17)
+    wedge_squeeze: float = 0.0  # instead where they press at an angle the grasp rule does not count
+    # (0: squeeze): the SO-100's 8 mrad held a 1.7 cm tall prism; on every grasp it lost balls
     grip_lead: float = 0.0  # then, while it holds, its target is kept this far (action) past the
     # jaw at every control step (PickPlaceSolver._keep_grip): a PD jaw presses only by its lead,
     # and the SO-100's jaw crept to 0.3 mrad of the target its squeeze set (3 N on a hex pencil,
@@ -337,8 +335,8 @@ SO100_HAND = Hand(
     action_openings=((0.005, -1.1), (0.0121, -1.0), (0.0187, -0.9), (0.0251, -0.8),
                      (0.0314, -0.7), (0.0362, -0.6), (0.0408, -0.5), (0.0456, -0.4),
                      (0.0509, -0.3), (0.0569, -0.2), (0.0636, -0.1), (0.0706, 0.0)),
-    close_gap=0.004, close_step=0.02, squeeze=0.002, max_path_steps=300, convertible=False,
-    grip_lead=0.002, wedge_squeeze=0.008, fixed_jaw=0.0385, drifts=True,
+    close_gap=0.004, close_step=0.02, squeeze=0.002, wedge_squeeze=0.008, grip_lead=0.002,
+    max_path_steps=300, convertible=False, fixed_jaw=0.0385, drifts=True,
     lift_heights=(0.02, 0.05, 0.10),
     tilt_reach=((0.14, 0.0, 0.0), (0.18, 0.0, 15.0), (0.22, 0.0, 15.0), (0.26, 0.0, 30.0),
                 (0.30, 0.0, 30.0), (0.34, 15.0, 45.0)),
