@@ -162,7 +162,7 @@ class Hand:
     close_step: float = 0.0  # then its target leads the jaw by this (action) until it grasps
     squeeze: float = 0.0  # and stays this far (action) past where the jaw stands
     wedge_squeeze: float = 0.0  # instead where they press at an angle the grasp rule does not count
-    # (0: squeeze): the SO-100's 8 mrad held a 1.7 cm tall prism; on every grasp it lost balls
+    # (0: squeeze; seen mostly on a retry): the SO-100's 8 mrad took a 1.7 cm prism, balls unchanged
     grip_lead: float = 0.0  # then, while it holds, its target is kept this far (action) past the
     # jaw at every control step (PickPlaceSolver._keep_grip): a PD jaw presses only by its lead,
     # and the SO-100's jaw crept to 0.3 mrad of the target its squeeze set (3 N on a hex pencil,

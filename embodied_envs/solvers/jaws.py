@@ -98,11 +98,13 @@ class Jaws:
             self.gripper[closing] = shut[closing]
             self._execute([None] * self.num_envs, 1)
             now = self._jaw_action()
-            held = closing & self._pressing()
+            pressed = self._pressing()
+            held = closing & pressed
             pressing = (pressing & (np.abs(now - before) >= JAW_REST)) | (held & self.firm)
-            # a wedge: both jaws press, but at an angle the robot's grasp rule does not count
-            wedge = self._pressing() & ~self._grasping()
-            lead = way * np.where(wedge, hand.wedge_squeeze or hand.squeeze, hand.squeeze)
+            # a wedge: both jaws press at an angle the robot's grasp rule does not count (seen
+            # mostly as a firm retry presses on: accept11's prism, carried at the second attempt)
+            wedge = pressed & ~self._grasping() if hand.wedge_squeeze else np.zeros_like(held)
+            lead = way * np.where(wedge, hand.wedge_squeeze, hand.squeeze)
             self.gripper[held | pressing] = (now + lead)[held | pressing]
             closing &= ~held & (self.gripper != hand.action_closed)
             before = now
