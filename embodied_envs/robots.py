@@ -18,13 +18,11 @@ holds for every arm. The Panda stands exactly at the spot, as before.
 
 Reach numbers: the horizontal distance from the base, over 3000 uniformly drawn joint
 configurations, of TCPs 0.02-0.20 m above the base's table (ManiSkill 3.0.1 models; 99th
-percentile / max): Panda 0.91 / 0.93, SO-100 0.46 / 0.48, Koch 0.37 / 0.38, Fetch (from its
-base, table top 0.76 m) 1.08 / 1.09. ``reach_max`` stays below these, where top-down grasps
-still work (the Panda's 0.78 m was measured with the expert).
+percentile / max): Panda 0.91 / 0.93, SO-100 0.46 / 0.48, Koch 0.37 / 0.38, Fetch 1.08 / 1.09
+(table top 0.76 m); the reach bands stay below, where top-down grasps work.
 
-This module imports nothing heavy: the layout commands and config files use it without the
-simulator. What needs ManiSkill (whether a model file is on the machine, whether an agent class
-has a grasp check) is in ``envs/agents.py``.
+This module imports nothing heavy (the layout commands use it without the simulator); what
+needs ManiSkill (model files, grasp checks, the pads' material) is in ``envs/agents.py``.
 """
 
 from __future__ import annotations
@@ -36,8 +34,7 @@ import numpy as np
 
 DOWNLOAD_COMMAND = "python -m mani_skill.utils.download_asset {uid}"
 GRAVITY = 9.81  # m/s^2
-MANISKILL_FORCE_LIMIT = 100.0  # N m: ManiSkill 3.0.1's arm drives (panda.py arm_force_limit,
-# so_100.py and koch.py force_limit)
+MANISKILL_FORCE_LIMIT = 100.0  # N m: ManiSkill 3.0.1's arm drives (panda, so_100, koch .py)
 # m: the SO-100's and the Koch's movers stand this far from other objects, room for a jaw
 # (1.5 cm thick, tools/make/measure_jaws.py) and the grasps' 3 mm obstacle margin beside them:
 # at 1 cm a 2 cm ball beside an 8 cm tin had no grasp for either hand (accept6 seed 1)
@@ -243,6 +240,8 @@ class Robot:
     arm_force_limit: float | None = None  # N m, the most its arm joints' drives exert
     # (ManiSkill 3.0.1's controller configs: force_limit=100 for the Panda, SO-100 and Koch; their
     # URDFs give none: so100.urdf's effort="0", the Koch's no effort); None: not read, unchecked
+    pad_friction: float | None = None  # its jaw pads' friction (static and dynamic) instead of
+    # its ManiSkill class's ``gripper`` material (envs/agents.set_pads); None: ManiSkill's
 
     @property
     def placement(self) -> dict:
@@ -416,7 +415,8 @@ ROBOTS: dict[str, Robot] = {
         # tips 0.10 m above the table 0.12 m out (ManiSkill's rest keyframe, folded, holds
         # them 0.02 m above it, where the expert's planner finds the start colliding), jaw
         # opened to its limit (1.6 rad: 0.078 m between gripper_tcp and gripper_tcp2; 0: shut);
-        # reach to 0.24 m (blocks 0.25-0.26 m out off to the side had no grasp with IK)
+        # reach to 0.24 m (blocks 0.25-0.26 m out off to the side had no grasp with IK);
+        # pads of friction 2 as every other gripper of ManiSkill 3.0.1 (its Koch's alone: 0.3)
         Robot(
             uid="koch-v1.1", names=("koch", "koch_v1.1", "koch-v1.1"),
             rest_qpos=(0.0, 2.2, 1.6, 2.0, 0.0, 1.6),
@@ -428,7 +428,7 @@ ROBOTS: dict[str, Robot] = {
             tcp_link="gripper_tcp", grasp_check=JAW_GRASP, camera_mount="base_link",
             camera_eye=(0.50, 0.0, 0.38), camera_target=(0.16, 0.0, 0.0), base_yaw=math.pi / 2,
             hand=KOCH_HAND, arm_force_limit=MANISKILL_FORCE_LIMIT, mover_clearance=SMALL_ROOM,
-            rest_arm=KOCH_REST_ARM,
+            rest_arm=KOCH_REST_ARM, pad_friction=2.0,
         ),
         # Fetch: ManiSkill's table-scene joints (torso up), fingers open (0.05 m each); on the
         # floor 0.345 m behind the spot (ManiSkill: 0.325 m behind the table's edge; the spot

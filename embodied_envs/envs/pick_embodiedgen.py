@@ -112,8 +112,7 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         render_mode: str | None = None,
         **kwargs,
     ):
-        # everything the user gave is checked before any simulation object exists
-        self.camera_spec = CameraSpec.from_cfg(camera_cfg)
+        self.camera_spec = CameraSpec.from_cfg(camera_cfg)  # all checked before any simulation
         # no eye or target given: the render camera is framed on the robot and the table
         self.frame_render_camera = not {"camera_eye", "camera_target_pt"} & set(camera_cfg or {})
         self.layout_set = LayoutSet.load(default_layout() if layout_file is None else layout_file)
@@ -178,7 +177,8 @@ class PickEmbodiedGenEnv(HybridRendering, CheckedEnv):
         super()._load_agent(options, placed if len(placed) > 1 else placed[0])
         if self.robot_init_qpos is not None:  # before anything is simulated
             keywords.check_rest_limits(self.robot_rests[0], self.main_agent, self.robot_entry.uid)
-        for agent in agents.all_agents(self):  # ManiSkill's set_action in numpy (CPU only)
+        for agent, entry in zip(agents.all_agents(self), self.robot_entries, strict=True):
+            agents.set_pads(agent, entry)  # and ManiSkill's set_action in numpy (CPU only):
             fast_control.install(agent)
 
     @property

@@ -14,6 +14,7 @@ import dataclasses
 import numpy as np
 import sapien
 
+from embodied_envs.envs import agents
 from embodied_envs.layout.assets import (
     ASSET_FILES,
     AssetSpec,
@@ -101,8 +102,8 @@ def _held_so(grasps, object_to_world: np.ndarray, hand_y: np.ndarray) -> np.ndar
 
 
 # the part of the friction cone of the jaws' pads against an object that a grasp found on
-# tilted rays may use (``GraspConfig.tilted_cone_deg``): the SO-100's pads (ManiSkill's
-# friction 2) on a block (0.6) give 35 degrees, the Koch's (0.3) 16
+# tilted rays may use (``GraspConfig.tilted_cone_deg``): pads of friction 2 (the SO-100's, the
+# Koch's) on a block (0.6) give 35 degrees; ManiSkill's Koch pads (0.3) gave 16
 TILTED_SHARE = 2 / 3
 
 
@@ -112,12 +113,12 @@ class GraspChoice:
     def asset_config(self, spec) -> GraspConfig:
         """The grasp synthesis' numbers for an asset (``spec``): ``tilted_cone_deg``,
         ``TILTED_SHARE`` of the friction cone of the jaws' pads on it (PhysX averages the
-        two materials' friction: the robot's ManiSkill ``gripper`` material and the asset's
+        two materials' friction: the robot's pads, ``agents.pad_friction``, and the asset's
         mu2); none where the robot names no pad material."""
-        pads = self.base.agent.urdf_config.get("_materials", {}).get("gripper")
-        if not pads:
+        pads = agents.pad_friction(self.base.main_agent, self.base.robot_entry)
+        if pads is None:
             return self.grasp_config
-        mu = (pads["dynamic_friction"] + spec.dynamic_friction) / 2
+        mu = (pads + spec.dynamic_friction) / 2
         cone = TILTED_SHARE * np.degrees(np.arctan(mu))
         return dataclasses.replace(self.grasp_config, tilted_cone_deg=float(cone))
 

@@ -6,6 +6,7 @@ small-arm zoo."""
 import dataclasses
 import json
 import shutil
+from pathlib import Path
 from types import SimpleNamespace
 
 import gymnasium as gym
@@ -331,11 +332,14 @@ def test_a_flat_l_shaped_block_is_taken(folder, arm):
     assert success and not solver.reports[0].misses
 
 
-def test_the_tilted_cone_follows_the_pads_friction():
-    """A lying triangular prism needs each face's normal 30 degrees off the closing line: the
-    SO-100's pads (ManiSkill's friction 2) allow it on a block's 0.6, the Koch's (0.3) do not,
-    and the Panda's (2) do."""
-    spec = SimpleNamespace(dynamic_friction=0.6)
+def koch_with_maniskill_pads(monkeypatch):
+    """The Koch's entry with ManiSkill 3.0.1's own pads (its class's friction 0.3)."""
+    koch = dataclasses.replace(ROBOTS["koch-v1.1"], pad_friction=None)
+    monkeypatch.setitem(ROBOTS, "koch-v1.1", koch)
+
+
+def tilted_cones() -> dict:
+    spec = SimpleNamespace(dynamic_friction=0.6)  # a block's
     cones = {}
     for uid in ("so100", "koch-v1.1", "panda"):
         env = gym.make("PickEmbodiedGen-v1", layout_file=str(DEV1 / "so100_cube.json"),
@@ -343,7 +347,56 @@ def test_the_tilted_cone_follows_the_pads_friction():
         solver = SimpleNamespace(base=env.unwrapped, grasp_config=GraspConfig())
         cones[uid] = GraspChoice.asset_config(solver, spec).tilted_cone_deg
         env.close()
+    return cones
+
+
+def test_the_tilted_cone_follows_the_pads_friction(monkeypatch):
+    """A lying triangular prism needs each face's normal 30 degrees off the closing line: the
+    pads of friction 2 (the SO-100's and the Panda's from ManiSkill, the Koch's from its
+    ``Robot.pad_friction``) allow it on a block's 0.6; ManiSkill's own Koch pads (0.3) do not."""
+    cones = tilted_cones()
+    assert all(cone > 30 for cone in cones.values()), cones
+    koch_with_maniskill_pads(monkeypatch)
+    cones = tilted_cones()
     assert cones["so100"] > 30 and cones["panda"] > 30 and 15 < cones["koch-v1.1"] < 30
+
+
+def pad_frictions(layout: Path) -> dict:
+    """Each link's collision shapes' (static, dynamic) frictions, over every shape."""
+    env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout))
+    out = {}
+    for link in env.unwrapped.main_agent.robot.links:
+        shapes = [s for obj in link._objs for s in obj.collision_shapes]
+        out[link.name] = {(round(s.physical_material.static_friction, 4),
+                           round(s.physical_material.dynamic_friction, 4)) for s in shapes}
+    env.close()
+    return out
+
+
+def test_the_koch_jaws_have_pads_of_friction_2(monkeypatch):
+    """The links ManiSkill's Koch gives its ``gripper`` material (``link_6``, ``gripper``; 0.3
+    there, every other ManiSkill gripper 2) get ``pad_friction`` 2 at load; its other links keep
+    ManiSkill's. With the entry's ``pad_friction`` None the jaws keep ManiSkill's 0.3."""
+    ours = pad_frictions(ROOT / "layouts" / "koch_block.json")
+    assert ours["link_6"] == ours["gripper"] == {(2.0, 2.0)}
+    assert ours["link_5"] != {(2.0, 2.0)}
+    koch_with_maniskill_pads(monkeypatch)
+    theirs = pad_frictions(ROOT / "layouts" / "koch_block.json")
+    assert theirs["link_6"] == theirs["gripper"] == {(0.3, 0.3)}
+    assert theirs["link_5"] == ours["link_5"]
+
+
+def test_the_koch_takes_a_lying_prism_on_its_pads(monkeypatch):
+    """accept11's 2 cm lying triangular prism (seed 0): faces 30 degrees off the closing line
+    need friction 0.58; the Koch's pads (2, averaged with the prism's 0.6 by PhysX) hold it. On
+    ManiSkill's own pads (0.3: 24 degrees) the expert refuses it (no grasp: plan stage
+    ``grasp``) and the episode fails."""
+    success, solver = drawn_episode("accept11", "koch_tri_prism", 0)
+    assert success and not solver.reports[0].plan_failures, solver.reports[0]
+    koch_with_maniskill_pads(monkeypatch)
+    success, solver = drawn_episode("accept11", "koch_tri_prism", 0)
+    assert not success
+    assert solver.reports[0].plan_failures[0].startswith("grasp"), solver.reports[0]
 
 
 def test_a_hex_pencil_lying_on_a_face_is_taken_across_its_slanted_faces():
@@ -392,11 +445,15 @@ class NeverFirm(PickPlaceSolver):
         pass
 
 
-def test_a_grip_that_slipped_presses_on_the_retry():
-    """accept4's hex pencil on the Koch (seed 0): the first close sets its squeeze while the
-    jaw still closes, the pencil held by 0.7 N slips at the lift; the retry presses until the
-    jaw rests (``PickPlaceSolver.firm``) and carries it. Retrying as the first attempt closed,
-    every attempt slips."""
+def test_a_grip_that_slipped_presses_on_the_retry(monkeypatch):
+    """accept4's hex pencil on the Koch with ManiSkill's own pads (0.3; seed 0): the first
+    close sets its squeeze while the jaw still closes, the pencil held by 0.7 N slips at the
+    lift; the retry presses until the jaw rests (``PickPlaceSolver.firm``) and carries it.
+    Retrying as the first attempt closed, every attempt slips. On its pads of friction 2
+    (``Robot.pad_friction``) the first attempt holds it."""
+    success, solver = drawn_episode("accept4", "koch_hex_pencil", 0)
+    assert success and not solver.reports[0].misses, solver.reports[0]
+    koch_with_maniskill_pads(monkeypatch)
     success, solver = drawn_episode("accept4", "koch_hex_pencil", 0)
     assert success and solver.reports[0].misses == ["grasp (attempt 0)"], solver.reports[0]
     assert solver.firm[0]
