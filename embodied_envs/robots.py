@@ -16,10 +16,9 @@ Fetch, which ManiSkill's own table scene puts 0.33 m behind the table's edge on 
 Reach and goal distances are measured from the spot, so a layout's check of its objects' reach
 holds for every arm. The Panda stands exactly at the spot, as before.
 
-Reach numbers: the horizontal distance from the base, over 3000 uniformly drawn joint
-configurations, of TCPs 0.02-0.20 m above the base's table (ManiSkill 3.0.1 models; 99th
-percentile / max): Panda 0.91 / 0.93, SO-100 0.46 / 0.48, Koch 0.37 / 0.38, Fetch 1.08 / 1.09
-(table top 0.76 m); the reach bands stay below, where top-down grasps work.
+Reach: the horizontal distance from the base of TCPs 0.02-0.20 m above its table, over 3000
+random joint configurations (99th percentile / max): Panda 0.91 / 0.93, SO-100 0.46 / 0.48, Koch
+0.37 / 0.38, Fetch 1.08 / 1.09; the reach bands stay below, where top-down grasps work.
 
 This module imports nothing heavy (the layout commands use it without the simulator); what
 needs ManiSkill (model files, grasp checks, the pads' material) is in ``envs/agents.py``.
@@ -166,17 +165,15 @@ class Hand:
     # then none as the carry's turn began: the pencil fell out, accept10 4/12 -> 12/12 at 2
     # mrad); 0: the target set at the grasp stays (the Panda; the Koch, whose arm gives way)
     lift_heights: tuple[float, ...] = (0.05, 0.10)  # m, lifts after grasping, tried in order
-    # (the carry plans from there: 5 cm before 10 saves the Panda 3-7 steps an episode on the
-    # shipped layouts and the zoo); the SO-100's first is 2 cm, its carry rising the rest
-    # while its base turns (in pd_joint_delta_pos the lift cost 40-90 of 500 steps); not the
-    # Koch's (its arm gives way under the squeeze: at 2 cm it lost the zoo's battery 3 times in 6)
+    # (5 cm first saves the Panda 3-7 steps); the SO-100's first 2 cm, its carry rising the rest
+    # (in pd_joint_delta_pos the lift cost 40-90 of 500 steps); not the Koch's (its arm gives
+    # way: at 2 cm it lost the zoo's battery 3 times in 6)
     drifts: bool = False  # its arm gives way while its jaw squeezes an object (the Koch: 0.05-0.3
     # rad off its targets, mostly the wrist): it plans from its joint targets and the hand
     # where they put it, and corrects at the goal while the object is off it (solvers/)
     convertible: bool = True  # its joint targets kept within what its other joint controllers
-    # follow (solvers/follow.py; SolverConfig.convertible). False: an arm whose one controller
-    # drives every joint, which ManiSkill 3.0.1's converter cannot convert anyway (the SO-100:
-    # at 0.4 rad/s 8 of 20 episodes ran out of steps; docs/robots.md)
+    # follow (solvers/follow.py); False: one controller drives every joint, which ManiSkill
+    # 3.0.1's converter cannot convert anyway (the SO-100: 8 of 20 ran out of steps)
 
     def tilts_at(self, distance):
         """The approach tilts (deg, lowest and highest) this hand reaches an object at
@@ -260,6 +257,11 @@ class Robot:
             return None
         return self.arm_force_limit / (GRAVITY * (self.reach[1] + self.reach_origin))
 
+    def pads(self, maniskill_config: dict | None) -> float | None:
+        """Its jaw pads' friction: ``pad_friction``, else its ManiSkill class's (None: none)."""
+        pads = (maniskill_config or {}).get("_materials", {}).get("gripper") or {}
+        return pads.get("dynamic_friction") if self.pad_friction is None else self.pad_friction
+
     @property
     def expert(self) -> bool:
         """Whether the scripted expert drives this robot."""
@@ -268,8 +270,6 @@ class Robot:
     def base_poses(self, spots, floor_z: float):
         """Base raw poses ``(n, 7)`` (xyz, quaternion wxyz, as ManiSkill's) from the layout
         spots' ``spots (n, 7)``; the spots themselves (same array) for a robot standing there."""
-        import numpy as np  # numpy only: the layout commands import this module
-
         spots = np.asarray(spots)
         if not self.edge_offset and not self.base_yaw and self.base_height == "table":
             return spots

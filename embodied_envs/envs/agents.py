@@ -10,10 +10,10 @@ import os
 import mani_skill.agents.robots  # noqa: F401  (registers ManiSkill's agents)
 import numpy as np
 import torch
-from sapien import physx
 from mani_skill.agents.base_agent import BaseAgent
 from mani_skill.agents.registration import REGISTERED_AGENTS
 from mani_skill.utils.structs.pose import Pose
+from sapien import physx
 
 from embodied_envs import robots
 from embodied_envs.envs import contacts
@@ -66,15 +66,6 @@ def check_robot(uid) -> None:
         )
 
 
-def pad_friction(agent, entry: robots.Robot) -> float | None:
-    """The friction of ``agent``'s jaw pads: ``entry.pad_friction``, else its ManiSkill
-    class's ``gripper`` material's dynamic friction; None where it names none."""
-    if entry.pad_friction is not None:
-        return entry.pad_friction
-    pads = (agent.urdf_config or {}).get("_materials", {}).get("gripper")
-    return None if not pads else float(pads["dynamic_friction"])
-
-
 def set_pads(agent, entry: robots.Robot) -> None:
     """Give the links ManiSkill's agent class pads with its ``gripper`` material (its
     ``urdf_config``) ``entry.pad_friction``, static and dynamic, in every parallel env, before
@@ -87,7 +78,7 @@ def set_pads(agent, entry: robots.Robot) -> None:
     material = physx.PhysxMaterial(static_friction=mu, dynamic_friction=mu, restitution=0.0)
     for link in agent.robot.links:
         if link.name in links:
-            for shape in (s for obj in link._objs for s in obj.collision_shapes):
+            for shape in (s for obj in link_components(link) for s in obj.collision_shapes):
                 shape.set_physical_material(material)
 
 

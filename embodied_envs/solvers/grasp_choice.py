@@ -14,7 +14,6 @@ import dataclasses
 import numpy as np
 import sapien
 
-from embodied_envs.envs import agents
 from embodied_envs.layout.assets import (
     ASSET_FILES,
     AssetSpec,
@@ -113,9 +112,9 @@ class GraspChoice:
     def asset_config(self, spec) -> GraspConfig:
         """The grasp synthesis' numbers for an asset (``spec``): ``tilted_cone_deg``,
         ``TILTED_SHARE`` of the friction cone of the jaws' pads on it (PhysX averages the
-        two materials' friction: the robot's pads, ``agents.pad_friction``, and the asset's
-        mu2); none where the robot names no pad material."""
-        pads = agents.pad_friction(self.base.main_agent, self.base.robot_entry)
+        two materials' friction: the robot's pads, ``Robot.pads``, and the asset's mu2); none
+        where the robot names no pad material."""
+        pads = self.base.robot_entry.pads(self.base.main_agent.urdf_config)
         if pads is None:
             return self.grasp_config
         mu = (pads + spec.dynamic_friction) / 2

@@ -15,6 +15,7 @@ import pytest
 from conftest import ROOT, solve_watching_close
 
 import embodied_envs  # noqa: F401
+from embodied_envs.internals import link_components
 from embodied_envs.layout import LayoutError, LayoutPose, parse_urdf
 from embodied_envs.layout.assets import asset_geometry
 from embodied_envs.robots import ROBOTS
@@ -366,7 +367,7 @@ def pad_frictions(layout: Path) -> dict:
     env = gym.make("PickEmbodiedGen-v1", layout_file=str(layout))
     out = {}
     for link in env.unwrapped.main_agent.robot.links:
-        shapes = [s for obj in link._objs for s in obj.collision_shapes]
+        shapes = [s for obj in link_components(link) for s in obj.collision_shapes]
         out[link.name] = {(round(s.physical_material.static_friction, 4),
                            round(s.physical_material.dynamic_friction, 4)) for s in shapes}
     env.close()
