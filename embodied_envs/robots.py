@@ -352,8 +352,8 @@ SO100_HAND = Hand(
 # cube slipped out at every lift (grasp_depth 0.015); taken 0.005 below its top, the top stays
 # below the knuckle by the descent's error (SCREW_END_TOLERANCE, 3 mm) and the face holds it.
 # Its pd_joint_pos drives the jaw with stiffness 100, damping 1 (1 mrad: about 3 N on an object);
-# the jaw, slanted by its angle, holds a 2 cm block (0.33 rad) with a squeeze of 0.01 rad, and
-# the arm gives way under it (drifts: docs/robots.md, "The Koch"). Its still jaw's face stands
+# on pads of friction 2 a squeeze of 3 mrad holds (0.01 rad, for ManiSkill's pads of 0.3: accept2-13
+# 481 of 504, at 3 mrad 492), and the arm gives way under it (drifts). Its still jaw's face stands
 # 0.0225 m from the origin on -y (fixed_jaw, tools/make/measure_jaws.py): objects are taken
 # against it, as the SO-100's (centred, the moving jaw pushed a flat L-shaped block 1.4 cm
 # across the table by its top edge and turned it)
@@ -368,7 +368,7 @@ KOCH_HAND = Hand(
                      (0.0211, 0.4), (0.0243, 0.5), (0.0277, 0.6), (0.0315, 0.7),
                      (0.0357, 0.8), (0.0401, 0.9), (0.0445, 1.0), (0.0497, 1.1),
                      (0.0563, 1.2)),
-    close_gap=0.004, close_step=0.02, squeeze=0.01, max_path_steps=300, convertible=False,
+    close_gap=0.004, close_step=0.02, squeeze=0.003, max_path_steps=300, convertible=False,
     drifts=True, fixed_jaw=-0.0225,
     tilt_reach=((0.12, 0.0, 0.0), (0.15, 0.0, 15.0), (0.19, 0.0, 30.0), (0.23, 0.0, 45.0),
                 (0.26, 0.0, 60.0), (0.29, 15.0, 75.0), (0.32, 30.0, 75.0)),

@@ -334,8 +334,11 @@ def test_a_flat_l_shaped_block_is_taken(folder, arm):
 
 
 def koch_with_maniskill_pads(monkeypatch):
-    """The Koch's entry with ManiSkill 3.0.1's own pads (its class's friction 0.3)."""
-    koch = dataclasses.replace(ROBOTS["koch-v1.1"], pad_friction=None)
+    """The Koch's entry with ManiSkill 3.0.1's own pads (its class's friction 0.3) and the
+    squeeze its expert had on them (0.01 rad)."""
+    koch = ROBOTS["koch-v1.1"]
+    hand = dataclasses.replace(koch.hand, squeeze=0.01)
+    koch = dataclasses.replace(koch, pad_friction=None, hand=hand)
     monkeypatch.setitem(ROBOTS, "koch-v1.1", koch)
 
 
@@ -444,6 +447,19 @@ class NeverFirm(PickPlaceSolver):
     @firm.setter
     def firm(self, value):
         pass
+
+
+def test_the_koch_squeezes_lightly_on_its_pads(monkeypatch):
+    """accept9's cone on the Koch (seed 2): on pads of friction 2 its squeeze of 3 mrad holds
+    the cone to the goal; the 0.01 rad it had on ManiSkill's pads left its hand 12 cm off its
+    planned lift (the arm giving way) and the carry put the cone down short of the goal."""
+    success, solver = drawn_episode("accept9", "koch_cone", 2)
+    assert success and not solver.reports[0].misses, solver.reports[0]
+    koch = ROBOTS["koch-v1.1"]
+    hand = dataclasses.replace(koch.hand, squeeze=0.01)
+    monkeypatch.setitem(ROBOTS, "koch-v1.1", dataclasses.replace(koch, hand=hand))
+    success, solver = drawn_episode("accept9", "koch_cone", 2)
+    assert not success
 
 
 def test_a_grip_that_slipped_presses_on_the_retry(monkeypatch):
