@@ -168,8 +168,8 @@ class Hand:
     # (5 cm first saves the Panda 3-7 steps); the SO-100's first 2 cm, its carry rising the rest
     # (in pd_joint_delta_pos the lift cost 40-90 of 500 steps); not the Koch's (its arm gives
     # way: at 2 cm it lost the zoo's battery 3 times in 6)
-    drifts: bool = False  # its arm gives way while its jaw squeezes an object (the Koch: 0.05-0.3
-    # rad off its targets, mostly the wrist): it plans from its joint targets and the hand
+    drifts: bool = False  # its arm gives way while its jaw squeezes an object (the Koch: mostly its
+    # wrist, 0.05-0.3 rad off its targets, once 2.5): it plans from its joint targets and the hand
     # where they put it, and corrects at the goal while the object is off it (solvers/)
     convertible: bool = True  # its joint targets kept within what its other joint controllers
     # follow (solvers/follow.py); False: one controller drives every joint, which ManiSkill
