@@ -416,7 +416,7 @@ ROBOTS: dict[str, Robot] = {
         # them 0.02 m above it, where the expert's planner finds the start colliding), jaw
         # opened to its limit (1.6 rad: 0.078 m between gripper_tcp and gripper_tcp2; 0: shut);
         # reach to 0.24 m (blocks 0.25-0.26 m out off to the side had no grasp with IK);
-        # pads of friction 2 as every other gripper of ManiSkill 3.0.1 (its Koch's alone: 0.3)
+        # pads of friction 2 as ManiSkill 3.0.1's Panda, SO-100, Fetch, WidowX AI (its Koch's: 0.3)
         Robot(
             uid="koch-v1.1", names=("koch", "koch_v1.1", "koch-v1.1"),
             rest_qpos=(0.0, 2.2, 1.6, 2.0, 0.0, 1.6),

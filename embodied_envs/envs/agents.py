@@ -69,17 +69,27 @@ def check_robot(uid) -> None:
 def set_pads(agent, entry: robots.Robot) -> None:
     """Give the links ManiSkill's agent class pads with its ``gripper`` material (its
     ``urdf_config``) ``entry.pad_friction``, static and dynamic, in every parallel env, before
-    anything is simulated; nothing where the entry keeps ManiSkill's."""
+    anything is simulated; nothing where the entry keeps ManiSkill's.
+
+    Raises:
+        ValueError: the entry sets a friction and the agent names no such link it has.
+    """
     if entry.pad_friction is None:
         return
-    links = {name for name, cfg in (agent.urdf_config or {}).get("link", {}).items()
+    names = {name for name, cfg in (agent.urdf_config or {}).get("link", {}).items()
              if cfg.get("material") == "gripper"}  # fmt: skip
+    links = [link for link in agent.robot.links if link.name in names]
+    if not links:
+        raise ValueError(
+            f"robots.py: {entry.uid}'s pad_friction={entry.pad_friction} has no pads to go on: "
+            f"ManiSkill's {type(agent).__name__} gives no link of it the 'gripper' material. "
+            "Fix: set its pad_friction to None"
+        )
     mu = entry.pad_friction
     material = physx.PhysxMaterial(static_friction=mu, dynamic_friction=mu, restitution=0.0)
-    for link in agent.robot.links:
-        if link.name in links:
-            for shape in (s for obj in link_components(link) for s in obj.collision_shapes):
-                shape.set_physical_material(material)
+    for link in links:
+        for shape in (s for obj in link_components(link) for s in obj.collision_shapes):
+            shape.set_physical_material(material)
 
 
 def all_agents(env) -> list:

@@ -283,7 +283,7 @@ def test_koch_expert_holds_the_block_at_the_goal():
     """Seed 7 of the Koch's layout, drawn in the reach band about its spot (0.12-0.24 m, as
     before its band was centred on its pan axis): its jaw closes gently on the 2 cm block (it
     stays within 1.5 cm of where it lay; the jaw then stands near 0.33 rad, slanted little
-    enough that its low friction holds it), the arm gives way to the squeeze, and the expert
+    enough that its pads hold it), the arm gives way to the squeeze, and the expert
     still holds the block within 1 cm of the goal (corrected there from its joint targets)."""
     spot_band = dict(reach_min=0.12, reach_max=0.24, reach_origin=0.0)
     koch = gym.make(ENV_ID, layout_file=str(KOCH_LAYOUT), control_mode="pd_joint_pos",

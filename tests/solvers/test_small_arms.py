@@ -379,7 +379,7 @@ def pad_frictions(layout: Path) -> dict:
 
 def test_the_koch_jaws_have_pads_of_friction_2(monkeypatch):
     """The links ManiSkill's Koch gives its ``gripper`` material (``link_6``, ``gripper``; 0.3
-    there, every other ManiSkill gripper 2) get ``pad_friction`` 2 at load; its other links keep
+    there, the Panda's and the SO-100's 2) get ``pad_friction`` 2 at load; its other links keep
     ManiSkill's. With the entry's ``pad_friction`` None the jaws keep ManiSkill's 0.3."""
     ours = pad_frictions(ROOT / "layouts" / "koch_block.json")
     assert ours["link_6"] == ours["gripper"] == {(2.0, 2.0)}
@@ -388,6 +388,18 @@ def test_the_koch_jaws_have_pads_of_friction_2(monkeypatch):
     theirs = pad_frictions(ROOT / "layouts" / "koch_block.json")
     assert theirs["link_6"] == theirs["gripper"] == {(0.3, 0.3)}
     assert theirs["link_5"] == ours["link_5"]
+
+
+def test_pads_set_on_an_arm_without_pads_are_refused():
+    """A robot entry with ``pad_friction`` whose ManiSkill class gives no link the ``gripper``
+    material is refused in one line naming robots.py, the robot and the fix."""
+    from embodied_envs.envs.agents import set_pads
+
+    entry = dataclasses.replace(ROBOTS["koch-v1.1"], pad_friction=1.5)
+    agent = SimpleNamespace(urdf_config={}, robot=SimpleNamespace(links=[]))
+    with pytest.raises(ValueError, match=r"robots.py: koch-v1.1's pad_friction=1.5 .*None"):
+        set_pads(agent, entry)
+    set_pads(agent, dataclasses.replace(entry, pad_friction=None))  # ManiSkill's: nothing to do
 
 
 def test_the_koch_takes_a_lying_prism_on_its_pads(monkeypatch):
@@ -451,8 +463,8 @@ class NeverFirm(PickPlaceSolver):
 
 def test_the_koch_squeezes_lightly_on_its_pads(monkeypatch):
     """accept9's cone on the Koch (seed 2): on pads of friction 2 its squeeze of 3 mrad holds
-    the cone to the goal; the 0.01 rad it had on ManiSkill's pads left its hand 12 cm off its
-    planned lift (the arm giving way) and the carry put the cone down short of the goal."""
+    the cone to the goal; on the same pads at 0.01 rad (its squeeze on ManiSkill's pads) its
+    hand ended 12 cm off its planned lift (the arm giving way) and the cone short of the goal."""
     success, solver = drawn_episode("accept9", "koch_cone", 2)
     assert success and not solver.reports[0].misses, solver.reports[0]
     koch = ROBOTS["koch-v1.1"]
