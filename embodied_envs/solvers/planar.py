@@ -17,6 +17,8 @@ centre of mass, the width mid-opening), then by the tilt's distance from the han
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from embodied_envs.solvers.grasp_types import GraspConfig, Grasps
@@ -90,7 +92,7 @@ def planar_grasps(
     support_z: float,
     obstacles: np.ndarray | None,
     tilts: tuple[float, ...],
-    reach,
+    reach: Callable,
     cfg: GraspConfig,
     gripper: GripperModel,
     limit: int,
@@ -99,7 +101,7 @@ def planar_grasps(
     docstring), best first, at most ``limit``: world ``(centre, closing, approach, opening)``.
     ``base_xy``: the arm's base in the world; ``tilts``: the approach tilts (deg) from
     straight down toward the far side tried for a closing line across the plane; ``reach``:
-    the tilts (deg, lowest and highest) its arm reaches, ``(lo, hi)``, or per grasp centre
+    the tilts (deg, lowest and highest) its arm reaches per grasp centre,
     ``reach(xy (n, 2)) -> (lo, hi)`` (``robots.Hand.tilts_at`` at each centre's distance: an
     L block's far leg lay 2 cm further out than its centre, where only tilted grasps reach):
     grasps tilted outside rank after the others, by how far; an empty list when none passes.
@@ -129,7 +131,7 @@ def planar_grasps(
     approach.append(a)
     tilt.append(np.arctan2(np.einsum("ij,ij->i", a, out[k]), -a[:, 2]))
     rows, approach, tilt = np.concatenate(rows), np.concatenate(approach), np.concatenate(tilt)
-    lo, hi = reach(centre[rows, :2]) if callable(reach) else reach
+    lo, hi = reach(centre[rows, :2])
     reach_deg = np.stack(np.broadcast_arrays(lo, hi, tilt)[:2], 1)  # per row: (lo, hi) deg
     highest = np.deg2rad(np.maximum(max(tilts), reach_deg[:, 1])) + 1e-9
     keep = (tilt >= -BACK_TILT) & (tilt <= highest)

@@ -41,7 +41,7 @@ def test_planar_grasps_lie_in_the_arms_plane_and_clear_the_table(uid):
     for yaw in (0.0, 0.7, 1.57):  # the marker along the arm's plane, askew, across it
         pose = LayoutPose.from_layout([0.2, 0.05, support, 0.0, 0.0, np.sin(yaw / 2),
                                         np.cos(yaw / 2)]).matrix()
-        reach = hand.tilts_at(0.2)
+        reach = lambda xy: hand.tilts_at(np.full(len(xy), 0.2))  # noqa: E731
         found = planar_grasps(grasps, pose, base, support, None, (30.0, 15.0, 0.0), reach,
                               cfg, gripper, 6)  # fmt: skip
         assert found, yaw
@@ -66,8 +66,9 @@ def test_planar_grasps_come_the_other_way_after_their_own():
     gripper, cfg = GripperModel(**dict(hand.boxes)), GraspConfig(sweep=hand.approach_offset)
     grasps = asset_grasps(parse_urdf(SMALL_ZOO / "assets" / "marker" / "marker.urdf"), cfg, gripper)
     pose = LayoutPose.from_layout([0.2, 0.05, 0.74, 0.0, 0.0, 0.0, 1.0]).matrix()
-    found = planar_grasps(grasps, pose, np.zeros(2), 0.74, None, (30.0, 15.0, 0.0),
-                          hand.tilts_at(0.2), cfg, gripper, 3)  # fmt: skip
+    reach = lambda xy: hand.tilts_at(np.full(len(xy), 0.2))  # noqa: E731
+    found = planar_grasps(grasps, pose, np.zeros(2), 0.74, None, (30.0, 15.0, 0.0), reach,
+                          cfg, gripper, 3)  # fmt: skip
     assert len(found) == 6
     for own, other in zip(found[:3], found[3:], strict=True):
         assert np.allclose(other[0], own[0]) and np.allclose(other[2], own[2])
@@ -109,7 +110,7 @@ def test_each_planar_grasp_is_ranked_by_the_reach_at_its_own_centre():
 
     own = first_offs(lambda xy: hand.tilts_at(np.linalg.norm(xy - base, axis=1)))
     assert max(own) == pytest.approx(0.0, abs=1e-6)  # every one within the reach at its centre
-    whole = first_offs(hand.tilts_at(float(np.linalg.norm(centre - base))))
+    whole = first_offs(lambda xy: hand.tilts_at(np.full(len(xy), np.linalg.norm(centre - base))))
     assert max(whole) > 1.0  # the ablation: ranked at the object's centre, some lie out of reach
 
 
